@@ -1,0 +1,10 @@
+#!/usr/bin/env bash
+# The test command: lint, the serial suite, then the MPI suite on 2 ranks.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+export MPLBACKEND=Agg
+PY=.venv/bin/python
+if [ -x .venv/bin/ruff ]; then .venv/bin/ruff check app forms geometry tests bench; fi
+$PY -m pytest -q -m "not slow" tests "$@"
+mpirun -n 2 $PY -m pytest -q -m "mpi and not slow" -p no:cacheprovider tests

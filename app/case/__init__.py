@@ -1,0 +1,1 @@
+"""Case files: TOML scenes validated into typed dataclasses before any dolfinx object exists."""

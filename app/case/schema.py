@@ -1,0 +1,198 @@
+"""The case schema: every key a TOML case may hold, its type, bounds, unit and default.
+
+Defaults live here and only here. ``load_case`` turns a TOML file (plus ``--set`` overrides) into a
+validated :class:`Case` before any dolfinx object is built; checks that need the mesh (missing
+facet or cell groups) happen in :mod:`app.fe.problem` and raise the same :class:`CaseError`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Literal
+
+from app.case.loader import apply_overrides, read_toml
+from app.case.validate import from_dict, param
+from app.errors import CaseError
+from app.materials import Material, resolve
+
+ModelKind = Literal["axisymmetric", "3d", "plane_strain"]
+Analysis = Literal["modal", "harmonic", "circuit", "transient", "lumped"]
+TagRef = str | int
+
+
+@dataclass(frozen=True)
+class GeometrySection:
+    model: ModelKind = param("axisymmetric", doc="axisymmetric (r, z), 3d (x, y, z) or plane_strain (x, z)")
+    builder: Literal["bar", "disc", "transducer"] | None = param(None, doc="gmsh builder to use")
+    parameters: dict[str, Any] = param(default_factory=dict, doc="builder parameters (see docs)")
+    mesh_file: str | None = param(None, doc=".msh file, relative to the case file")
+    degree: int = param(2, ge=1, le=3, doc="Lagrange degree of u and phi")
+    thickness_m: float = param(1.0, gt=0, doc="out-of-plane thickness for plane_strain")
+
+    def check(self, file, prefix):
+        if (self.builder is None) == (self.mesh_file is None):
+            raise CaseError(file, f"{prefix}.builder", "give exactly one of builder or mesh_file")
+
+
+@dataclass(frozen=True)
+class Region:
+    cells: TagRef = param(doc="cell group name or tag")
+    material: str = param(doc="name of a [materials.*] entry")
+    poling: Literal["+x", "-x", "+y", "-y", "+z", "-z", "radial", "-radial"] | list[float] = param(
+        "+z", doc="poling direction of a piezoelectric material (global axes; radial about z)")
+
+
+@dataclass(frozen=True)
+class Electrode:
+    facets: list[TagRef] = param(doc="facet group names or tags")
+    kind: Literal["ground", "voltage", "floating"] = param(doc="0 V, driven, or equipotential with zero charge")
+
+
+@dataclass(frozen=True)
+class Support:
+    facets: list[TagRef] = param()
+    components: list[Literal["x", "y", "z", "r"]] = param(doc="displacement components held at 0")
+
+
+@dataclass(frozen=True)
+class Point:
+    coordinates_m: list[float] = param()
+    component: Literal["x", "y", "z", "r"] = param("z", doc="displacement component reported")
+
+
+@dataclass(frozen=True)
+class DampingSection:
+    alpha_per_s: float = param(0.0, ge=0, doc="mass-proportional Rayleigh alpha")
+    beta_s: float = param(0.0, ge=0, doc="global stiffness-proportional Rayleigh beta")
+    material_quality: bool = param(True, doc="add beta_j = 1/(omega Q_m,j) per material")
+    reference_frequency_Hz: float | None = param(None, gt=0, doc="omega in beta_j; default: working mode")
+
+
+@dataclass(frozen=True)
+class ModalSection:
+    target_frequency_Hz: float = param(gt=0, unit="Hz", doc="shift of the shift-invert transform")
+    n_modes: int = param(6, ge=1)
+    electrical: Literal["short", "open", "both"] = param("both")
+    rigid_cutoff_Hz: float = param(10.0, ge=0, doc="modes below are rigid-body modes and dropped")
+    working_mode: Literal["nearest", "coupling"] = param(
+        "coupling", doc="nearest to target, or the most strongly coupled of the modes found")
+
+
+@dataclass(frozen=True)
+class TargetAmplitude:
+    point: str = param()
+    amplitude_m: float = param(gt=0, unit="m")
+
+
+@dataclass(frozen=True)
+class HarmonicSection:
+    f_start_Hz: float | None = param(None, gt=0, doc="default: around the modal f_r, f_a")
+    f_stop_Hz: float | None = param(None, gt=0)
+    n_points: int = param(41, ge=2)
+    voltage_V: float = param(1.0, gt=0, doc="drive amplitude on voltage electrodes")
+    refine_extrema: bool = param(True, doc="locate |Y| peak and trough by golden-section search")
+    target: TargetAmplitude | None = None
+
+    def check(self, file, prefix):
+        if (self.f_start_Hz is None) != (self.f_stop_Hz is None):
+            raise CaseError(file, f"{prefix}.f_stop_Hz", "give both f_start_Hz and f_stop_Hz or neither")
+        if self.f_start_Hz is not None and self.f_stop_Hz <= self.f_start_Hz:
+            raise CaseError(file, f"{prefix}.f_stop_Hz", "must be greater than f_start_Hz")
+
+
+@dataclass(frozen=True)
+class CircuitSection:
+    point: str = param(doc="named point the 1-DOF model is referred to")
+
+
+@dataclass(frozen=True)
+class OutputSection:
+    fields: bool = param(True, doc="write XDMF mode shapes / fields")
+    plots: bool = param(True, doc="write PNG plots")
+
+
+@dataclass(frozen=True)
+class Case:
+    tier: Literal["fe", "lumped"] = param("fe", doc="model tier: full FE or lumped")
+    title: str = param("")
+    analyses: list[Analysis] = param(default_factory=lambda: ["modal"])
+    geometry: GeometrySection | None = None
+    materials: dict[str, Material] = param(default_factory=dict)
+    regions: list[Region] = param(default_factory=list)
+    electrodes: dict[str, Electrode] = param(default_factory=dict)
+    supports: list[Support] = param(default_factory=list)
+    points: dict[str, Point] = param(default_factory=dict)
+    damping: DampingSection = field(default_factory=DampingSection)
+    modal: ModalSection | None = None
+    harmonic: HarmonicSection | None = None
+    circuit: CircuitSection | None = None
+    output: OutputSection = field(default_factory=OutputSection)
+    lumped: Any = None
+    transient: Any = None
+    source: str = param("", doc="set by the loader: path of the case file")
+
+    def check(self, file, prefix):
+        if self.tier == "fe":
+            if self.geometry is None:
+                raise CaseError(file, "geometry", "required for tier = 'fe'")
+            if not self.regions:
+                raise CaseError(file, "regions", "at least one region is required for tier = 'fe'")
+            for i, region in enumerate(self.regions):
+                if region.material not in self.materials:
+                    raise CaseError(file, f"regions[{i}].material",
+                                    f"unknown material {region.material!r}; defined: {', '.join(self.materials)}")
+                if isinstance(region.poling, list) and (len(region.poling) != 3 or not any(region.poling)):
+                    raise CaseError(file, f"regions[{i}].poling", "a poling vector needs 3 non-zero-norm entries")
+        needs = {"modal": ("modal",), "harmonic": ("harmonic",), "circuit": ("modal", "harmonic", "circuit")}
+        for analysis in self.analyses:
+            for section in needs.get(analysis, ()):
+                if getattr(self, section) is None:
+                    raise CaseError(file, section, f"section required by analysis {analysis!r}")
+        if self.harmonic and self.harmonic.target and self.harmonic.target.point not in self.points:
+            raise CaseError(file, "harmonic.target.point", f"unknown point {self.harmonic.target.point!r}")
+        if self.circuit and self.circuit.point not in self.points:
+            raise CaseError(file, "circuit.point", f"unknown point {self.circuit.point!r}")
+
+
+def _section_types():
+    """Sections owned by other packages (lumped, transient), imported lazily."""
+    types = {}
+    try:
+        from app.lumped.schema import LumpedSection
+
+        types["lumped"] = LumpedSection
+    except ImportError:
+        pass
+    try:
+        from app.transient.schema import TransientSection
+
+        types["transient"] = TransientSection
+    except ImportError:
+        pass
+    return types
+
+
+def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
+    """Read, override and validate a case file into a :class:`Case`."""
+    path = Path(path)
+    file = str(path)
+    raw = apply_overrides(read_toml(path), overrides)
+    if "source" in raw:
+        raise CaseError(file, "source", "is set by piezodyn, not by the case file")
+    sections = _section_types()
+    extra = {}
+    for name, cls in sections.items():
+        if name in raw:
+            extra[name] = from_dict(cls, raw.pop(name), file, name)
+    for name in ("lumped", "transient"):
+        if name in raw and name not in sections:
+            raise CaseError(file, name, "this section is not supported by this build")
+    case = from_dict(Case, raw, file)
+    materials = {name: resolve(m, file, f"materials.{name}") for name, m in case.materials.items()}
+    case = replace(case, materials=materials, source=str(path.resolve()), **extra)
+    if case.tier == "lumped" and case.lumped is None:
+        raise CaseError(file, "lumped", "section required for tier = 'lumped'")
+    if "transient" in case.analyses and case.transient is None:
+        raise CaseError(file, "transient", "section required by analysis 'transient'")
+    return case

@@ -1,0 +1,71 @@
+"""Command line: ``piezodyn run|validate|sweep``. Input errors exit 2 with one line; unrecoverable
+numerical failures exit 1 saying what was tried."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from app import __version__
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="piezodyn", description="Piezoelectric actuators with contact and impact.")
+    parser.add_argument("--version", action="version", version=f"piezodyn {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run a case file")
+    run.add_argument("case")
+    run.add_argument("--out", help="output directory (default results/<case name>)")
+    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a case key")
+    run.add_argument("--resume", metavar="DIR", help="continue a transient run from its checkpoint in DIR")
+    run.add_argument("--quiet", action="store_true")
+    validate = sub.add_parser("validate", help="validate a case file without running it")
+    validate.add_argument("case")
+    validate.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    sub.add_parser("sweep", help="parameter sweep (see 'piezodyn sweep --help')", add_help=False)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    from mpi4py import MPI
+
+    from app.errors import CaseError, NumericalFailure
+
+    rank = MPI.COMM_WORLD.rank
+    try:
+        if argv and argv[0] == "sweep":
+            from app import sweep
+
+            return sweep.main(argv[1:])
+        args = _parser().parse_args(argv)
+        if args.command == "validate":
+            from app.case.schema import load_case
+
+            case = load_case(args.case, args.set)
+            if case.tier == "fe":
+                from app.fe.model import build_model
+
+                build_model(case, MPI.COMM_WORLD)
+            if rank == 0:
+                print(f"{args.case}: valid")
+            return 0
+        from app.runner import run_case
+
+        out = args.resume or args.out
+        run_case(args.case, args.set, out, quiet=args.quiet, resume=bool(args.resume))
+        return 0
+    except CaseError as exc:
+        if rank == 0:
+            print(f"piezodyn: error: {exc.line()}", file=sys.stderr, flush=True)
+        return 2
+    except NumericalFailure as exc:
+        if rank == 0:
+            print(f"piezodyn: numerical failure: {exc}", file=sys.stderr, flush=True)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+
+
+def entry() -> None:
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Finite-element model assembly shared by the modal, harmonic and transient drivers."""

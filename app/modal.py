@@ -1,0 +1,156 @@
+"""Modal analysis: SLEPc shift-invert around a target frequency for the short-circuit (driven
+electrodes grounded: resonance f_r) and open-circuit (driven electrodes floating: antiresonance
+f_a) states; effective coupling k_eff^2 = (f_a^2 - f_r^2) / f_a^2 from MAC-paired modes."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from petsc4py import PETSc
+from slepc4py import SLEPc
+
+from app.errors import NumericalFailure
+from app.fe.constraints import ConstraintSet
+from app.fe.model import FEModel
+from app.fe.operators import Operators, electrical_state
+
+
+@dataclass
+class Mode:
+    frequency_Hz: float
+    vector: PETSc.Vec  # full u-phi numbering, mass-normalised: x^T M x = 1 [1/sqrt(kg)]
+
+
+def solve_modes(ops: Operators, constraints: ConstraintSet, target_Hz: float, n_modes: int,
+                rigid_cutoff_Hz: float, prefix: str) -> list[Mode]:
+    """Eigenpairs K x = omega^2 M x nearest ``target_Hz`` (rigid-body modes below the cutoff dropped)."""
+    comm = ops.K.getComm()
+    K = constraints.reduce(ops.K)
+    M = constraints.reduce(ops.M)
+    constraints.apply(K, 1.0)
+    constraints.apply(M, 0.0)
+    eps = SLEPc.EPS().create(comm)
+    eps.setOptionsPrefix(prefix)
+    eps.setOperators(K, M)
+    eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
+    eps.setDimensions(nev=n_modes)
+    eps.setTarget((2 * math.pi * target_Hz) ** 2)
+    eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_REAL)
+    eps.setTolerances(tol=1e-10, max_it=200)
+    st = eps.getST()
+    st.setType(SLEPc.ST.Type.SINVERT)
+    ksp = st.getKSP()
+    ksp.setType("preonly")
+    pc = ksp.getPC()
+    pc.setType("lu")
+    pc.setFactorSolverType("mumps")
+    eps.setFromOptions()
+    eps.solve()
+    n_conv = eps.getConverged()
+    if n_conv == 0:
+        raise NumericalFailure(f"eigensolver ({prefix}) found no eigenpair near {target_Hz} Hz "
+                               f"(tried Krylov-Schur shift-invert with MUMPS LU)")
+    modes = []
+    y = K.createVecRight()
+    Mx = ops.M.createVecLeft()
+    for i in range(n_conv):
+        lam = eps.getEigenpair(i, y).real
+        if lam <= (2 * math.pi * rigid_cutoff_Hz) ** 2:
+            continue
+        x = ops.K.createVecRight()
+        constraints.expand(y, x)
+        ops.M.mult(x, Mx)
+        x.scale(1.0 / math.sqrt(abs(x.dot(Mx))))
+        modes.append(Mode(math.sqrt(lam) / (2 * math.pi), x))
+    for obj in (eps, K, M, y, Mx):
+        obj.destroy()
+    # SLEPc may converge more pairs than asked for, depending on the partition: keep the n nearest
+    modes.sort(key=lambda m: abs(m.frequency_Hz - target_Hz))
+    for extra in modes[n_modes:]:
+        extra.vector.destroy()
+    modes = sorted(modes[:n_modes], key=lambda m: m.frequency_Hz)
+    return modes
+
+
+def mac(M: PETSc.Mat, a: PETSc.Vec, b: PETSc.Vec) -> float:
+    """Mass-weighted modal assurance criterion of two mass-normalised modes."""
+    Mb = M.createVecLeft()
+    M.mult(b, Mb)
+    value = a.dot(Mb) ** 2
+    Mb.destroy()
+    return value
+
+
+@dataclass
+class ModalResult:
+    short: list[Mode]
+    open: list[Mode]
+    pairs: list[tuple[int, int | None, float | None]]  # (short index, open index, k_eff)
+    working: int  # index into short
+
+    @property
+    def working_mode(self) -> Mode:
+        return self.short[self.working]
+
+    def antiresonance_Hz(self) -> float | None:
+        _, j, _ = self.pairs[self.working]
+        return None if j is None else self.open[j].frequency_Hz
+
+
+def run_modal(model: FEModel, ops: Operators) -> ModalResult:
+    cfg = model.case.modal
+    has_drive = bool(model.electrodes_of("voltage"))
+    states = {"short": ["short"], "open": ["open"], "both": ["short", "open"]}[cfg.electrical]
+    if not has_drive:
+        states = ["short"]
+    found = {}
+    for state in states:
+        found[state] = solve_modes(ops, electrical_state(model, state), cfg.target_frequency_Hz, cfg.n_modes,
+                                   cfg.rigid_cutoff_Hz, prefix=f"modal_{state}_")
+    short = found.get("short") or found.get("open")
+    opened = found.get("open", []) if "short" in found else []
+    pairs = []
+    for i, mode in enumerate(short):
+        best, best_mac = None, 0.0
+        for j, other in enumerate(opened):
+            value = mac(ops.M, mode.vector, other.vector)
+            if value > best_mac:
+                best, best_mac = j, value
+        if best is not None and best_mac > 0.5:
+            fa, fr = opened[best].frequency_Hz, mode.frequency_Hz
+            k_eff = math.sqrt(max(fa * fa - fr * fr, 0.0)) / fa
+            pairs.append((i, best, k_eff))
+        else:
+            pairs.append((i, None, None))
+    if not short:
+        raise NumericalFailure("no elastic mode found above the rigid-body cutoff; raise modal.n_modes")
+    if cfg.working_mode == "coupling" and any(p[2] for p in pairs):
+        working = max(range(len(pairs)), key=lambda i: pairs[i][2] or 0.0)
+    else:
+        working = min(range(len(short)), key=lambda i: abs(short[i].frequency_Hz - cfg.target_frequency_Hz))
+    return ModalResult(short, opened, pairs, working)
+
+
+def modal_summary(model: FEModel, result: ModalResult) -> dict:
+    """Plain results for summary.json (units in key names)."""
+    modes = []
+    for i, j, k_eff in result.pairs:
+        mode = result.short[i]
+        entry = {"resonance_Hz": mode.frequency_Hz}
+        if j is not None:
+            entry["antiresonance_Hz"] = result.open[j].frequency_Hz
+            entry["k_eff"] = k_eff
+        for name, value in model.point_values(mode.vector).items():
+            entry[f"modal_mass_at_{name}_kg"] = (1.0 / value**2) if abs(value) > 0 else None
+        modes.append(entry)
+    out = {"modes": modes, "working_mode_index": result.working,
+           "working_resonance_Hz": result.working_mode.frequency_Hz}
+    fa = result.antiresonance_Hz()
+    if fa is not None:
+        out["working_antiresonance_Hz"] = fa
+        out["working_k_eff"] = result.pairs[result.working][2]
+    if result.open and not any(p[1] is not None for p in result.pairs):
+        out["open_circuit_Hz"] = [m.frequency_Hz for m in result.open]
+    return out

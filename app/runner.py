@@ -1,0 +1,171 @@
+"""Runs one case: validation, then the analyses it lists, then summary.json.
+
+Phases (each timed): mesh, assemble, modal, harmonic, circuit, lumped / transient, export.
+"""
+
+from __future__ import annotations
+
+import platform
+import sys
+from pathlib import Path
+
+from mpi4py import MPI
+
+from app import __version__
+from app.case.schema import Case, load_case
+from app.case.validate import to_dict
+from app.exports import write_json_atomic
+from app.mpi_log import PhaseTimer, make_log
+
+
+def versions() -> dict:
+    import dolfinx
+    import petsc4py
+    import slepc4py
+
+    return {"piezodyn": __version__, "dolfinx": dolfinx.__version__, "petsc4py": petsc4py.__version__,
+            "slepc4py": slepc4py.__version__, "python": platform.python_version()}
+
+
+def run_case(case_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,
+             comm: MPI.Comm = MPI.COMM_WORLD, quiet: bool = False, resume: bool = False) -> dict:
+    log = make_log(comm, quiet)
+    timer = PhaseTimer()
+    with timer.phase("validate"):
+        case = load_case(case_path, overrides)
+    out = Path(out_dir) if out_dir else Path("results") / Path(case_path).stem
+    if comm.rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+    comm.barrier()
+    log(f"piezodyn {__version__}: {case.title or Path(case_path).name} -> {out}/ ({comm.size} MPI rank(s))")
+    summary = {"case": to_dict(case), "versions": versions(), "mpi_size": comm.size, "results": {},
+               "outputs": []}
+    if case.tier == "lumped":
+        from app.lumped import driver
+
+        with timer.phase("lumped"):
+            summary["results"]["lumped"] = driver.run(case.lumped, out, comm, log)
+    else:
+        run_fe(case, out, comm, log, timer, summary, resume)
+    summary["wall_time_s"] = timer.seconds
+    if comm.rank == 0:
+        write_json_atomic(out / "summary.json", summary)
+    log(f"summary: {out / 'summary.json'}")
+    return summary
+
+
+def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, resume: bool) -> None:
+    from app.fe.model import build_model
+    from app.fe.operators import assemble_operators
+
+    results = summary["results"]
+    with timer.phase("mesh"):
+        model = build_model(case, comm)
+    imap = model.W.dofmap.index_map
+    cells = model.mesh.topology.index_map(model.mesh.topology.dim).size_global
+    summary["dofs"] = {"total": imap.size_global, "cells": cells}
+    results["mass_kg"] = model.total_mass_kg()
+    log(f"mesh: {cells} cells, {imap.size_global} DOFs, mass {results['mass_kg'] * 1e3:.2f} g")
+    modal = harmonic = None
+    f_r = f_a = None
+    if "modal" in case.analyses:
+        from app.modal import modal_summary, run_modal
+
+        with timer.phase("assemble"):
+            ops = assemble_operators(model)
+        with timer.phase("modal"):
+            modal = run_modal(model, ops)
+            results["modal"] = modal_summary(model, modal)
+        f_r, f_a = modal.working_mode.frequency_Hz, modal.antiresonance_Hz()
+        log(f"modal: working mode f_r = {f_r:.2f} Hz" + (f", f_a = {f_a:.2f} Hz, k_eff = "
+                                                          f"{results['modal']['working_k_eff']:.4f}" if f_a else ""))
+        if case.output.fields:
+            with timer.phase("export"):
+                write_modes(model, modal, out, summary)
+        ops.destroy()
+    damping_f = case.damping.reference_frequency_Hz or f_r or (case.modal.target_frequency_Hz if case.modal else None)
+    if "harmonic" in case.analyses or "circuit" in case.analyses:
+        from app.harmonic import harmonic_summary, run_harmonic
+
+        with timer.phase("assemble"):
+            ops = assemble_operators(model, damping_f)
+        if "harmonic" in case.analyses:
+            with timer.phase("harmonic"):
+                harmonic = run_harmonic(model, ops, f_r, f_a, log)
+                results["harmonic"] = harmonic_summary(harmonic)
+        if "circuit" in case.analyses:
+            from app.circuit import equivalent_circuit
+
+            with timer.phase("circuit"):
+                results["circuit"] = equivalent_circuit(model, ops, modal, harmonic, case.circuit.point)
+        ops.destroy()
+        if harmonic is not None and case.output.plots and comm.rank == 0:
+            from app.plots import admittance_plot
+
+            with timer.phase("export"):
+                admittance_plot(out / "admittance.png", results["harmonic"], f_r, f_a, results.get("circuit"))
+                summary["outputs"].append("admittance.png")
+    if "transient" in case.analyses:
+        from app.transient import driver as transient_driver
+
+        with timer.phase("transient"):
+            results["transient"] = transient_driver.run(case, out, comm, log)
+    print_table(results, log)
+
+
+def write_modes(model, modal, out: Path, summary: dict) -> None:
+    from app.exports import ModeShapeExport
+
+    for state, modes in (("short", modal.short), ("open", modal.open)):
+        if not modes:
+            continue
+        name = f"modes_{state}.xdmf"
+        export = ModeShapeExport(out / name, model.mesh)
+        for i, mode in enumerate(modes):
+            export.write(model.displacement(mode.vector), i)
+        export.close()
+        summary["outputs"].append(name)
+
+
+def print_table(results: dict, log) -> None:
+    rows = []
+    if "mass_kg" in results:
+        rows.append(("mass", f"{results['mass_kg'] * 1e3:.2f}", "g"))
+    modal = results.get("modal")
+    if modal:
+        rows.append(("resonance f_r (modal, short circuit)", f"{modal['working_resonance_Hz']:.2f}", "Hz"))
+        if "working_antiresonance_Hz" in modal:
+            rows.append(("antiresonance f_a (modal, open circuit)", f"{modal['working_antiresonance_Hz']:.2f}", "Hz"))
+            rows.append(("effective coupling k_eff", f"{modal['working_k_eff']:.4f}", "-"))
+    harmonic = results.get("harmonic")
+    if harmonic:
+        rows.append(("|Y| peak (harmonic)", f"{harmonic['admittance_peak_Hz']:.2f}", "Hz"))
+        if harmonic.get("admittance_trough_Hz"):
+            rows.append(("|Y| trough (harmonic)", f"{harmonic['admittance_trough_Hz']:.2f}", "Hz"))
+        if "voltage_for_target_amplitude_V" in harmonic:
+            rows.append(("voltage for target amplitude", f"{harmonic['voltage_for_target_amplitude_V']:.2f}", "V"))
+    circuit = results.get("circuit")
+    if circuit:
+        for key, label, scale, unit in (("modal_mass_kg", "equivalent mass m_m", 1e3, "g"),
+                                        ("modal_stiffness_N_per_m", "equivalent stiffness k_m", 1e-6, "N/um"),
+                                        ("modal_damping_N_s_per_m", "equivalent damping c_m", 1.0, "N s/m"),
+                                        ("force_factor_N_per_V", "force factor alpha", 1.0, "N/V"),
+                                        ("clamped_capacitance_F", "clamped capacitance C_p", 1e9, "nF")):
+            if key in circuit:
+                rows.append((label, f"{circuit[key] * scale:.4g}", unit))
+    if not rows:
+        return
+    width = max(len(r[0]) for r in rows)
+    log("-" * (width + 24))
+    for label, value, unit in rows:
+        log(f"{label:<{width}}  {value:>14} {unit}")
+    log("-" * (width + 24))
+
+
+def main_run(args) -> int:
+    run_case(args.case, args.set, args.out, quiet=args.quiet, resume=bool(getattr(args, "resume", None)))
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main_run(sys.argv[1:]))

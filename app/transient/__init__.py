@@ -1,0 +1,13 @@
+"""Transient analysis: generalized-alpha time stepping of FE + rigid bodies with penalty contact.
+
+Layers (each small, each testable alone):
+
+- ``rigid``     rigid bodies (own DOFs, mass, gravity, applied force, prescribed motion)
+- ``fe``        the linear FE part: M, C, K, loads, Dirichlet drives, factorised K_eff per dt
+- ``contact``   penalty contacts: FE surface vs rigid body (UFL), rigid vs rigid (Kelvin-Voigt)
+- ``coupled``   residual, Jacobian and bordered solve of FE + rigid + contact, driven by PETSc SNES
+- ``control``   dt by contact state (open / closed / changing), growth and cut-back
+- ``stepper``   the time loop (update loads, solve, check reason, export, shift, adapt dt)
+- ``history``   HDF5 time series, progress bar, checkpoints
+- ``schema``/``driver``  the ``[transient]`` case section and the runner entry point
+"""

@@ -1,0 +1,238 @@
+"""Penalty contacts: an FE surface against a rigid body, and Kelvin-Voigt links between rigid bodies.
+
+:class:`SurfaceContact` compiles the UFL terms of :mod:`forms.contact` on one facet tag. The
+residual and its tangent are evaluated at the generalised mid-point fields (u_mid, v_mid) that the
+coupled system shares between all contacts; the body's mid-point position and velocity enter as
+Constants, so nothing is recompiled while stepping.
+
+:class:`PointContact` is a one-dimensional Kelvin-Voigt element between two rigid bodies (ball on
+stem, stem on rock foundation): force = < k delta + c d(delta)/dt > while delta > 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from dolfinx.fem.petsc import assemble_matrix, assemble_vector, create_matrix, create_vector
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from app.transient.fe import LinearFE, displacement_of
+from forms import contact as cf
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Regularised Coulomb friction (ANSYS names in brackets): kinetic coefficient [MU], static to
+    kinetic ratio [FACT], exponential decay with slip speed [DC, s/m], shear stress cap [TAUMAX, Pa]
+    and the slip speed below which the law is viscous (regularisation) [m/s]."""
+
+    mu_dynamic: float
+    static_ratio: float = 1.0
+    decay_s_per_m: float = 0.0
+    shear_cap_Pa: float = 1e20
+    regularisation_speed_m_per_s: float = 1e-4
+
+
+@dataclass(frozen=True)
+class ObstacleShape:
+    """Shape of the rigid body seen by an FE surface: ``"plane"`` with outward unit ``normal``
+    through the body position + ``offset_m``, or ``"sphere"`` of ``radius_m`` centred there."""
+
+    kind: str
+    normal: tuple[float, ...] = ()
+    radius_m: float = 0.0
+    offset_m: tuple[float, ...] = ()
+
+    def __post_init__(self):
+        if self.kind not in ("plane", "sphere"):
+            raise ValueError(f"unknown obstacle shape {self.kind!r}")
+        if self.kind == "plane":
+            n = np.asarray(self.normal, dtype=float)
+            if n.size == 0 or not np.isclose(np.linalg.norm(n), 1.0):
+                raise ValueError("a plane obstacle needs a unit normal")
+        if self.kind == "sphere" and not self.radius_m > 0:
+            raise ValueError("a sphere obstacle needs a positive radius")
+
+
+class MidpointFields:
+    """Fields and Constants shared by every surface contact of one model: the generalised mid-point
+    displacement and velocity, d v_{n+1} / d u_{n+1} and 1 - alpha_f (set by the coupled system)."""
+
+    def __init__(self, fe: LinearFE):
+        mesh = fe.space.mesh
+        self.u_mid = fem.Function(fe.space, name="u_mid")
+        self.v_mid = fem.Function(fe.space, name="v_mid")
+        self.velocity_per_displacement = fem.Constant(mesh, 0.0)
+        self.one_minus_alpha_f = fem.Constant(mesh, 1.0)
+
+
+class SurfaceContact:
+    """Penalty contact between FE facets (``tag`` in ``facet_tags``) and rigid body ``body``.
+
+    ``stiffness_Pa_per_m`` is the penalty per unit area (pressure per metre of penetration),
+    ``damping_Pa_s_per_m`` the normal viscous term; ``weight`` is the volume weight of the model
+    (2 pi r for axisymmetric), so forces are those of the whole body of revolution."""
+
+    def __init__(self, name: str, fe: LinearFE, facet_tags, tag: int, body: str, shape: ObstacleShape,
+                 stiffness_Pa_per_m: float, damping_Pa_s_per_m: float = 0.0, friction: Friction | None = None,
+                 weight=1.0, fields: MidpointFields | None = None):
+        if not stiffness_Pa_per_m > 0:
+            raise ValueError(f"contact {name!r}: stiffness must be > 0")
+        fields = fields if fields is not None else MidpointFields(fe)
+        self.fields = fields
+        self.name, self.body, self.shape, self.fe = name, body, shape, fe
+        mesh = fe.space.mesh
+        gdim = fe.gdim
+        facets = facet_tags.find(tag)
+        self.local_dofs, self.dof_axes = fe.facet_displacement_dofs(facets)
+        self.u_mid, self.v_mid = fields.u_mid, fields.v_mid
+        self.velocity_per_displacement = fields.velocity_per_displacement
+        self.one_minus_alpha_f = fields.one_minus_alpha_f
+        self.body_position = fem.Constant(mesh, np.zeros(gdim))
+        self.body_velocity = fem.Constant(mesh, np.zeros(gdim))
+        self.stiffness = fem.Constant(mesh, float(stiffness_Pa_per_m))
+        self.damping = fem.Constant(mesh, float(damping_Pa_s_per_m))
+        ds = ufl.Measure("ds", domain=mesh, subdomain_data=facet_tags)(tag)
+        x = ufl.SpatialCoordinate(mesh)
+        u = displacement_of(self.u_mid)
+        v = displacement_of(self.v_mid)
+        y = x + u
+        if shape.kind == "plane":
+            point = self.body_position + ufl.as_vector(shape.offset_m or (0.0,) * gdim)
+            normal = ufl.as_vector(shape.normal)
+            gap = cf.plane_gap(y, point, normal)
+        else:
+            point = self.body_position + ufl.as_vector(shape.offset_m or (0.0,) * gdim)
+            normal = cf.sphere_normal(y, point, shape.radius_m)
+            gap = cf.sphere_gap(y, point, shape.radius_m)
+        relative_velocity = v - self.body_velocity
+        gap_rate = ufl.dot(relative_velocity, normal)
+        pressure = cf.normal_pressure(gap, gap_rate, self.stiffness, self.damping)
+        traction = pressure * normal
+        if friction is not None:
+            traction = traction + cf.friction_traction(
+                normal, relative_velocity, pressure, friction.mu_dynamic, friction.static_ratio,
+                friction.decay_s_per_m, friction.shear_cap_Pa, friction.regularisation_speed_m_per_s)
+        test = ufl.TestFunction(fe.space)
+        trial = ufl.TrialFunction(fe.space)
+        residual = cf.contact_residual(traction, displacement_of_test(test, fe), ds, weight)
+        tangent = self.one_minus_alpha_f * (
+            ufl.derivative(residual, self.u_mid, trial)
+            + self.velocity_per_displacement * ufl.derivative(residual, self.v_mid, trial))
+        self.residual_form = fem.form(residual)
+        self.tangent_form = fem.form(tangent)
+        penetration = cf.macaulay(-gap)
+        self.energy_form = fem.form(0.5 * self.stiffness * penetration**2 * weight * ds)
+        self.area_in_contact_form = fem.form(cf.heaviside(-gap) * weight * ds)
+        self.residual_vector = create_vector(self.residual_form)
+        self.tangent_matrix = create_matrix(self.tangent_form)
+        self._coordinates = fe.dof_coordinates()
+        self._node_dofs = self._group_dofs_by_node()
+
+    def set_body_state(self, position_m: np.ndarray, velocity_m_per_s: np.ndarray) -> None:
+        self.body_position.value[:] = position_m
+        self.body_velocity.value[:] = velocity_m_per_s
+
+    def assemble_residual(self) -> PETSc.Vec:
+        """Contact residual (-f_contact) at the current mid-point fields; Dirichlet rows zeroed."""
+        b = self.residual_vector
+        with b.localForm() as local:
+            local.set(0.0)
+        assemble_vector(b, self.residual_form)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self.fe.zero_constrained(b)
+        return b
+
+    def assemble_tangent(self) -> PETSc.Mat:
+        A = self.tangent_matrix
+        A.zeroEntries()
+        assemble_matrix(A, self.tangent_form)
+        A.assemble()
+        return A
+
+    def elastic_energy_J(self) -> float:
+        comm = self.fe.comm
+        return comm.allreduce(fem.assemble_scalar(self.energy_form), op=MPI.SUM)
+
+    def area_in_contact_m2(self) -> float:
+        return self.fe.comm.allreduce(fem.assemble_scalar(self.area_in_contact_form), op=MPI.SUM)
+
+    # Nodal gaps, for the step controller (where will contact open or close next?)
+    def _group_dofs_by_node(self) -> np.ndarray:
+        """(n_nodes, gdim) local DOF numbers of the contact nodes owned here (component order)."""
+        gdim = self.fe.gdim
+        if self.local_dofs.size == 0:
+            return np.zeros((0, gdim), dtype=np.int32)
+        coords = self._coordinates[self.local_dofs]
+        scale = max(np.abs(coords).max(), 1e-30)
+        keys = np.round(coords / scale, 10)
+        _, node = np.unique(keys, axis=0, return_inverse=True)
+        node = node.reshape(-1)
+        out = np.full((node.max() + 1, gdim), -1, dtype=np.int64)
+        out[node, self.dof_axes] = self.local_dofs
+        return out[(out >= 0).all(axis=1)]
+
+    def nodal_gaps(self, u: np.ndarray, v: np.ndarray, body_position, body_velocity):
+        """(gap [m], gap rate [m/s]) at the owned contact nodes for local DOF arrays u, v."""
+        nodes = self._node_dofs
+        if nodes.shape[0] == 0:
+            return np.zeros(0), np.zeros(0)
+        x = self._coordinates[nodes[:, 0]]
+        y = x + u[nodes]
+        rel_v = v[nodes] - np.asarray(body_velocity)
+        point = np.asarray(body_position) + (np.asarray(self.shape.offset_m) if self.shape.offset_m else 0.0)
+        if self.shape.kind == "plane":
+            n = np.asarray(self.shape.normal)
+            return (y - point) @ n, rel_v @ n
+        d = y - point
+        dist = np.linalg.norm(d, axis=1)
+        return dist - self.shape.radius_m, np.einsum("ij,ij->i", d / dist[:, None], rel_v)
+
+
+def displacement_of_test(test, fe: LinearFE):
+    element = fe.space.ufl_element()
+    if isinstance(element, ufl.MixedElement) and not isinstance(element, ufl.VectorElement):
+        return ufl.split(test)[0]
+    return test
+
+
+class PointContact:
+    """Kelvin-Voigt contact between rigid bodies ``lower`` and ``upper`` along unit ``normal``
+    (pointing from lower to upper). Penetration delta = touch_distance - normal . (z_upper - z_lower);
+    force f = < k delta + c d(delta)/dt > for delta > 0 (no pull), pushing the bodies apart."""
+
+    def __init__(self, name: str, lower: str, upper: str, normal, touch_distance_m: float,
+                 stiffness_N_per_m: float, damping_N_s_per_m: float = 0.0):
+        if not stiffness_N_per_m > 0:
+            raise ValueError(f"contact {name!r}: stiffness must be > 0")
+        if damping_N_s_per_m < 0:
+            raise ValueError(f"contact {name!r}: damping must be >= 0")
+        self.name, self.lower, self.upper = name, lower, upper
+        self.normal = np.asarray(normal, dtype=float)
+        self.normal /= np.linalg.norm(self.normal)
+        self.touch_distance_m = float(touch_distance_m)
+        self.stiffness_N_per_m = float(stiffness_N_per_m)
+        self.damping_N_s_per_m = float(damping_N_s_per_m)
+
+    def penetration(self, z_lower, z_upper, v_lower, v_upper):
+        """(delta [m], d(delta)/dt [m/s])."""
+        delta = self.touch_distance_m - self.normal @ (np.asarray(z_upper) - np.asarray(z_lower))
+        rate = -self.normal @ (np.asarray(v_upper) - np.asarray(v_lower))
+        return float(delta), float(rate)
+
+    def force(self, delta: float, rate: float) -> tuple[float, float, float]:
+        """(f [N], df/d delta [N/m], df/d rate [N s/m])."""
+        if delta <= 0.0:
+            return 0.0, 0.0, 0.0
+        f = self.stiffness_N_per_m * delta + self.damping_N_s_per_m * rate
+        if f <= 0.0:
+            return 0.0, 0.0, 0.0
+        return f, self.stiffness_N_per_m, self.damping_N_s_per_m
+
+    def elastic_energy_J(self, delta: float) -> float:
+        return 0.5 * self.stiffness_N_per_m * max(delta, 0.0) ** 2
+

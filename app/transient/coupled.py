@@ -1,0 +1,396 @@
+"""One implicit step of FE + rigid bodies + penalty contact, solved by PETSc SNES with a bordered
+linear solve.
+
+Unknowns of a step: the FE displacement u_{n+1} (owned DOFs) and the rigid positions z_{n+1}
+(held by rank 0), packed in one PETSc Vec. The Newton matrix is
+
+    [ A + E Kss E^T    E B ] [du]   [r_u]
+    [ L E^T            Kzz ] [dz] = [r_z]
+
+with A = K_eff (constant for a given dt, factorised once by :class:`EffectiveOperator`), E the
+unit columns of the s contact DOFs, Kss the s x s contact tangent, B/L the contact coupling to
+the rigid DOFs and Kzz the rigid block (mass, Kelvin-Voigt links, contact). With w = A^-1 r_u and
+G = A^-1 E (precomputed per dt), du = w - G y where the (s + m) dense system
+
+    [ I + Kss G_S   -B  ] [y ]   [ Kss w_S     ]
+    [ -L G_S        Kzz ] [dz] = [ r_z - L w_S ]
+
+gives the contact correction y and dz (G_S = E^T G). The exact Newton step thus costs one
+back-substitution with the constant factorisation plus an n x s product: contact never triggers
+a refactorisation. SNES (prefix ``transient_``) drives the iteration with a line search through a
+shell preconditioner applying this inverse and a shell matrix applying J.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+from petsc4py import PETSc
+
+from app.transient.contact import PointContact, SurfaceContact
+from app.transient.fe import EffectiveOperatorCache, LinearFE
+from app.transient.rigid import RigidSet
+from app.transient.state import TransientState
+from forms.newmark import (
+    TimeScheme,
+    acceleration,
+    acceleration_per_displacement,
+    midpoint,
+    velocity,
+    velocity_per_displacement,
+)
+
+SNES_PREFIX = "transient_"
+SNES_DEFAULTS = {
+    "snes_type": "newtonls",
+    "snes_linesearch_type": "bt",
+    "snes_rtol": 1e-10,
+    "snes_stol": 1e-14,
+    "snes_max_it": 30,
+}
+
+
+class CoupledSystem:
+    """Residual, Jacobian and bordered solve of one generalized-alpha step."""
+
+    def __init__(self, comm, scheme: TimeScheme, fe: LinearFE | None, rigid: RigidSet,
+                 surface_contacts: list[SurfaceContact] = (), point_contacts: list[PointContact] = (),
+                 relative_force_tolerance: float = 1e-10):
+        self.comm, self.scheme, self.fe, self.rigid = comm, scheme, fe, rigid
+        self.surface_contacts = list(surface_contacts)
+        self.point_contacts = list(point_contacts)
+        self.relative_force_tolerance = relative_force_tolerance
+        for c in self.surface_contacts:
+            if c.body not in rigid.index:
+                raise ValueError(f"contact {c.name!r} names unknown rigid body {c.body!r}")
+        for c in self.point_contacts:
+            for name in (c.lower, c.upper):
+                if name not in rigid.index:
+                    raise ValueError(f"contact {c.name!r} names unknown rigid body {name!r}")
+        self.n_fe = fe.n_owned if fe is not None else 0
+        self.m = rigid.size
+        self.m_local = self.m if comm.rank == 0 else 0
+        self._setup_contact_dofs()
+        self.cache = EffectiveOperatorCache(fe, scheme, self.contact_global) if fe is not None else None
+        self.fields = list({id(c.fields): c.fields for c in self.surface_contacts}.values())
+        if fe is not None:
+            from dolfinx import fem
+
+            self._u1 = fem.Function(fe.space)
+            self.translations = fe.translation_vectors()
+            self._b = fe.new_vector()
+            self._r = fe.new_vector()
+            self._tmp = fe.new_vector()
+            self._tmp2 = fe.new_vector()
+        self._setup_snes()
+        self.last_iterations = 0
+        self.total_iterations = 0
+
+    # ----------------------------------------------------------------- setup
+    def _setup_contact_dofs(self) -> None:
+        if self.fe is None or not self.surface_contacts:
+            self.contact_local = np.zeros(0, dtype=np.int32)
+            self.contact_global = np.zeros(0, dtype=PETSc.IntType)
+            self.translation_S = np.zeros((0, self.rigid.gdim))
+            self._S_offset = 0
+            return
+        axes = {}
+        for c in self.surface_contacts:
+            axes.update(zip(c.local_dofs.tolist(), c.dof_axes.tolist()))
+        local = np.array(sorted(axes), dtype=np.int32)
+        gathered = self.comm.allgather(local + self.fe.first_global)
+        gathered_axes = self.comm.allgather(np.array([axes[d] for d in local], dtype=int))
+        self.contact_local = local
+        self.contact_global = np.concatenate(gathered).astype(PETSc.IntType)
+        all_axes = np.concatenate(gathered_axes)
+        self.translation_S = np.zeros((self.contact_global.size, self.fe.gdim))
+        self.translation_S[np.arange(all_axes.size), all_axes] = 1.0
+        self._S_offset = sum(g.size for g in gathered[: self.comm.rank])
+
+    def _setup_snes(self) -> None:
+        n_local = self.n_fe + self.m_local
+        sizes = (n_local, PETSc.DECIDE)
+        self.X = PETSc.Vec().createMPI(sizes, comm=self.comm)
+        self.R = self.X.duplicate()
+        self.J = PETSc.Mat().createPython((sizes, sizes), context=_JacobianShell(self), comm=self.comm)
+        self.J.setUp()
+        opts = PETSc.Options()
+        for key, value in SNES_DEFAULTS.items():
+            if not opts.hasName(SNES_PREFIX + key):
+                opts.setValue(SNES_PREFIX + key, value)
+        snes = PETSc.SNES().create(self.comm)
+        snes.setOptionsPrefix(SNES_PREFIX)
+        snes.setFunction(self._residual_callback, self.R)
+        snes.setJacobian(self._jacobian_callback, self.J, self.J)
+        ksp = snes.getKSP()
+        ksp.setType("preonly")
+        pc = ksp.getPC()
+        pc.setType("python")
+        pc.setPythonContext(_BorderedInverse(self))
+        snes.setFromOptions()
+        ksp.setType("preonly")
+        self.snes = snes
+
+    # ------------------------------------------------------------- one step
+    def solve_step(self, state: TransientState, dt: float) -> tuple[int, TransientState | None]:
+        """Try one step from ``state``. Returns (SNES converged reason, new state or None)."""
+        self._begin_step(state, dt)
+        self.snes.setTolerances(atol=self.relative_force_tolerance * self._force_scale + self._roundoff_force
+                                + 1e-300)
+        try:
+            self.snes.solve(None, self.X)
+        except (PETSc.Error, FloatingPointError, np.linalg.LinAlgError, ValueError):
+            return PETSc.SNES.ConvergedReason.DIVERGED_FUNCTION_DOMAIN, None
+        reason = self.snes.getConvergedReason()
+        self.last_iterations = self.snes.getIterationNumber()
+        self.total_iterations += self.last_iterations
+        if reason <= 0:
+            return reason, None
+        self._evaluate(self.X)
+        return reason, self._new_state()
+
+    def _begin_step(self, state: TransientState, dt: float) -> None:
+        s, fe, rigid = self.scheme, self.fe, self.rigid
+        self.state0, self.dt = state, dt
+        self.t1 = state.t + dt
+        self.t_mid = midpoint(self.t1, state.t, s.alpha_f)
+        self.c_acc = acceleration_per_displacement(dt, s)
+        self.c_vel = velocity_per_displacement(dt, s)
+        for f in self.fields:
+            f.velocity_per_displacement.value = self.c_vel
+            f.one_minus_alpha_f.value = 1 - s.alpha_f
+        X = self.X.array
+        scale_sq = 0.0
+        if fe is not None:
+            self.op = self.cache.get(dt)
+            u0, v0, a0 = state.u, state.v, state.a
+            a_hat = acceleration(0.0, u0, v0, a0, dt, s)
+            v_hat = velocity(a_hat, v0, a0, dt, s)
+            n = self.n_fe
+            b, tmp, tmp2 = self._b, self._tmp, self._tmp2
+            fe.load_N(self.t_mid, b)
+            tmp.array_w[:] = ((1 - s.alpha_m) * a_hat + s.alpha_m * a0)[:n]
+            fe.M.mult(tmp, tmp2)
+            b.axpy(-1.0, tmp2)
+            if fe.C is not None:
+                tmp.array_w[:] = ((1 - s.alpha_f) * v_hat + s.alpha_f * v0)[:n]
+                fe.C.mult(tmp, tmp2)
+                b.axpy(-1.0, tmp2)
+            if s.alpha_f:
+                tmp.array_w[:] = s.alpha_f * u0[:n]
+                fe.K.mult(tmp, tmp2)
+                b.axpy(-1.0, tmp2)
+            # Force scale for the absolute tolerance: physical forces only (b itself holds
+            # u_n / (beta dt^2)-sized terms that say nothing about the force level).
+            tmp.array_w[:] = u0[:n]
+            fe.K.mult(tmp, tmp2)
+            scale_sq += tmp2.norm() ** 2
+            tmp.array_w[:] = a0[:n]
+            fe.M.mult(tmp, tmp2)
+            scale_sq += tmp2.norm() ** 2
+            fe.load_N(self.t_mid, tmp2)
+            scale_sq += tmp2.norm() ** 2
+            predictor = self._u1.vector
+            predictor.array_w[:] = (u0 + dt * v0 + 0.5 * dt * dt * a0)[:n]
+            fe.apply_dirichlet(self.t1, predictor)
+            X[:n] = predictor.array_r
+        z0, zd0, zdd0 = state.z, state.zd, state.zdd
+        self.zdd_hat = acceleration(0.0, 0.0, zd0, zdd0, dt, s)
+        self.zd_hat = velocity(self.zdd_hat, zd0, zdd0, dt, s)
+        self.rigid_force_ext = rigid.external_force_N(self.t_mid)
+        self.rigid_inertia_const = rigid.mass_diagonal * ((1 - s.alpha_m) * self.zdd_hat + s.alpha_m * zdd0)
+        rigid_scale_sq = float(np.sum(self.rigid_force_ext**2 + (rigid.mass_diagonal * zdd0) ** 2))
+        self._force_scale = float(np.sqrt(scale_sq + rigid_scale_sq))
+        # Below ~eps |b| the residual is round-off: never ask for less.
+        roundoff_sq = (b.norm() ** 2 if fe is not None else 0.0) + float(np.sum(self.rigid_inertia_const**2))
+        self._roundoff_force = 10 * np.finfo(float).eps * float(np.sqrt(roundoff_sq))
+        z1 = z0 + dt * zd0 + 0.5 * dt * dt * zdd0
+        rigid.apply_prescribed(self.t1, z1)
+        if self.m_local:
+            # The rigid unknowns are the increments z_{n+1} - z_n: absolute positions divided by
+            # beta dt^2 would drown the accelerations in round-off at small dt.
+            X[self.n_fe:] = z1 - z0
+
+    def _evaluate(self, X: PETSc.Vec) -> None:
+        """Set u_{n+1}, z_{n+1} and every derived (mid-point) quantity from the iterate X."""
+        s, st, dt = self.scheme, self.state0, self.dt
+        x = X.array_r
+        if self.fe is not None:
+            self._u1.vector.array_w[:] = x[: self.n_fe]
+            self._u1.x.scatter_forward()
+            u1 = self._u1.x.array
+            self.a1 = acceleration(u1, st.u, st.v, st.a, dt, s)
+            self.v1 = velocity(self.a1, st.v, st.a, dt, s)
+            for f in self.fields:
+                f.u_mid.x.array[:] = midpoint(u1, st.u, s.alpha_f)
+                f.v_mid.x.array[:] = midpoint(self.v1, st.v, s.alpha_f)
+        dz = self.comm.bcast(np.array(x[self.n_fe:]) if self.comm.rank == 0 else None, root=0)
+        z1 = st.z + dz
+        self.z1 = z1
+        self.zdd1 = acceleration(dz, 0.0, st.zd, st.zdd, dt, s)
+        self.zd1 = velocity(self.zdd1, st.zd, st.zdd, dt, s)
+        self.z_mid = midpoint(z1, st.z, s.alpha_f)
+        self.zd_mid = midpoint(self.zd1, st.zd, s.alpha_f)
+        for c in self.surface_contacts:
+            sl = self.rigid.dofs(c.body)
+            c.set_body_state(self.z_mid[sl], self.zd_mid[sl])
+
+    def _new_state(self) -> TransientState:
+        if self.fe is not None:
+            u, v, a = self._u1.x.array.copy(), self.v1.copy(), self.a1.copy()
+        else:
+            u = v = a = np.zeros(0)
+        return TransientState(self.t1, u, v, a, self.z1.copy(), self.zd1.copy(), self.zdd1.copy())
+
+    # ------------------------------------------------------------- residual
+    def _residual_callback(self, snes, X, R) -> None:
+        self._evaluate(X)
+        r_z = self.rigid.mass_diagonal * (1 - self.scheme.alpha_m) * self.zdd1
+        r_z = r_z + self.rigid.mass_diagonal * self.scheme.alpha_m * self.state0.zdd - self.rigid_force_ext
+        out = R.array
+        if self.fe is not None:
+            r = self._r
+            self.op.full.mult(self._u1.vector, r)
+            r.axpy(-1.0, self._b)
+            for c in self.surface_contacts:
+                rc = c.assemble_residual()
+                r.axpy(1.0, rc)
+                sl = self.rigid.dofs(c.body)
+                r_z[sl] -= np.array([rc.dot(tk) for tk in self.translations])
+            self.fe.zero_constrained(r)
+            out[: self.n_fe] = r.array_r
+        for c in self.point_contacts:
+            f, _, _ = self._point_force(c)
+            r_z[self.rigid.dofs(c.upper)] -= f * c.normal
+            r_z[self.rigid.dofs(c.lower)] += f * c.normal
+        r_z[~self.rigid.free_mask] = 0.0
+        if self.m_local:
+            out[self.n_fe:] = r_z
+
+    def _point_force(self, c: PointContact):
+        lo, up = self.rigid.dofs(c.lower), self.rigid.dofs(c.upper)
+        delta, rate = c.penetration(self.z_mid[lo], self.z_mid[up], self.zd_mid[lo], self.zd_mid[up])
+        return c.force(delta, rate)
+
+    # ------------------------------------------------------------- Jacobian
+    def _gather_rows(self, local_rows: np.ndarray) -> np.ndarray:
+        """Stack per-rank row blocks (each rank's contact rows) into the full s x k array."""
+        if self.comm.size == 1:
+            return local_rows
+        return np.vstack(self.comm.allgather(local_rows))
+
+    def _jacobian_callback(self, snes, X, J, P) -> None:
+        self._evaluate(X)
+        s_count, m = self.contact_global.size, self.m
+        Kss = np.zeros((s_count, s_count))
+        B = np.zeros((s_count, m))
+        L = np.zeros((m, s_count))
+        Kzz = np.diag((1 - self.scheme.alpha_m) * self.c_acc * self.rigid.mass_diagonal)
+        T = self.translation_S
+        owned_rows = (self.contact_local + self.fe.first_global).astype(PETSc.IntType) if self.fe else None
+        for c in self.surface_contacts:
+            A = c.assemble_tangent()
+            block = self._gather_rows(A.getValues(owned_rows, self.contact_global)
+                                      .reshape(owned_rows.size, s_count))
+            Kss += block
+            sl = self.rigid.dofs(c.body)
+            B[:, sl] -= block @ T
+            L[sl, :] -= T.T @ block
+            Kzz[sl, sl] += T.T @ block @ T
+        one_minus_af = 1 - self.scheme.alpha_f
+        for c in self.point_contacts:
+            _, k_f, c_f = self._point_force(c)
+            stiffness = one_minus_af * (k_f + c_f * self.c_vel) * np.outer(c.normal, c.normal)
+            lo, up = self.rigid.dofs(c.lower), self.rigid.dofs(c.upper)
+            Kzz[up, up] += stiffness
+            Kzz[lo, lo] += stiffness
+            Kzz[up, lo] -= stiffness
+            Kzz[lo, up] -= stiffness
+        fixed = ~self.rigid.free_mask
+        Kzz[fixed, :] = 0.0
+        Kzz[:, fixed] = 0.0
+        Kzz[fixed, fixed] = 1.0
+        L[fixed, :] = 0.0
+        B[:, fixed] = 0.0
+        G_S = (self._gather_rows(self.op.columns[self.contact_local]) if self.fe is not None
+               else np.zeros((0, 0)))
+        Z = np.block([[np.eye(s_count) + Kss @ G_S, -B], [-L @ G_S, Kzz]])
+        self._Kss, self._B, self._L, self._Kzz = Kss, B, L, Kzz
+        self._Z_lu = scipy.linalg.lu_factor(Z, check_finite=True) if Z.size else None
+
+    # ------------------------------------------------------- bordered solve
+    def apply_inverse(self, x: np.ndarray, y: np.ndarray) -> None:
+        """y = J^-1 x for local arrays of the packed vector."""
+        n, s_count = self.n_fe, self.contact_global.size
+        r_z = self.comm.bcast(np.array(x[n:]) if self.comm.rank == 0 else None, root=0)
+        if self.fe is not None:
+            self._tmp.array_w[:] = x[:n]
+            self.op.solve(self._tmp, self._tmp2)
+            w = self._tmp2.array_r.copy()
+            w_S = np.concatenate(self.comm.allgather(w[self.contact_local])) if s_count else np.zeros(0)
+        else:
+            w, w_S = np.zeros(0), np.zeros(0)
+        if self._Z_lu is not None:
+            rhs = np.concatenate([self._Kss @ w_S, r_z - self._L @ w_S])
+            sol = scipy.linalg.lu_solve(self._Z_lu, rhs)
+            y_contact, dz = sol[:s_count], sol[s_count:]
+        else:
+            y_contact, dz = np.zeros(0), np.zeros(0)
+        if self.fe is not None:
+            y[:n] = w - self.op.columns @ y_contact if s_count else w
+        if self.m_local:
+            y[n:] = dz
+
+    def apply_jacobian(self, x: np.ndarray, y: np.ndarray) -> None:
+        """y = J x for local arrays of the packed vector."""
+        n, s_count = self.n_fe, self.contact_global.size
+        x_z = self.comm.bcast(np.array(x[n:]) if self.comm.rank == 0 else None, root=0)
+        if self.fe is not None:
+            self._tmp.array_w[:] = x[:n]
+            self.op.constrained.mult(self._tmp, self._tmp2)
+            y_u = self._tmp2.array_r.copy()
+            x_S = (np.concatenate(self.comm.allgather(x[:n][self.contact_local])) if s_count
+                   else np.zeros(0))
+            if s_count:
+                local = slice(self._S_offset, self._S_offset + self.contact_local.size)
+                y_u[self.contact_local] += (self._Kss @ x_S + self._B @ x_z)[local]
+            y[:n] = y_u
+        else:
+            x_S = np.zeros(0)
+        if self.m_local:
+            y[n:] = self._L @ x_S + self._Kzz @ x_z
+
+    # ------------------------------------------------------------ reporting
+    def contact_forces_N(self) -> dict[str, np.ndarray]:
+        """Force on the rigid body (surface contacts) or on the upper body (point contacts) at the
+        mid-point of the last evaluated iterate, as gdim vectors [N]."""
+        out = {}
+        for c in self.surface_contacts:
+            rc = c.assemble_residual()
+            out[c.name] = np.array([rc.dot(tk) for tk in self.translations])
+        for c in self.point_contacts:
+            f, _, _ = self._point_force(c)
+            out[c.name] = f * c.normal
+        return out
+
+    def destroy(self) -> None:
+        if self.cache is not None:
+            self.cache.destroy()
+        for obj in (self.snes, self.J, self.X, self.R):
+            obj.destroy()
+
+
+class _JacobianShell:
+    def __init__(self, system: CoupledSystem):
+        self.system = system
+
+    def mult(self, mat, x, y):
+        self.system.apply_jacobian(x.array_r, y.array)
+
+
+class _BorderedInverse:
+    def __init__(self, system: CoupledSystem):
+        self.system = system
+
+    def apply(self, pc, x, y):
+        self.system.apply_inverse(x.array_r, y.array)

@@ -1,0 +1,90 @@
+"""Penalty contact of a deformable surface against a rigid body, and regularised Coulomb friction.
+
+Sign conventions (used by ``app.transient``):
+
+- The rigid obstacle's outward unit normal ``n`` points from the obstacle towards the deformable
+  body. The normal gap g = (y - p) . n for a plane through p, g = |y - c| - R for a sphere, with
+  y = x + u the current position of a surface point; g < 0 is penetration.
+- The contact pressure is p = < k (-g) + c (-dg/dt) > H(-g) >= 0 (Macaulay bracket <.>: no
+  adhesion); the traction on the deformable surface is p n (+ friction), the force on the rigid
+  body is minus its integral.
+- Residual convention: r(u) = M a + C v + K u - f_ext - f_contact = 0, so the contact term that
+  enters the residual form is ``-inner(traction, w) ds`` (see :func:`contact_residual`).
+
+The gap depends on the deformable displacement u and the body position z only through y - z, so
+the derivative with respect to z is minus the derivative with respect to u applied to a rigid
+translation: the assembler needs only the tangent of :func:`contact_residual` with respect to u.
+"""
+
+from __future__ import annotations
+
+import ufl
+
+
+def macaulay(x):
+    """<x> = max(x, 0)."""
+    return ufl.conditional(ufl.gt(x, 0), x, 0)
+
+
+def heaviside(x):
+    """H(x) = 1 for x > 0, else 0 (derivative of the Macaulay bracket)."""
+    return ufl.conditional(ufl.gt(x, 0), 1, 0)
+
+
+def plane_gap(y, plane_point, normal):
+    """Normal gap [m] of points ``y`` to a plane through ``plane_point`` with unit ``normal``."""
+    return ufl.dot(y - plane_point, normal)
+
+
+def plane_normal(y, plane_point, normal):
+    return normal
+
+
+def sphere_gap(y, center, radius):
+    """Normal gap [m] of points ``y`` to a sphere (circle in 2D) of ``radius`` about ``center``."""
+    return ufl.sqrt(ufl.dot(y - center, y - center)) - radius
+
+
+def sphere_normal(y, center, radius):
+    d = y - center
+    return d / ufl.sqrt(ufl.dot(d, d))
+
+
+def normal_pressure(gap, gap_rate, stiffness, damping):
+    """Kelvin-Voigt penalty pressure [Pa] (or force per length/area per the caller's stiffness
+    unit): k (-g) + c (-dg/dt) while penetrating, clipped at zero so the surfaces never pull."""
+    return heaviside(-gap) * macaulay(-stiffness * gap - damping * gap_rate)
+
+
+def friction_coefficient(slip_speed, mu_dynamic, static_ratio, decay_s_per_m):
+    """ANSYS-style exponential static-to-kinetic law: mu = mu_d (1 + (FACT - 1) exp(-DC |s|)).
+    mu_s = FACT mu_d at zero slip speed, mu_d at high slip speed."""
+    return mu_dynamic * (1 + (static_ratio - 1) * ufl.exp(-decay_s_per_m * slip_speed))
+
+
+def friction_traction(normal, relative_velocity, pressure, mu_dynamic, static_ratio, decay_s_per_m,
+                      shear_cap, regularisation_speed):
+    """Regularised Coulomb traction on the deformable surface [Pa], opposing the tangential slip
+    velocity s = (I - n n) (v - v_body):
+
+        t_t = -min(mu(|s|) p, TAUMAX) s / sqrt(|s|^2 + eps^2).
+
+    Below the regularisation speed eps the law is a stiff viscous stick (|t_t| ~ mu p |s| / eps),
+    which is what keeps Newton smooth through stick/slip transitions."""
+    slip = relative_velocity - ufl.dot(relative_velocity, normal) * normal
+    speed_reg = ufl.sqrt(ufl.dot(slip, slip) + regularisation_speed**2)
+    speed = ufl.sqrt(ufl.dot(slip, slip) + 1e-30)
+    mu = friction_coefficient(speed, mu_dynamic, static_ratio, decay_s_per_m)
+    shear = ufl.min_value(mu * pressure, shear_cap)
+    return -shear * slip / speed_reg
+
+
+def contact_residual(traction, test, ds, weight=1.0):
+    """Contribution of a surface traction [Pa] to the residual r = ... - f_contact; ``weight`` is the
+    model's volume weight (2 pi r axisymmetric, thickness in plane strain)."""
+    return -ufl.inner(traction, test) * weight * ds
+
+
+def body_force_density(traction):
+    """Force per area on the rigid body: the reaction of the traction on the deformable surface."""
+    return -traction

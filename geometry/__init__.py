@@ -1,0 +1,1 @@
+"""gmsh builders of tagged meshes for the scenes and validation specimens, and .msh import."""

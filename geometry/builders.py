@@ -1,0 +1,12 @@
+"""Registry of mesh builders: name -> (parameter dataclass, build function)."""
+
+from __future__ import annotations
+
+from geometry.specimens import BarParameters, DiscParameters, build_bar, build_disc
+from geometry.transducer import TransducerParameters, build_transducer
+
+BUILDERS = {
+    "bar": (BarParameters, build_bar),
+    "disc": (DiscParameters, build_disc),
+    "transducer": (TransducerParameters, build_transducer),
+}

@@ -1,0 +1,112 @@
+"""Validation specimens: PZT bars (IEEE Std 176 length-extensional 33 bar) and discs.
+
+Axisymmetric models use mesh coordinates (r, z); 3D models (x, y, z). Electrodes are the faces
+normal to z. Facet names: ``bottom`` (z = 0), ``top`` (z = length), ``side``; axisymmetric
+models also name ``axis`` (r = 0). Cell name: ``piezo``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gmsh
+from mpi4py import MPI
+
+from app.case.validate import param
+from geometry.meshdata import GmshSession, MeshData, from_gmsh_model
+
+
+@dataclass(frozen=True)
+class BarParameters:
+    """Length-extensional bar: square w x w section in 3D, or a round rod of radius w/2."""
+
+    length_m: float = param(0.02, gt=0)
+    width_m: float = param(0.002, gt=0, doc="square side (3D) or diameter (axisymmetric)")
+    axial_divisions: int = param(20, ge=1)
+    lateral_divisions: int = param(2, ge=1)
+
+
+@dataclass(frozen=True)
+class DiscParameters:
+    """Thickness-poled disc (axisymmetric)."""
+
+    radius_m: float = param(0.01, gt=0)
+    thickness_m: float = param(0.001, gt=0)
+    radial_divisions: int = param(40, ge=1)
+    thickness_divisions: int = param(4, ge=1)
+
+
+def _structured_rectangle(width: float, height: float, nx: int, ny: int, axisymmetric: bool):
+    """Transfinite rectangle [0, width] x [0, height] with named boundary lines."""
+    occ = gmsh.model.occ
+    surface = occ.addRectangle(0, 0, 0, width, height)
+    occ.synchronize()
+    lines = {}
+    for _, line in gmsh.model.getBoundary([(2, surface)], oriented=False):
+        x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(1, line)
+        if abs(y1 - y0) < 1e-3 * min(width, height):  # OCC boxes carry a tolerance margin
+            lines["bottom" if y0 < 0.5 * height else "top"] = line
+            gmsh.model.mesh.setTransfiniteCurve(line, nx + 1)
+        else:
+            name = "axis" if (x0 < 0.5 * width and axisymmetric) else ("side" if x0 > 0.5 * width else "left")
+            lines[name] = line
+            gmsh.model.mesh.setTransfiniteCurve(line, ny + 1)
+    gmsh.model.mesh.setTransfiniteSurface(surface)
+    gmsh.model.addPhysicalGroup(2, [surface], 1)
+    gmsh.model.setPhysicalName(2, 1, "piezo")
+    for tag, name in enumerate(("bottom", "top", "side", "axis", "left"), start=1):
+        if name in lines:
+            gmsh.model.addPhysicalGroup(1, [lines[name]], tag)
+            gmsh.model.setPhysicalName(1, tag, name)
+    gmsh.model.mesh.generate(2)
+
+
+def build_bar(comm: MPI.Comm, params: BarParameters, kind: str) -> MeshData:
+    """Bar along z from 0 to ``length_m``: a rod (axisymmetric) or a square prism (3D)."""
+    with GmshSession(comm, "bar"):
+        if comm.rank == 0:
+            if kind == "axisymmetric":
+                _structured_rectangle(0.5 * params.width_m, params.length_m, params.lateral_divisions,
+                                      params.axial_divisions, axisymmetric=True)
+            elif kind == "3d":
+                _structured_box(params)
+            else:
+                raise ValueError(f"bar builder supports axisymmetric and 3d, not {kind}")
+        return from_gmsh_model(comm, 2 if kind == "axisymmetric" else 3)
+
+
+def _structured_box(params: BarParameters):
+    occ = gmsh.model.occ
+    w, L = params.width_m, params.length_m
+    volume = occ.addBox(-w / 2, -w / 2, 0, w, w, L)
+    occ.synchronize()
+    for _, curve in gmsh.model.getEntities(1):
+        x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(1, curve)
+        n = params.axial_divisions if (z1 - z0) > 0.5 * L else params.lateral_divisions
+        gmsh.model.mesh.setTransfiniteCurve(curve, n + 1)
+    faces = {"bottom": [], "top": [], "side": []}
+    for _, face in gmsh.model.getBoundary([(3, volume)], oriented=False):
+        gmsh.model.mesh.setTransfiniteSurface(face)
+        z0, z1 = gmsh.model.getBoundingBox(2, face)[2::3]
+        if z1 - z0 < 1e-3 * w:
+            faces["bottom" if z0 < 0.5 * L else "top"].append(face)
+        else:
+            faces["side"].append(face)
+    gmsh.model.mesh.setTransfiniteVolume(volume)
+    gmsh.model.addPhysicalGroup(3, [volume], 1)
+    gmsh.model.setPhysicalName(3, 1, "piezo")
+    for tag, (name, ids) in enumerate(faces.items(), start=1):
+        gmsh.model.addPhysicalGroup(2, ids, tag)
+        gmsh.model.setPhysicalName(2, tag, name)
+    gmsh.model.mesh.generate(3)
+
+
+def build_disc(comm: MPI.Comm, params: DiscParameters, kind: str) -> MeshData:
+    """Thickness-poled disc: axisymmetric rectangle [0, R] x [0, t]."""
+    if kind != "axisymmetric":
+        raise ValueError(f"disc builder supports axisymmetric, not {kind}")
+    with GmshSession(comm, "disc"):
+        if comm.rank == 0:
+            _structured_rectangle(params.radius_m, params.thickness_m, params.radial_divisions,
+                                  params.thickness_divisions, axisymmetric=True)
+        return from_gmsh_model(comm, 2)

@@ -1,0 +1,40 @@
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CASES = ROOT / "cases"
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+def run_cli(*args, mpi: int = 0, timeout: float = 600, cwd=None):
+    """Run ``python -m app ...`` (optionally under mpirun) and return the CompletedProcess."""
+    cmd = [sys.executable, "-m", "app", *map(str, args)]
+    if mpi:
+        cmd = ["mpirun", "-n", str(mpi), *cmd]
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               OMPI_MCA_rmaps_base_oversubscribe="1", PYTHONPATH=str(ROOT))
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd or ROOT, env=env)
+
+
+@pytest.fixture
+def cli():
+    return run_cli
+
+
+@pytest.fixture
+def shared_tmp(tmp_path):
+    """A temporary directory that is the same on every MPI rank (rank 0's tmp_path)."""
+    from mpi4py import MPI
+
+    return Path(MPI.COMM_WORLD.bcast(str(tmp_path), root=0))
+
+
+def run_case_quiet(case, out, *overrides):
+    from app.runner import run_case
+
+    return run_case(CASES / case if not Path(case).is_absolute() else case, list(overrides), out, quiet=True)

@@ -1,0 +1,38 @@
+"""Every case file under cases/ runs at tiny resolution, serially and on 2 MPI ranks.
+
+A new case file needs an entry in TINY: the overrides that make it run in seconds.
+"""
+
+import json
+
+import pytest
+from conftest import CASES, run_cli
+
+TINY = {
+    "usdc-transducer.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic_mesh_size_m=0.0025",
+                             "harmonic.n_points=5", "harmonic.refine_extrema=false", "modal.n_modes=2"],
+    "validation/pzt4-bar-axisymmetric.toml": ["geometry.parameters.axial_divisions=8", "harmonic.n_points=5"],
+    "validation/pzt4-bar-3d.toml": ["geometry.parameters.axial_divisions=8", "geometry.parameters.lateral_divisions=1"],
+    "validation/pzt4-disc.toml": ["geometry.parameters.radial_divisions=10", "harmonic.n_points=5"],
+}
+
+
+def all_cases():
+    return sorted(str(p.relative_to(CASES)) for p in CASES.rglob("*.toml"))
+
+
+def test_every_case_has_a_tiny_variant():
+    missing = [c for c in all_cases() if c not in TINY]
+    assert not missing, f"add tiny-resolution overrides for {missing} to tests/test_cases.py"
+
+
+@pytest.mark.parametrize("ranks", [0, 2], ids=["serial", "mpi2"])
+@pytest.mark.parametrize("case", sorted(TINY))
+def test_case_runs(case, ranks, tmp_path):
+    overrides = [arg for o in TINY[case] for arg in ("--set", o)]
+    result = run_cli("run", CASES / case, "--out", tmp_path, *overrides, mpi=ranks)
+    assert result.returncode == 0, result.stderr[-3000:]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["mpi_size"] == max(ranks, 1)
+    assert summary["results"]
+    assert "Traceback" not in result.stderr

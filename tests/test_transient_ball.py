@@ -1,0 +1,97 @@
+"""Ball drop on a Kelvin-Voigt plane against the closed form, and hard contact cases that must
+finish: 1000x stiffness, a ball chattering on a shaken elastic block, a grazing impact."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from app.transient.scenes import (
+    BallDrop,
+    ball_drop_closed_form,
+    ball_step_sizes,
+    build_ball_drop,
+    run_scene,
+    vibrating_block_with_ball,
+)
+from app.transient.control import StepSizes
+from forms.newmark import TimeScheme
+
+
+def measured_impact(ball: BallDrop, records):
+    """(contact duration [s], restitution) of the first impact: contact starts where the penetration
+    crosses zero and ends where the unclipped Kelvin-Voigt force k delta + c delta' does (both located
+    by linear interpolation between steps), as in the closed form."""
+    t = np.array([r["time_s"] for r in records])
+    z = np.array([r["position_m"][1] for r in records])
+    v = np.array([r["velocity_m_per_s"][1] for r in records])
+    penetration = ball.diameter_m / 2 - z
+    kv_force = ball.stiffness_N_per_m * penetration - ball.damping_N_s_per_m * v
+
+    def crossing(q, i):     # zero of q between records i-1 and i
+        return t[i - 1] + (t[i] - t[i - 1]) * q[i - 1] / (q[i - 1] - q[i])
+
+    start = int(np.argmax(penetration > 0))
+    end = start + int(np.argmax(kv_force[start:] < 0))
+    t_in, t_out = crossing(penetration, start), crossing(kv_force, end)
+    g = ball.gravity_m_per_s2
+    v_in = v[start - 1] - g * (t_in - t[start - 1])
+    v_out = v[end - 1] + (v[end] - v[end - 1]) * (t_out - t[end - 1]) / (t[end] - t[end - 1])
+    return t_out - t_in, -v_out / v_in
+
+
+@pytest.mark.parametrize("stiffness_factor", [1.0, 1000.0])
+def test_ball_drop_matches_kelvin_voigt_closed_form(stiffness_factor):
+    base = BallDrop()
+    ball = dataclasses.replace(base, stiffness_N_per_m=base.stiffness_N_per_m * stiffness_factor,
+                               damping_N_s_per_m=base.damping_N_s_per_m * np.sqrt(stiffness_factor))
+    system, state = build_ball_drop(MPI.COMM_SELF, ball, TimeScheme.newmark())
+    fall_s = np.sqrt(2 * ball.height_m / ball.gravity_m_per_s2)
+    duration_cf, restitution_cf = ball_drop_closed_form(ball)
+    records, _, stepper = run_scene(system, state, ball_step_sizes(ball), fall_s + 3 * duration_cf)
+    duration, restitution = measured_impact(ball, records)
+    assert duration == pytest.approx(duration_cf, rel=0.005)
+    assert restitution == pytest.approx(restitution_cf, abs=0.002)
+    assert restitution < 0.995      # the damper really dissipates
+    assert stepper.stats.cutbacks == 0
+
+
+def test_ball_drop_force_free_restitution_is_one_without_damping():
+    ball = BallDrop(damping_N_s_per_m=0.0)
+    system, state = build_ball_drop(MPI.COMM_SELF, ball, TimeScheme.newmark())
+    fall_s = np.sqrt(2 * ball.height_m / ball.gravity_m_per_s2)
+    duration_cf, restitution_cf = ball_drop_closed_form(ball)
+    records, _, _ = run_scene(system, state, ball_step_sizes(ball), fall_s + 3 * duration_cf)
+    duration, restitution = measured_impact(ball, records)
+    assert restitution_cf == pytest.approx(1.0, abs=1e-9)
+    assert restitution == pytest.approx(1.0, abs=2e-3)
+    assert duration == pytest.approx(duration_cf, rel=0.01)
+
+
+def test_ball_chattering_on_shaken_block_finishes():
+    """Table acceleration A w^2 ~ 11 g at 3 kHz: the ball is thrown off and lands again, again."""
+    system, state = vibrating_block_with_ball(MPI.COMM_WORLD, TimeScheme.generalized_alpha(0.7),
+                                              amplitude_m=0.3e-6, frequency_Hz=3000.0)
+    sizes = StepSizes(open_s=2.5e-6, closed_s=5e-7, change_s=5e-8, min_s=1e-12)
+    records, final, stepper = run_scene(system, state, sizes, 4e-3)
+    closed = np.array([r["contact_closed"][0] for r in records])
+    impacts = int(np.sum(np.diff(closed) == 1))
+    assert final.t == pytest.approx(4e-3)
+    assert impacts >= 2
+    heights = np.array([r["position_m"][1] for r in records])
+    assert heights.max() > heights[0] + 1e-6           # it really flew
+    assert np.all(np.isfinite(heights))
+
+
+def test_grazing_impact_finishes():
+    """The ball skims the block's top face with a tiny normal speed and a large tangential one."""
+    system, state = vibrating_block_with_ball(MPI.COMM_WORLD, TimeScheme.generalized_alpha(0.7),
+                                              amplitude_m=0.0, ball_gap_m=2e-8,
+                                              ball_velocity_m_per_s=(1.0, -1e-4))
+    sizes = StepSizes(open_s=2.5e-6, closed_s=5e-7, change_s=5e-8, min_s=1e-12)
+    records, final, stepper = run_scene(system, state, sizes, 2e-3)
+    assert final.t == pytest.approx(2e-3)
+    assert any(r["contact_closed"][0] for r in records)
