@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
 from petsc4py import PETSc
 from slepc4py import SLEPc
 

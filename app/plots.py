@@ -26,7 +26,7 @@ def admittance_plot(path: Path, harmonic: dict, f_r: float | None, f_a: float | 
         ax1.semilogy(fine / 1e3, np.abs(y), "-", lw=1, label="1-DOF equivalent circuit")
         ax2.plot(fine / 1e3, np.degrees(np.angle(y)), "-", lw=1, label="1-DOF equivalent circuit")
     for ax in (ax1, ax2):
-        for value, label in ((f_r, "f_r (modal)"), (f_a, "f_a (modal)")):
+        for value in (f_r, f_a):
             if value:
                 ax.axvline(value / 1e3, color="gray", ls="--", lw=0.8)
         ax.grid(True, which="both", alpha=0.3)

@@ -46,8 +46,14 @@ TABLE_COLUMNS = (
     ("energy_closure_relative", ("energy_ledger", "closure_relative")),
     ("contact_events", ("solver", "events")),
 )
-PLOT_COLUMNS = ("transducer_max_flight_height_m", "flight_rate_per_s", "free_mass_impact_rate_per_s",
-                "rock_mean_power_W", "rock_impulse_per_impact_mean_N_s", "impact_rate_stem_rock_per_s")
+PLOT_COLUMNS = (
+    "transducer_max_flight_height_m",
+    "flight_rate_per_s",
+    "free_mass_impact_rate_per_s",
+    "rock_mean_power_W",
+    "rock_impulse_per_impact_mean_N_s",
+    "impact_rate_stem_rock_per_s",
+)
 
 
 def parse_param(text: str) -> tuple[str, list]:
@@ -62,19 +68,27 @@ def parse_param(text: str) -> tuple[str, list]:
             raise CaseError("--param", key, f"empty value in {raw!r}")
         values.append(parse_override(f"{key}={item}")[1])
     if not key.startswith("lumped.") or len(key.split(".")) < 2:
-        raise CaseError("--param", key, "unknown sweep parameter: sweep parameters live under [lumped], "
-                        "e.g. lumped.downforce_N or lumped.free_mass.mass_kg")
+        raise CaseError(
+            "--param",
+            key,
+            "unknown sweep parameter: sweep parameters live under [lumped], "
+            "e.g. lumped.downforce_N or lumped.free_mass.mass_kg",
+        )
     return key, values
 
 
-def build_points(case_path: str | Path, params: list[tuple[str, list]], sets: list[str] | None = None) -> list[dict]:
+def build_points(
+    case_path: str | Path, params: list[tuple[str, list]], sets: list[str] | None = None
+) -> list[dict]:
     """Validate every grid point; returns [{index, values: {key: value}, section}] in grid order."""
     from app.lumped.schema import LumpedSection
 
     case_path = str(case_path)
     base = read_toml(case_path)
     if base.get("tier", "lumped") != "lumped":
-        raise CaseError(case_path, "tier", f"sweep runs lumped cases; this case has tier = {base.get('tier')!r}")
+        raise CaseError(
+            case_path, "tier", f"sweep runs lumped cases; this case has tier = {base.get('tier')!r}"
+        )
     keys = [k for k, _ in params]
     if len(set(keys)) != len(keys):
         raise CaseError("--param", keys[0], "a parameter is swept twice")
@@ -132,8 +146,12 @@ def _versions() -> dict:
 
     import app
 
-    out = {"piezodyn": app.__version__, "python": platform.python_version(), "numpy": numpy.__version__,
-           "scipy": scipy.__version__}
+    out = {
+        "piezodyn": app.__version__,
+        "python": platform.python_version(),
+        "numpy": numpy.__version__,
+        "scipy": scipy.__version__,
+    }
     try:
         import numba
 
@@ -242,9 +260,9 @@ def write_table(rows: list[dict], keys: list[str], out_dir: Path, case_path: str
         writer.writerow(columns)
         for row in rows:
             writer.writerow([_csv(row.get(c, "")) for c in columns])
-    (out_dir / "sweep.json").write_text(json.dumps(
-        {"case": case_path, "parameters": keys, "rows": rows}, indent=1, default=_json_default
-    ))
+    (out_dir / "sweep.json").write_text(
+        json.dumps({"case": case_path, "parameters": keys, "rows": rows}, indent=1, default=_json_default)
+    )
     ok = [r for r in rows if "_failed" not in r]
     if ok:
         write_sweep_plots(ok, keys, out_dir)
@@ -295,10 +313,20 @@ def write_sweep_plots(rows: list[dict], keys: list[str], out_dir: Path) -> list[
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="piezodyn sweep", description=__doc__.split("\n\n")[0])
     parser.add_argument("case", help="lumped case file (tier = 'lumped')")
-    parser.add_argument("--param", action="append", default=[], metavar="KEY=V1,V2,...",
-                        help="swept parameter, e.g. lumped.downforce_N=0,3,6,9 (repeat for a grid)")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="fixed override applied to every point")
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="KEY=V1,V2,...",
+        help="swept parameter, e.g. lumped.downforce_N=0,3,6,9 (repeat for a grid)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="fixed override applied to every point",
+    )
     parser.add_argument("--out", default=None, help="output directory (default: sweep-<case name>)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser

@@ -11,10 +11,14 @@ import pytest
 
 from app.case.validate import from_dict
 from app.lumped import kernel as K
-from app.lumped.model import ID2, ID3, IV, IW, IX, IZ
+from app.lumped.model import ID2, ID3, IW, IX, IZ
 from app.lumped.parameters import (
-    contact_duration_s, damping_ratio_from_restitution, derive_parameters, effective_modulus_Pa,
-    hertz_secant_stiffness_N_per_m, restitution_from_damping_ratio,
+    contact_duration_s,
+    damping_ratio_from_restitution,
+    derive_parameters,
+    effective_modulus_Pa,
+    hertz_secant_stiffness_N_per_m,
+    restitution_from_damping_ratio,
 )
 from app.lumped.schema import LumpedSection
 from app.lumped.simulate import initial_state_from_section, simulate
@@ -24,7 +28,10 @@ def run(data: dict):
     section = from_dict(LumpedSection, data, "test.toml", "lumped")
     p = derive_parameters(section)
     result = simulate(
-        p, section.duration_s, initial_state_from_section(p, section.initial), section.output.output_interval_s,
+        p,
+        section.duration_s,
+        initial_state_from_section(p, section.initial),
+        section.output.output_interval_s,
         section.solver,
     )
     return section, p, result
@@ -47,10 +54,18 @@ def stem_drop(approach_velocity, damping, stiffness=2.0e8, duration=2e-4):
         "gravity_m_per_s2": 0.0,
         "drive": {"voltage_amplitude_V": 0.0},
         "stem": {"mass_kg": 0.04},
-        "contact_stem_rock": {"stiffness_rule": "given", "stiffness_N_per_m": stiffness,
-                              "damping_N_s_per_m": damping},
-        "initial": {"vibration": "rest", "transducer_z_m": 0.02, "free_mass_w_m": 0.01,
-                    "stem_v_m": approach_velocity * 1e-5, "stem_velocity_m_per_s": -approach_velocity},
+        "contact_stem_rock": {
+            "stiffness_rule": "given",
+            "stiffness_N_per_m": stiffness,
+            "damping_N_s_per_m": damping,
+        },
+        "initial": {
+            "vibration": "rest",
+            "transducer_z_m": 0.02,
+            "free_mass_w_m": 0.01,
+            "stem_v_m": approach_velocity * 1e-5,
+            "stem_velocity_m_per_s": -approach_velocity,
+        },
         "output": {"output_interval_s": 1e-6},
     }
 
@@ -90,10 +105,13 @@ def test_opening_before_geometric_separation_and_rock_relaxation():
 
 def test_restitution_inverse_and_hertz_secant():
     for e in (0.99, 0.8, 0.5, math.exp(-2.0), 0.05):
-        assert restitution_from_damping_ratio(damping_ratio_from_restitution(e)) == pytest.approx(e, rel=1e-12)
+        assert restitution_from_damping_ratio(damping_ratio_from_restitution(e)) == pytest.approx(
+            e, rel=1e-12
+        )
     # continuity across critical damping
-    assert restitution_from_damping_ratio(1 - 1e-7) == pytest.approx(restitution_from_damping_ratio(1 + 1e-7),
-                                                                     rel=1e-5)
+    assert restitution_from_damping_ratio(1 - 1e-7) == pytest.approx(
+        restitution_from_damping_ratio(1 + 1e-7), rel=1e-5
+    )
     e_star = effective_modulus_Pa(210e9, 0.3, 210e9, 0.3)
     k = hertz_secant_stiffness_N_per_m(4e-3, e_star, 300.0)
     delta = 300.0 / k
@@ -119,8 +137,14 @@ def test_grazing_tip_touches_ball_only_when_it_reaches_it(clearance_m, expect_co
     """Vibrating tip above a ball at rest (no gravity): the gap is amplitude-exact, so a 1 pm
     clearance must give no contact and a 1 pm overlap a contact at the tip's lowest point."""
     data = {"duration_s": 2e-4, "gravity_m_per_s2": 0.0, "output": {"output_interval_s": 1e-6}}
-    amplitude = derive_parameters(from_dict(LumpedSection, data, "test.toml", "lumped")).free_tip_amplitude_m()
-    data["initial"] = {"transducer_z_m": 2e-3 + amplitude + clearance_m, "free_mass_w_m": 2e-3, "stem_v_m": 1e-3}
+    amplitude = derive_parameters(
+        from_dict(LumpedSection, data, "test.toml", "lumped")
+    ).free_tip_amplitude_m()
+    data["initial"] = {
+        "transducer_z_m": 2e-3 + amplitude + clearance_m,
+        "free_mass_w_m": 2e-3,
+        "stem_v_m": 1e-3,
+    }
     _, p, result = run(data)
     close = closings(result, 0)
     assert (len(close) > 0) == expect_contact
@@ -139,8 +163,12 @@ def test_free_flight_is_a_parabola_and_tip_vibrates_at_15_um():
     data = {
         "duration_s": 5e-3,
         "downforce_N": downforce,
-        "initial": {"transducer_z_m": 1e-3, "transducer_velocity_m_per_s": v0, "free_mass_w_m": 0.0,
-                    "stem_v_m": 0.0},
+        "initial": {
+            "transducer_z_m": 1e-3,
+            "transducer_velocity_m_per_s": v0,
+            "free_mass_w_m": 0.0,
+            "stem_v_m": 0.0,
+        },
         "output": {"output_interval_s": 2e-6},
     }
     _, p, result = run(data)
@@ -157,8 +185,13 @@ def test_energy_ledger_closes_on_the_drill_scene():
     balance = result.energy_balance()
     assert result.counters["events"] > 100
     assert balance["closure_relative"] < 1e-10
-    for key in ("modal_damping_loss_J", "contact_tip_ball_loss_J", "contact_ball_stem_loss_J",
-                "contact_stem_rock_loss_J", "electrical_input_J"):
+    for key in (
+        "modal_damping_loss_J",
+        "contact_tip_ball_loss_J",
+        "contact_ball_stem_loss_J",
+        "contact_stem_rock_loss_J",
+        "electrical_input_J",
+    ):
         assert balance[key] > 0.0
 
 

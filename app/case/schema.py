@@ -7,7 +7,7 @@ facet or cell groups) happen in :mod:`app.fe.problem` and raise the same :class:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -115,21 +115,22 @@ class OutputSection:
 @dataclass(frozen=True)
 class Case:
     tier: Literal["fe", "lumped"] = param("fe", doc="model tier: full FE or lumped")
-    title: str = param("")
-    analyses: list[Analysis] = param(default_factory=lambda: ["modal"])
-    geometry: GeometrySection | None = None
-    materials: dict[str, Material] = param(default_factory=dict)
-    regions: list[Region] = param(default_factory=list)
-    electrodes: dict[str, Electrode] = param(default_factory=dict)
-    supports: list[Support] = param(default_factory=list)
-    points: dict[str, Point] = param(default_factory=dict)
-    damping: DampingSection = field(default_factory=DampingSection)
-    modal: ModalSection | None = None
-    harmonic: HarmonicSection | None = None
-    circuit: CircuitSection | None = None
-    output: OutputSection = field(default_factory=OutputSection)
-    lumped: Any = None
-    transient: Any = None
+    title: str = param("", doc="free text shown in the log")
+    analyses: list[Analysis] = param(default_factory=lambda: ["modal"],
+                                     doc="analyses to run, in order: modal, harmonic, circuit, transient")
+    geometry: GeometrySection | None = param(None, doc="mesh source (tier fe)")
+    materials: dict[str, Material] = param(default_factory=dict, doc="named materials")
+    regions: list[Region] = param(default_factory=list, doc="material and poling per cell group")
+    electrodes: dict[str, Electrode] = param(default_factory=dict, doc="named electrodes")
+    supports: list[Support] = param(default_factory=list, doc="fixed displacement components")
+    points: dict[str, Point] = param(default_factory=dict, doc="named points for results")
+    damping: DampingSection = param(default_factory=DampingSection, doc="see [damping]")
+    modal: ModalSection | None = param(None, doc="see [modal]")
+    harmonic: HarmonicSection | None = param(None, doc="see [harmonic]")
+    circuit: CircuitSection | None = param(None, doc="see [circuit]")
+    output: OutputSection = param(default_factory=OutputSection, doc="see [output]")
+    lumped: Any = param(None, doc="see [lumped] (tier lumped)")
+    transient: Any = param(None, doc="see [transient]")
     source: str = param("", doc="set by the loader: path of the case file")
 
     def check(self, file, prefix):

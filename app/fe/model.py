@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import ufl
-from dolfinx import fem, mesh as dmesh
+from dolfinx import fem
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 from app.case.schema import Case

@@ -29,5 +29,6 @@ class PointProbe:
         """Values of ``function`` (any value shape, flattened) at the point, on all ranks."""
         value = None
         if self.cell is not None:
-            value = np.asarray(function.eval(self.point.reshape(1, 3), np.array([self.cell], dtype=np.int32))).reshape(-1)
+            cells = np.array([self.cell], dtype=np.int32)
+            value = np.asarray(function.eval(self.point.reshape(1, 3), cells)).reshape(-1)
         return self.mesh.comm.bcast(value, root=self.owner)

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from app.errors import NumericalFailure
 from app.lumped.outputs import write_plots, write_time_series
@@ -23,7 +23,10 @@ def compute(section: LumpedSection) -> tuple[dict, object]:
     wall0 = time.perf_counter()
     p = derive_parameters(section)
     result = simulate(
-        p, section.duration_s, initial_state_from_section(p, section.initial), section.output.output_interval_s,
+        p,
+        section.duration_s,
+        initial_state_from_section(p, section.initial),
+        section.output.output_interval_s,
         section.solver,
     )
     balance = result.energy_balance()
@@ -32,7 +35,7 @@ def compute(section: LumpedSection) -> tuple[dict, object]:
             "lumped model: the state became non-finite although the propagation is exact; "
             "check the parameters (tried: exact matrix-exponential steps, no step-size control to relax)"
         )
-    stats = run_statistics(result, section.output.min_flight_duration_s, section.output.histogram_bins)
+    stats = run_statistics(result, section.output.min_flight_rise_m, section.output.histogram_bins)
     wall = time.perf_counter() - wall0
     simulated_ms = result.duration_s * 1e3
     results = {
@@ -74,7 +77,8 @@ def run(section: LumpedSection, out_dir: Path, comm=None, log: Callable[[str], N
         s = results["statistics"]
         log(
             f"lumped: {result.counters['events']} contact events, max flight height "
-            f"{s['transducer']['max_flight_height_m'] * 1e3:.3f} mm, rock power {s['rock']['mean_power_W']:.3g} W, "
+            f"{s['transducer']['max_flight_height_m'] * 1e3:.3f} mm, "
+            f"rock power {s['rock']['mean_power_W']:.3g} W, "
             f"ledger closure {results['energy_ledger']['closure_relative']:.1e}, "
             f"{results['solver']['wall_s_per_simulated_ms'] * 1e3:.3f} ms wall per simulated ms"
         )

@@ -162,9 +162,27 @@ def _advance(expm_mode, ledger_mode, impulse_mode, mode, y, level, units, fstate
 
 @njit(cache=True)
 def run_kernel(
-    expm, ledger, impulse, event_value, event_slope, gap_rows, force_rows, velocity_rows,
-    y, istate, fstate, cflags, time_end_units, sample_every, unit_s, zeno_window_s, zeno_max,
-    samples_t, samples_y, samples_mode, events,
+    expm,
+    ledger,
+    impulse,
+    event_value,
+    event_slope,
+    gap_rows,
+    force_rows,
+    velocity_rows,
+    y,
+    istate,
+    fstate,
+    cflags,
+    time_end_units,
+    sample_every,
+    unit_s,
+    zeno_window_s,
+    zeno_max,
+    samples_t,
+    samples_y,
+    samples_mode,
+    events,
 ):
     """Propagate until lattice time ``time_end_units`` or until an output buffer is full."""
     y1 = np.empty(N)
@@ -227,7 +245,9 @@ def run_kernel(
                     kind = 2
             if kind >= 0:
                 istate[S_BISECTIONS] += 1
-                u, fu = _bisect(e_mode, event_value[mode, i], event_slope[mode, i], offset, level, y, kind, noise, yl, ym)
+                u, fu = _bisect(
+                    e_mode, event_value[mode, i], event_slope[mode, i], offset, level, y, kind, noise, yl, ym
+                )
                 if kind == 1 and fu > 0.0:
                     continue
                 cand[i] = u

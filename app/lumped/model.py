@@ -29,6 +29,7 @@ N_STATE = 14
 LEVELS = 30  # dyadic refinements of the sampling step: events are located to h / 2**30
 N_MODES = 8  # contact states: bit i set = contact i closed
 N_LEDGER = 5  # electrical input, c_m loss, loss in layers 1..3
+DIRECT_EVERY = 5  # levels whose exponential is computed directly (see Propagators)
 
 IX, IXD, IZ, IZD, IW, IWD, IV, IVD, ID1, ID2, ID3, IONE, ISIN, ICOS = range(N_STATE)
 LEDGER_NAMES = ("electrical_input", "modal_damping", "tip_ball", "ball_stem", "stem_rock")
@@ -171,8 +172,14 @@ class Propagators:
         for mode in range(N_MODES):
             a = system_matrix(p, mode)
             q = ledger_forms(p, mode)
-            for level in range(LEVELS + 1):
-                self.expm[mode, level] = expm(a * (step_s / 2**level))
+            # expm at every DIRECT_EVERY-th level; the levels between by squaring the next finer
+            # one (at most DIRECT_EVERY - 1 squarings, so round-off grows by at most 2**4)
+            for level in range(LEVELS, -1, -1):
+                if level % DIRECT_EVERY == 0 or level == LEVELS:
+                    self.expm[mode, level] = expm(a * (step_s / 2.0**level))
+                else:
+                    finer = self.expm[mode, level + 1]
+                    self.expm[mode, level] = finer @ finer
             # Gramians and integrals at the finest level directly, then doubled upwards:
             # G(2s) = G(s) + E(s)^T G(s) E(s) and Phi(2s) = Phi(s) + E(s) Phi(s) are exact.
             finest = step_s / 2**LEVELS
@@ -181,7 +188,7 @@ class Propagators:
             for level in range(LEVELS, -1, -1):
                 if level < LEVELS:
                     e = self.expm[mode, level + 1]
-                    gram = gram + np.einsum("ji,kjl,lm->kim", e, gram, e)
+                    gram = gram + e.T @ gram @ e
                     phi = phi + e @ phi
                 self.ledger[mode, level] = 0.5 * (gram + gram.transpose(0, 2, 1))
                 for i in range(3):
@@ -211,5 +218,9 @@ def energy_terms(p: LumpedParameters, y: np.ndarray) -> dict:
         p.transducer_mass_kg * y[..., IZ] + p.free_mass_kg * y[..., IW] + p.stem_mass_kg * y[..., IV]
     )
     downforce = p.downforce_N * (y[..., IX] + y[..., IZ])
-    return {"kinetic_J": kinetic, "elastic_J": elastic, "gravity_potential_J": gravity,
-            "downforce_potential_J": downforce}
+    return {
+        "kinetic_J": kinetic,
+        "elastic_J": elastic,
+        "gravity_potential_J": gravity,
+        "downforce_potential_J": downforce,
+    }

@@ -10,8 +10,16 @@ from app.lumped.model import ID3, IV, IVD, IW, IWD, IX, IZ, IZD
 from app.lumped.parameters import CONTACT_NAMES
 from app.lumped.simulate import SimulationResult
 
-EVENT_COLUMNS = ("time_s", "contact_index", "closing", "relative_velocity_m_per_s", "transducer_z_m",
-                 "transducer_velocity_m_per_s", "impulse_of_closed_interval_N_s", "layer_loss_so_far_J")
+EVENT_COLUMNS = (
+    "time_s",
+    "contact_index",
+    "closing",
+    "relative_velocity_m_per_s",
+    "transducer_z_m",
+    "transducer_velocity_m_per_s",
+    "impulse_of_closed_interval_N_s",
+    "layer_loss_so_far_J",
+)
 
 
 def write_time_series(result: SimulationResult, path: Path) -> None:

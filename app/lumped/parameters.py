@@ -70,7 +70,9 @@ def damping_ratio_from_restitution(restitution: float) -> float:
     upper = 1.0
     while restitution_from_damping_ratio(upper) > restitution:
         upper *= 2.0
-    return brentq(lambda z: restitution_from_damping_ratio(z) - restitution, 0.0, upper, xtol=1e-15, rtol=1e-15)
+    return brentq(
+        lambda z: restitution_from_damping_ratio(z) - restitution, 0.0, upper, xtol=1e-15, rtol=1e-15
+    )
 
 
 @dataclass(frozen=True)
@@ -112,8 +114,15 @@ class LumpedParameters:
     def free_tip_amplitude_m(self) -> float:
         """Amplitude of x for the free transducer at the drive frequency (1-DOF response)."""
         omega = self.drive_angular_frequency_rad_per_s
-        return self.force_factor_N_per_V * self.voltage_amplitude_V / abs(
-            complex(self.modal_stiffness_N_per_m - self.modal_mass_kg * omega**2, self.modal_damping_N_s_per_m * omega)
+        return (
+            self.force_factor_N_per_V
+            * self.voltage_amplitude_V
+            / abs(
+                complex(
+                    self.modal_stiffness_N_per_m - self.modal_mass_kg * omega**2,
+                    self.modal_damping_N_s_per_m * omega,
+                )
+            )
         )
 
     def to_report(self) -> dict:
@@ -129,7 +138,10 @@ def contact_stiffness_N_per_m(contact: ContactSection) -> float:
     if contact.stiffness_rule == "given":
         return float(contact.stiffness_N_per_m)
     modulus = effective_modulus_Pa(
-        contact.youngs_modulus_upper_Pa, contact.poisson_upper, contact.youngs_modulus_lower_Pa, contact.poisson_lower
+        contact.youngs_modulus_upper_Pa,
+        contact.poisson_upper,
+        contact.youngs_modulus_lower_Pa,
+        contact.poisson_lower,
     )
     if contact.stiffness_rule == "hertz_secant":
         return hertz_secant_stiffness_N_per_m(contact.radius_m, modulus, contact.reference_force_N)
@@ -174,7 +186,9 @@ def derive_parameters(section: LumpedSection) -> LumpedParameters:
         capacitance = trans.clamped_capacitance_F
 
     fm = section.free_mass
-    free_mass = fm.mass_kg if fm.mass_kg is not None else fm.density_kg_per_m3 * math.pi * fm.diameter_m**3 / 6.0
+    free_mass = (
+        fm.mass_kg if fm.mass_kg is not None else fm.density_kg_per_m3 * math.pi * fm.diameter_m**3 / 6.0
+    )
     stem_mass = section.stem.mass_kg
     transducer_mass = trans.total_mass_kg
 
@@ -200,7 +214,9 @@ def derive_parameters(section: LumpedSection) -> LumpedParameters:
     )
     contacts = tuple(
         _contact_parameters(c, m)
-        for c, m in zip((section.contact_tip_ball, section.contact_ball_stem, section.contact_stem_rock), reduced)
+        for c, m in zip(
+            (section.contact_tip_ball, section.contact_ball_stem, section.contact_stem_rock), reduced
+        )
     )
     return LumpedParameters(
         modal_mass_kg=modal_mass,

@@ -37,18 +37,24 @@ class TransducerSection:
 @dataclass(frozen=True)
 class DriveSection:
     frequency_mode: Literal["resonance", "fixed"] = param(
-        "resonance", doc="'resonance' drives at sqrt(k_m/m_m) (what a PLL locks to); 'fixed' uses frequency_Hz"
+        "resonance",
+        doc="'resonance' drives at sqrt(k_m/m_m) (what a PLL locks to); 'fixed' uses frequency_Hz",
     )
     frequency_Hz: float = param(20100.0, gt=0, unit="Hz", doc="drive frequency when frequency_mode='fixed'")
     tip_amplitude_m: float | None = param(
-        None, ge=0, unit="m", doc="free tip amplitude; sets the voltage (default 15e-6 if no voltage is given)"
+        None,
+        ge=0,
+        unit="m",
+        doc="free tip amplitude; sets the voltage (default 15e-6 if no voltage is given)",
     )
     voltage_amplitude_V: float | None = param(None, ge=0, unit="V", doc="drive voltage amplitude")
 
     def check(self, file, prefix):
         if self.tip_amplitude_m is not None and self.voltage_amplitude_V is not None:
             raise CaseError(
-                file, f"{prefix}.voltage_amplitude_V", "give either tip_amplitude_m or voltage_amplitude_V, not both"
+                file,
+                f"{prefix}.voltage_amplitude_V",
+                "give either tip_amplitude_m or voltage_amplitude_V, not both",
             )
 
 
@@ -70,29 +76,38 @@ class ContactSection:
         "hertz_secant", doc="how the linear contact stiffness is found"
     )
     stiffness_N_per_m: float | None = param(None, gt=0, unit="N/m", doc="used when stiffness_rule='given'")
-    radius_m: float = param(4e-3, gt=0, unit="m", doc="sphere radius (hertz_secant) or punch radius (flat_punch)")
+    radius_m: float = param(
+        4e-3, gt=0, unit="m", doc="sphere radius (hertz_secant) or punch radius (flat_punch)"
+    )
     youngs_modulus_upper_Pa: float = param(210e9, gt=0, unit="Pa", doc="upper body")
     poisson_upper: float = param(0.30, ge=0, lt=0.5, doc="upper body")
     youngs_modulus_lower_Pa: float = param(210e9, gt=0, unit="Pa", doc="lower body")
     poisson_lower: float = param(0.30, ge=0, lt=0.5, doc="lower body")
     reference_force_N: float = param(300.0, gt=0, unit="N", doc="force at which the Hertz secant is taken")
-    damping_N_s_per_m: float | None = param(None, unit="N s/m", doc="Kelvin-Voigt damper; overrides restitution")
-    restitution: float = param(0.8, gt=0, le=1, doc="coefficient of restitution under the force-zero opening rule")
+    damping_N_s_per_m: float | None = param(
+        None, unit="N s/m", doc="Kelvin-Voigt damper; overrides restitution"
+    )
+    restitution: float = param(
+        0.8, gt=0, le=1, doc="coefficient of restitution under the force-zero opening rule"
+    )
 
     def check(self, file, prefix):
         if self.stiffness_rule == "given" and self.stiffness_N_per_m is None:
             raise CaseError(file, f"{prefix}.stiffness_N_per_m", "required when stiffness_rule = 'given'")
         if self.stiffness_rule != "given" and self.stiffness_N_per_m is not None:
             raise CaseError(
-                file, f"{prefix}.stiffness_N_per_m", f"set stiffness_rule = 'given' to use it (rule is "
-                f"{self.stiffness_rule!r})"
+                file,
+                f"{prefix}.stiffness_N_per_m",
+                f"set stiffness_rule = 'given' to use it (rule is {self.stiffness_rule!r})",
             )
         if self.damping_N_s_per_m is not None and self.damping_N_s_per_m < 0:
             # A negative damper adds a pulling (tensile) force while the bodies approach, and the
             # force-zero opening rule cannot stop that: reject it.
             raise CaseError(
-                file, f"{prefix}.damping_N_s_per_m",
-                f"must be >= 0 N s/m (a negative damper makes the contact pull), got {self.damping_N_s_per_m}",
+                file,
+                f"{prefix}.damping_N_s_per_m",
+                "must be >= 0 N s/m (a negative damper makes the contact pull), "
+                f"got {self.damping_N_s_per_m}",
             )
         if self.damping_N_s_per_m is not None and not math.isfinite(self.damping_N_s_per_m):
             raise CaseError(file, f"{prefix}.damping_N_s_per_m", "must be finite")
@@ -134,7 +149,9 @@ class SolverSection:
     samples_per_period: int = param(
         16, ge=6, doc="sampling steps per shortest period of any contact state (event detection)"
     )
-    zeno_window_s: float = param(1e-9, gt=0, unit="s", doc="two switches closer than this count as chattering")
+    zeno_window_s: float = param(
+        1e-9, gt=0, unit="s", doc="two switches closer than this count as chattering"
+    )
     zeno_max_switches: int = param(4, ge=2, doc="rapid switches before a contact is held closed for a window")
 
 
@@ -143,15 +160,20 @@ class LumpedOutputSection:
     output_interval_s: float = param(1e-5, gt=0, unit="s", doc="time-series sample interval")
     write_time_series: bool = param(True, doc="write time_series.h5")
     plots: bool = param(True, doc="write PNG plots (Fig. 12 and Fig. 5 style)")
-    min_flight_duration_s: float = param(
-        1e-3, gt=0, unit="s", doc="tip/free-mass open intervals at least this long count as transducer flights"
+    min_flight_rise_m: float = param(
+        50e-6,
+        ge=0,
+        unit="m",
+        doc="a tip/free-mass open interval is a flight if z rises at least this much above take-off",
     )
     histogram_bins: int = param(20, ge=1, doc="bins of the flight-duration histogram")
 
 
 @dataclass(frozen=True)
 class LumpedSection:
-    source: Literal["typed", "circuit"] = param("typed", doc="transducer parameters typed or from an FE circuit")
+    source: Literal["typed", "circuit"] = param(
+        "typed", doc="transducer parameters typed or from an FE circuit"
+    )
     circuit_file: str | None = param(None, doc="JSON with the equivalent circuit (flat or summary.json)")
     duration_s: float = param(0.2, gt=0, unit="s", doc="simulated time window")
     downforce_N: float = param(0.0, ge=0, unit="N", doc="additional downforce F_a on the transducer")
@@ -171,7 +193,8 @@ class LumpedSection:
         dotted = f"{prefix}." if prefix else ""
         if self.output.output_interval_s > self.duration_s:
             raise CaseError(
-                file, f"{dotted}output.output_interval_s",
+                file,
+                f"{dotted}output.output_interval_s",
                 f"must not exceed duration_s = {self.duration_s} s, got {self.output.output_interval_s} s",
             )
         if self.source == "circuit":

@@ -10,8 +10,23 @@ import numpy as np
 
 from app.lumped import kernel as K
 from app.lumped.model import (
-    IONE, ICOS, ID1, IW, IWD, IX, IXD, IV, IVD, IZ, IZD, LEDGER_NAMES, N_STATE, Propagators, energy_terms,
-    penetration_rows, shortest_period_s,
+    ICOS,
+    ID1,
+    IONE,
+    IV,
+    IVD,
+    IW,
+    IWD,
+    IX,
+    IXD,
+    IZ,
+    IZD,
+    LEDGER_NAMES,
+    N_STATE,
+    Propagators,
+    energy_terms,
+    penetration_rows,
+    shortest_period_s,
 )
 from app.lumped.parameters import LumpedParameters
 from app.lumped.schema import InitialSection, SolverSection
@@ -34,8 +49,10 @@ class InitialState:
 def steady_state_vibration(p: LumpedParameters) -> tuple[float, float]:
     """x(0), x'(0) of the free transducer's harmonic steady state under U = U0 sin(omega t) and F_a."""
     omega = p.drive_angular_frequency_rad_per_s
-    amplitude = -p.force_factor_N_per_V * p.voltage_amplitude_V / complex(
-        p.modal_stiffness_N_per_m - p.modal_mass_kg * omega**2, p.modal_damping_N_s_per_m * omega
+    amplitude = (
+        -p.force_factor_N_per_V
+        * p.voltage_amplitude_V
+        / complex(p.modal_stiffness_N_per_m - p.modal_mass_kg * omega**2, p.modal_damping_N_s_per_m * omega)
     )
     static = -p.downforce_N / p.modal_stiffness_N_per_m
     return static + amplitude.imag, omega * amplitude.real
@@ -44,10 +61,14 @@ def steady_state_vibration(p: LumpedParameters) -> tuple[float, float]:
 def initial_state_from_section(p: LumpedParameters, init: InitialSection) -> InitialState:
     x0, xd0 = steady_state_vibration(p) if init.vibration == "steady_state" else (0.0, 0.0)
     return InitialState(
-        x_m=x0, x_velocity_m_per_s=xd0,
-        z_m=init.transducer_z_m, z_velocity_m_per_s=init.transducer_velocity_m_per_s,
-        w_m=init.free_mass_w_m, w_velocity_m_per_s=init.free_mass_velocity_m_per_s,
-        v_m=init.stem_v_m, v_velocity_m_per_s=init.stem_velocity_m_per_s,
+        x_m=x0,
+        x_velocity_m_per_s=xd0,
+        z_m=init.transducer_z_m,
+        z_velocity_m_per_s=init.transducer_velocity_m_per_s,
+        w_m=init.free_mass_w_m,
+        w_velocity_m_per_s=init.free_mass_velocity_m_per_s,
+        v_m=init.stem_v_m,
+        v_velocity_m_per_s=init.stem_velocity_m_per_s,
     )
 
 
@@ -143,7 +164,7 @@ def simulate(
 
     istate = np.zeros(K.N_ISTATE, dtype=np.int64)
     fstate = np.zeros(K.N_FSTATE)
-    fstate[K.F_LAST_SWITCH:K.F_LAST_SWITCH + 3] = -np.inf
+    fstate[K.F_LAST_SWITCH : K.F_LAST_SWITCH + 3] = -np.inf
     cflags = np.zeros((3, 3), dtype=np.int64)
     for i in range(3):
         value = float(propagators.event_value[mode, i] @ y)
@@ -162,10 +183,27 @@ def simulate(
     wall1 = _time.perf_counter()
     while True:
         status = K.run_kernel(
-            propagators.expm, propagators.ledger, propagators.impulse, propagators.event_value,
-            propagators.event_slope, propagators.gap_rows, propagators.force_rows, propagators.velocity_rows,
-            y, istate, fstate, cflags, time_end_units, sample_every, unit_s, solver.zeno_window_s,
-            solver.zeno_max_switches, samples_t, samples_y, samples_mode, events,
+            propagators.expm,
+            propagators.ledger,
+            propagators.impulse,
+            propagators.event_value,
+            propagators.event_slope,
+            propagators.gap_rows,
+            propagators.force_rows,
+            propagators.velocity_rows,
+            y,
+            istate,
+            fstate,
+            cflags,
+            time_end_units,
+            sample_every,
+            unit_s,
+            solver.zeno_window_s,
+            solver.zeno_max_switches,
+            samples_t,
+            samples_y,
+            samples_mode,
+            events,
         )
         if status == K.DONE:
             break
@@ -190,7 +228,7 @@ def simulate(
         samples_mode=samples_mode[:n_samples].copy(),
         events=events[: int(istate[K.S_EVENTS])].copy(),
         ledger_J=ledger,
-        impulse_total_N_s=fstate[K.F_IMPULSE_TOTAL:K.F_IMPULSE_TOTAL + 3].copy(),
+        impulse_total_N_s=fstate[K.F_IMPULSE_TOTAL : K.F_IMPULSE_TOTAL + 3].copy(),
         final_y=y.copy(),
         final_mode=int(istate[K.S_MODE]),
         initial_y=initial_y,
@@ -211,5 +249,14 @@ def tip_displacement_m(y: np.ndarray) -> np.ndarray:
     return y[..., IX] + y[..., IZ]
 
 
-__all__ = ["InitialState", "SimulationResult", "simulate", "steady_state_vibration", "initial_state_from_section",
-           "tip_displacement_m", "IVD", "IWD", "IZD"]
+__all__ = [
+    "InitialState",
+    "SimulationResult",
+    "simulate",
+    "steady_state_vibration",
+    "initial_state_from_section",
+    "tip_displacement_m",
+    "IVD",
+    "IWD",
+    "IZD",
+]

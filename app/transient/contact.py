@@ -79,7 +79,7 @@ class SurfaceContact:
 
     def __init__(self, name: str, fe: LinearFE, facet_tags, tag: int, body: str, shape: ObstacleShape,
                  stiffness_Pa_per_m: float, damping_Pa_s_per_m: float = 0.0, friction: Friction | None = None,
-                 weight=1.0, fields: MidpointFields | None = None):
+                 weight=1.0, fields: MidpointFields | None = None, quadrature_degree: int = 4):
         if not stiffness_Pa_per_m > 0:
             raise ValueError(f"contact {name!r}: stiffness must be > 0")
         fields = fields if fields is not None else MidpointFields(fe)
@@ -96,7 +96,10 @@ class SurfaceContact:
         self.body_velocity = fem.Constant(mesh, np.zeros(gdim))
         self.stiffness = fem.Constant(mesh, float(stiffness_Pa_per_m))
         self.damping = fem.Constant(mesh, float(damping_Pa_s_per_m))
-        ds = ufl.Measure("ds", domain=mesh, subdomain_data=facet_tags)(tag)
+        # One quadrature rule for every contact form, so the force, the energy and the
+        # "closed" indicator all see the same penetration points.
+        ds = ufl.Measure("ds", domain=mesh, subdomain_data=facet_tags,
+                         metadata={"quadrature_degree": quadrature_degree})(tag)
         x = ufl.SpatialCoordinate(mesh)
         u = displacement_of(self.u_mid)
         v = displacement_of(self.v_mid)

@@ -1,0 +1,89 @@
+"""Generates docs/cases.md from the schema dataclasses (``python -m app.case.docgen > docs/cases.md``);
+a test keeps the committed file in sync."""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+
+from app.case import schema
+from app.case.validate import _type_name
+from app.materials import Material, PiezoDForm, PiezoEForm
+
+INTRO = """# Case files
+
+A case is a TOML file validated into typed objects before any mesh or solver exists. Unknown keys,
+wrong types and out-of-range values stop the run with one line naming the file and the dotted key
+(exit status 2). Any key can be overridden on the command line: `--set modal.n_modes=12`,
+`--set 'analyses=["modal"]'`, `--set materials.steel.young_Pa=2.1e11` (values are TOML; bare words
+are strings).
+
+This page is generated from the schema (`python -m app.case.docgen > docs/cases.md`).
+"""
+
+
+def _default(f) -> str:
+    if f.default is not dataclasses.MISSING:
+        return "`" + repr(f.default) + "`"
+    if f.default_factory is not dataclasses.MISSING:
+        value = f.default_factory()
+        return "defaults" if dataclasses.is_dataclass(value) else "`" + repr(value) + "`"
+    return "required"
+
+
+def table(cls, title: str) -> list[str]:
+    hints = typing.get_type_hints(cls)
+    lines = [f"## {title}", "", "| key | type | default | unit | meaning |", "|---|---|---|---|---|"]
+    for f in dataclasses.fields(cls):
+        if f.name == "source":
+            continue
+        meta = f.metadata or {}
+        bounds = ", ".join(f"{op} {meta[k]}" for k, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="))
+                           if meta.get(k) is not None)
+        doc = meta.get("doc", "") + (f" ({bounds})" if bounds else "")
+        type_name = _type_name(hints[f.name]).replace("|", "or")
+        lines.append(f"| `{f.name}` | {type_name} | {_default(f)} | {meta.get('unit', '')} | {doc} |")
+    return lines + [""]
+
+
+def render() -> str:
+    from geometry.builders import BUILDERS
+
+    parts = [INTRO]
+    sections = [
+        (schema.Case, "Top level"),
+        (schema.GeometrySection, "[geometry]"),
+        (Material, "[materials.NAME]"),
+        (PiezoEForm, "[materials.NAME.piezo_e] (stress-charge, 6mm, poled along material axis 3)"),
+        (PiezoDForm, "[materials.NAME.piezo_d] (strain-charge datasheet form, converted on input)"),
+        (schema.Region, "[[regions]]"),
+        (schema.Electrode, "[electrodes.NAME]"),
+        (schema.Support, "[[supports]]"),
+        (schema.Point, "[points.NAME]"),
+        (schema.DampingSection, "[damping]"),
+        (schema.ModalSection, "[modal]"),
+        (schema.HarmonicSection, "[harmonic]"),
+        (schema.TargetAmplitude, "[harmonic.target]"),
+        (schema.CircuitSection, "[circuit]"),
+        (schema.OutputSection, "[output]"),
+    ]
+    for name, (params_cls, _) in BUILDERS.items():
+        sections.append((params_cls, f"[geometry.parameters] for builder = \"{name}\""))
+    for cls_path, title in {"lumped": ("app.lumped.schema:LumpedSection", "[lumped]"),
+                                       "transient": ("app.transient.schema:TransientSection", "[transient]")}.values():
+        module, _, attr = cls_path.partition(":")
+        try:
+            cls = getattr(__import__(module, fromlist=[attr]), attr)
+        except (ImportError, AttributeError):
+            continue
+        sections.append((cls, title))
+    for cls, title in sections:
+        parts.append("\n".join(table(cls, title)))
+    library = ", ".join(f"`{n}`" for n in __import__("app.materials", fromlist=["LIBRARY"]).LIBRARY)
+    parts.append(f"## Material library\n\n`library = ...` copies one of: {library}; keys given next to it "
+                 "override the entry. See docs/physics.md for the data and its sources.\n")
+    return "\n".join(parts)
+
+
+if __name__ == "__main__":
+    print(render(), end="")

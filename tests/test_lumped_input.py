@@ -1,0 +1,156 @@
+"""Lumped tier input: bad values name their dotted key; circuit files; the shipped cases validate;
+statistics hang together (mean rock force = supported weight)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from app.case.loader import apply_overrides, read_toml
+from app.case.validate import from_dict
+from app.errors import CaseError
+from app.lumped.driver import compute, run
+from app.lumped.parameters import derive_parameters
+from app.lumped.schema import CIRCUIT_KEYS, LumpedSection
+
+CASES = Path(__file__).resolve().parents[1] / "cases"
+
+
+def section(data: dict, file: str = "case.toml") -> LumpedSection:
+    return from_dict(LumpedSection, data, file, "lumped")
+
+
+@pytest.mark.parametrize(
+    "data, key",
+    [
+        ({"stem": {"mass_kg": -0.04}}, "lumped.stem.mass_kg"),
+        ({"free_mass": {"mass_kg": 0.0}}, "lumped.free_mass.mass_kg"),
+        ({"transducer": {"total_mass_kg": -0.3}}, "lumped.transducer.total_mass_kg"),
+        ({"transducer": {"modal_mass_kg": 0}}, "lumped.transducer.modal_mass_kg"),
+        (
+            {"contact_tip_ball": {"stiffness_rule": "given", "stiffness_N_per_m": -1e7}},
+            "lumped.contact_tip_ball.stiffness_N_per_m",
+        ),
+        (
+            {"contact_stem_rock": {"youngs_modulus_lower_Pa": -5e10}},
+            "lumped.contact_stem_rock.youngs_modulus_lower_Pa",
+        ),
+        ({"contact_ball_stem": {"damping_N_s_per_m": -3.0}}, "lumped.contact_ball_stem.damping_N_s_per_m"),
+        ({"contact_ball_stem": {"restitution": 0.0}}, "lumped.contact_ball_stem.restitution"),
+        ({"contact_ball_stem": {"restitution": 1.2}}, "lumped.contact_ball_stem.restitution"),
+        ({"contact_tip_ball": {"stiffness_rule": "given"}}, "lumped.contact_tip_ball.stiffness_N_per_m"),
+        ({"duration_s": 0.0}, "lumped.duration_s"),
+        ({"duration_s": -0.2}, "lumped.duration_s"),
+        ({"duration_s": 1e-3, "output": {"output_interval_s": 1e-2}}, "lumped.output.output_interval_s"),
+        ({"downforce_N": -3.0}, "lumped.downforce_N"),
+        (
+            {"drive": {"tip_amplitude_m": 1e-5, "voltage_amplitude_V": 10.0}},
+            "lumped.drive.voltage_amplitude_V",
+        ),
+        ({"drive": {"frequency_mode": "pll"}}, "lumped.drive.frequency_mode"),
+        ({"free_mas": {"mass_kg": 0.002}}, "lumped.free_mas"),
+        ({"source": "circuit"}, "lumped.circuit_file"),
+        ({"source": "circuit", "circuit_file": "does-not-exist.json"}, "lumped.circuit_file"),
+    ],
+)
+def test_bad_input_names_file_and_key(data, key):
+    with pytest.raises(CaseError) as info:
+        section(data)
+    assert info.value.key == key
+    assert info.value.file == "case.toml"
+    assert "case.toml" in info.value.line() and key in info.value.line()
+
+
+def test_negative_damping_message_says_it_would_pull():
+    with pytest.raises(CaseError, match="pull"):
+        section({"contact_stem_rock": {"damping_N_s_per_m": -1.0}})
+
+
+def _circuit(mass=0.05, f=20100.0, q=400.0):
+    omega = 2 * math.pi * f
+    return {
+        "modal_mass_kg": mass,
+        "modal_stiffness_N_per_m": mass * omega**2,
+        "modal_damping_N_s_per_m": mass * omega / q,
+        "force_factor_N_per_V": 1.0,
+        "clamped_capacitance_F": 8e-9,
+    }
+
+
+@pytest.mark.parametrize("nested", [False, True], ids=["flat", "summary"])
+def test_circuit_source_equals_typed_parameters(tmp_path, nested):
+    circuit = _circuit()
+    payload = {"results": {"circuit": circuit}} if nested else circuit
+    (tmp_path / "circuit.json").write_text(json.dumps(payload))
+    case_file = tmp_path / "case.toml"
+    from_circuit = derive_parameters(
+        section({"source": "circuit", "circuit_file": "circuit.json"}, str(case_file))
+    )
+    typed = derive_parameters(section({}))
+    for name in CIRCUIT_KEYS:
+        assert getattr(from_circuit, name) == pytest.approx(getattr(typed, name), rel=1e-12)
+    assert from_circuit.voltage_amplitude_V == pytest.approx(typed.voltage_amplitude_V, rel=1e-12)
+
+
+def test_circuit_file_missing_a_key_is_rejected(tmp_path):
+    circuit = _circuit()
+    del circuit["force_factor_N_per_V"]
+    (tmp_path / "c.json").write_text(json.dumps(circuit))
+    with pytest.raises(CaseError, match="force_factor_N_per_V") as info:
+        section({"source": "circuit", "circuit_file": str(tmp_path / "c.json")})
+    assert info.value.key == "lumped.circuit_file"
+
+
+def test_drive_voltage_gives_15_um_at_resonance():
+    p = derive_parameters(section({}))
+    # |x| = alpha U / (c_m omega) at resonance
+    expected = (
+        15e-6 * p.modal_damping_N_s_per_m * p.drive_angular_frequency_rad_per_s / p.force_factor_N_per_V
+    )
+    assert p.voltage_amplitude_V == pytest.approx(expected, rel=1e-12)
+    assert p.free_mass_kg == pytest.approx(7850 * math.pi * 0.008**3 / 6, rel=1e-12)
+
+
+@pytest.mark.parametrize("case", sorted(p.name for p in CASES.glob("usdc-lumped*.toml")))
+def test_shipped_lumped_cases_validate(case):
+    raw = read_toml(CASES / case)
+    assert raw["tier"] == "lumped"
+    sec = section(raw["lumped"], str(CASES / case))
+    assert sec.duration_s >= 0.2
+
+
+def test_statistics_on_a_short_drill_run(tmp_path):
+    raw = apply_overrides(read_toml(CASES / "usdc-lumped-9N.toml"), ["lumped.duration_s=0.05"])
+    sec = section(raw["lumped"])
+    results = run(sec, tmp_path, None, lambda msg: None)
+    rock = results["statistics"]["rock"]
+    # Over many impacts the rock carries the weight plus the downforce on average (momentum balance).
+    assert rock["mean_force_N"] == pytest.approx(rock["static_load_N"], rel=0.15)
+    assert results["statistics"]["impact_rate_per_s"]["stem_rock"] > 0
+    assert results["energy_ledger"]["closure_relative"] < 1e-10
+    assert (tmp_path / "time_series.h5").exists() and (tmp_path / "displacements.png").exists()
+    import h5py
+
+    with h5py.File(tmp_path / "time_series.h5") as f:
+        for name in (
+            "time_s",
+            "tip_displacement_m",
+            "free_mass_displacement_m",
+            "stem_displacement_m",
+            "rock_force_N",
+            "contact_force_tip_ball_N",
+            "contact_force_ball_stem_N",
+        ):
+            assert name in f and "units" in f[name].attrs
+        assert f["rock_force_N"].attrs["units"] == "N"
+        assert len(f["time_s"]) == round(0.05 / sec.output.output_interval_s) + 1
+
+
+def test_compute_is_deterministic():
+    sec = section({"duration_s": 0.01, "downforce_N": 6.0})
+    a, _ = compute(sec)
+    b, _ = compute(sec)
+    assert a["statistics"] == b["statistics"]
