@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from geometry.specimens import BarParameters, DiscParameters, build_bar, build_disc
+from geometry.specimens import BarParameters, DiscParameters, RingParameters, build_bar, build_disc, build_ring
 from geometry.transducer import TransducerParameters, build_transducer
 
 BUILDERS = {
     "bar": (BarParameters, build_bar),
     "disc": (DiscParameters, build_disc),
+    "ring": (RingParameters, build_ring),
     "transducer": (TransducerParameters, build_transducer),
 }

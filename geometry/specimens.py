@@ -62,17 +62,21 @@ def _structured_rectangle(width: float, height: float, nx: int, ny: int, axisymm
 
 
 def build_bar(comm: MPI.Comm, params: BarParameters, kind: str) -> MeshData:
-    """Bar along z from 0 to ``length_m``: a rod (axisymmetric) or a square prism (3D)."""
+    """Bar along z from 0 to ``length_m``: a rod (axisymmetric), a square prism (3D) or a strip of
+    width ``width_m`` (plane strain, mesh coordinates (x, z))."""
+    if kind not in ("axisymmetric", "plane_strain", "3d"):
+        raise ValueError(f"bar builder does not support {kind}")
     with GmshSession(comm, "bar"):
         if comm.rank == 0:
             if kind == "axisymmetric":
                 _structured_rectangle(0.5 * params.width_m, params.length_m, params.lateral_divisions,
                                       params.axial_divisions, axisymmetric=True)
+            elif kind == "plane_strain":
+                _structured_rectangle(params.width_m, params.length_m, params.lateral_divisions,
+                                      params.axial_divisions, axisymmetric=False)
             elif kind == "3d":
                 _structured_box(params)
-            else:
-                raise ValueError(f"bar builder supports axisymmetric and 3d, not {kind}")
-        return from_gmsh_model(comm, 2 if kind == "axisymmetric" else 3)
+        return from_gmsh_model(comm, 3 if kind == "3d" else 2)
 
 
 def _structured_box(params: BarParameters):
@@ -110,3 +114,61 @@ def build_disc(comm: MPI.Comm, params: DiscParameters, kind: str) -> MeshData:
             _structured_rectangle(params.radius_m, params.thickness_m, params.radial_divisions,
                                   params.thickness_divisions, axisymmetric=True)
         return from_gmsh_model(comm, 2)
+
+
+@dataclass(frozen=True)
+class RingParameters:
+    """Radially poled ring (tube segment) about the z axis, electrodes on the inner and outer faces."""
+
+    mean_radius_m: float = param(0.01, gt=0)
+    wall_thickness_m: float = param(0.0005, gt=0)
+    height_m: float = param(0.001, gt=0)
+    mesh_size_m: float = param(0.0005, gt=0)
+
+    def check(self, file, prefix):
+        from app.errors import CaseError
+
+        if self.wall_thickness_m >= 2 * self.mean_radius_m:
+            raise CaseError(file, f"{prefix}.wall_thickness_m", "must be smaller than the mean diameter")
+
+
+def build_ring(comm: MPI.Comm, params: RingParameters, kind: str) -> MeshData:
+    """Ring: rectangle [r_i, r_o] x [0, h] in (r, z), or the 3D solid of revolution."""
+    r_i = params.mean_radius_m - 0.5 * params.wall_thickness_m
+    r_o = params.mean_radius_m + 0.5 * params.wall_thickness_m
+    h = params.height_m
+    with GmshSession(comm, "ring"):
+        if comm.rank == 0:
+            occ = gmsh.model.occ
+            if kind == "axisymmetric":
+                entity = (2, occ.addRectangle(r_i, 0, 0, params.wall_thickness_m, h))
+            elif kind == "3d":
+                outer = occ.addCylinder(0, 0, 0, 0, 0, h, r_o)
+                inner = occ.addCylinder(0, 0, 0, 0, 0, h, r_i)
+                entity = occ.cut([(3, outer)], [(3, inner)])[0][0]
+            else:
+                raise ValueError(f"ring builder supports axisymmetric and 3d, not {kind}")
+            occ.synchronize()
+            dim = entity[0]
+            faces = {"inner": [], "outer": [], "bottom": [], "top": []}
+            for _, b in gmsh.model.getBoundary([entity], oriented=False):
+                x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(dim - 1, b)
+                if dim == 2:
+                    if abs(x1 - x0) < 1e-3 * params.wall_thickness_m:
+                        faces["inner" if x0 < params.mean_radius_m else "outer"].append(b)
+                    else:
+                        faces["bottom" if y0 < 0.5 * h else "top"].append(b)
+                else:
+                    if abs(z1 - z0) < 1e-3 * h:
+                        faces["bottom" if z0 < 0.5 * h else "top"].append(b)
+                    else:
+                        faces["inner" if x1 < params.mean_radius_m else "outer"].append(b)
+            gmsh.model.addPhysicalGroup(dim, [entity[1]], 1)
+            gmsh.model.setPhysicalName(dim, 1, "piezo")
+            for tag, (name, ids) in enumerate(faces.items(), start=1):
+                gmsh.model.addPhysicalGroup(dim - 1, ids, tag)
+                gmsh.model.setPhysicalName(dim - 1, tag, name)
+            gmsh.option.setNumber("Mesh.MeshSizeMax", params.mesh_size_m)
+            gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * params.mesh_size_m)
+            gmsh.model.mesh.generate(dim)
+        return from_gmsh_model(comm, 2 if kind == "axisymmetric" else 3)

@@ -35,3 +35,20 @@ def disc_radial(c, e, eps, density, radius):
 def observed_order(h, err):
     """Least-squares slope of log(err) against log(h)."""
     return float(np.polyfit(np.log(h), np.log(err), 1)[0])
+
+
+def ring_hoop(c, e, eps, density, mean_radius):
+    """Thin radially poled ring, electrodes on the curved faces: hoop-mode resonance
+    f_r = 1 / (2 pi R sqrt(rho s11^E)) and antiresonance f_a = f_r / sqrt(1 - k31^2)."""
+    sE, d, epsT = voigt.e_form_to_d_form(c, e, eps)
+    f_r = 1.0 / (2 * math.pi * mean_radius * math.sqrt(density * sE[0, 0]))
+    k31_sq = d[2, 0] ** 2 / (sE[0, 0] * epsT[2, 2])
+    return f_r, f_r / math.sqrt(1 - k31_sq)
+
+
+def strip_plane_strain_antiresonance(c, e, eps, density, length):
+    """33 strip with S_yy = 0 and free lateral faces, open circuit (D3 = 0):
+    f_a = 1 / (2 L sqrt(rho s'33)), s'33 = s33^D - (s23^D)^2 / s22^D."""
+    sD = voigt.open_circuit_compliance(c, e, eps)
+    s_eff = sD[2, 2] - sD[1, 2] ** 2 / sD[1, 1]
+    return 1.0 / (2 * length * math.sqrt(density * s_eff))

@@ -14,6 +14,9 @@ TINY = {
     "validation/pzt4-bar-axisymmetric.toml": ["geometry.parameters.axial_divisions=8", "harmonic.n_points=5"],
     "validation/pzt4-bar-3d.toml": ["geometry.parameters.axial_divisions=8", "geometry.parameters.lateral_divisions=1"],
     "validation/pzt4-disc.toml": ["geometry.parameters.radial_divisions=10", "harmonic.n_points=5"],
+    "validation/pzt4-ring-axisymmetric.toml": ["geometry.parameters.mesh_size_m=0.0005"],
+    "validation/pzt4-ring-3d.toml": ["geometry.parameters.mesh_size_m=0.002", "modal.n_modes=4"],
+    "validation/pzt4-strip-plane-strain.toml": ["geometry.parameters.axial_divisions=8"],
 }
 
 

@@ -3,7 +3,7 @@
 import math
 
 import pytest
-from ieee176 import bar_33, disc_radial, observed_order
+from ieee176 import bar_33, disc_radial, observed_order, ring_hoop, strip_plane_strain_antiresonance
 
 from app.materials import LIBRARY
 
@@ -60,3 +60,18 @@ def test_disc_radial_mode_against_closed_form(shared_tmp):
     f_closed = disc_radial(C, E, EPS, PZT4.density_kg_per_m3, radius)
     modal = _modal(shared_tmp, "validation/pzt4-disc.toml")
     assert modal["working_resonance_Hz"] == pytest.approx(f_closed, rel=1e-2)
+
+
+@pytest.mark.parametrize("case", ["validation/pzt4-ring-axisymmetric.toml", "validation/pzt4-ring-3d.toml"])
+def test_radially_poled_ring_against_closed_form(shared_tmp, case):
+    """Radial poling: constant rotation in axisymmetric, position-dependent UFL rotation in 3D."""
+    f_r, f_a = ring_hoop(C, E, EPS, PZT4.density_kg_per_m3, 0.01)
+    modal = _modal(shared_tmp, case)
+    assert modal["working_resonance_Hz"] == pytest.approx(f_r, rel=3e-3)
+    assert modal["working_antiresonance_Hz"] == pytest.approx(f_a, rel=3e-3)
+
+
+def test_plane_strain_strip_against_closed_form(shared_tmp):
+    f_a = strip_plane_strain_antiresonance(C, E, EPS, PZT4.density_kg_per_m3, 0.02)
+    modal = _modal(shared_tmp, "validation/pzt4-strip-plane-strain.toml")
+    assert modal["working_antiresonance_Hz"] == pytest.approx(f_a, rel=3e-3)

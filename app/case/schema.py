@@ -24,7 +24,7 @@ TagRef = str | int
 @dataclass(frozen=True)
 class GeometrySection:
     model: ModelKind = param("axisymmetric", doc="axisymmetric (r, z), 3d (x, y, z) or plane_strain (x, z)")
-    builder: Literal["bar", "disc", "transducer"] | None = param(None, doc="gmsh builder to use")
+    builder: Literal["bar", "disc", "ring", "transducer"] | None = param(None, doc="gmsh builder to use")
     parameters: dict[str, Any] = param(default_factory=dict, doc="builder parameters (see docs)")
     mesh_file: str | None = param(None, doc=".msh file, relative to the case file")
     degree: int = param(2, ge=1, le=3, doc="Lagrange degree of u and phi")
