@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from app.transient.control import StepSizes
 from app.transient.scenes import (
     BallDrop,
     ball_drop_closed_form,
@@ -17,7 +18,6 @@ from app.transient.scenes import (
     run_scene,
     vibrating_block_with_ball,
 )
-from app.transient.control import StepSizes
 from forms.newmark import TimeScheme
 
 
