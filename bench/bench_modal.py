@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 SIZES = [(2, 16), (4, 30), (6, 50), (8, 70), (10, 100)]
-PEER_MAX_DOFS = 120_000
+PEER_MAX_DOFS = 120_000  # SuperLU on larger 3D P2 problems takes minutes and GBs
 
 
 def single(lat: int, axial: int, peer: bool) -> dict:
@@ -97,7 +97,8 @@ def main() -> None:
             if ranks == 1 and dofs_estimate <= PEER_MAX_DOFS:
                 cmd.append("--peer")
             if ranks > 1:
-                cmd = ["mpirun", "-n", str(ranks), *cmd]
+                # one BLAS thread per rank: 2 ranks already fill the 2 cores
+                cmd = ["mpirun", "-n", str(ranks), "-x", "OPENBLAS_NUM_THREADS=1", *cmd]
             proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
             line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")]
             if not line:

@@ -8,9 +8,21 @@ import json
 import pytest
 from conftest import CASES, run_cli
 
+LUMPED_TINY = ["lumped.duration_s=0.005", "lumped.output.plots=false"]
 TINY = {
+    "usdc-lumped.toml": LUMPED_TINY,
+    "usdc-lumped-0N.toml": LUMPED_TINY,
+    "usdc-lumped-3N.toml": LUMPED_TINY,
+    "usdc-lumped-6N.toml": LUMPED_TINY,
+    "usdc-lumped-9N.toml": LUMPED_TINY,
+    "usdc-lumped-0N-1s.toml": LUMPED_TINY,
+    "usdc-lumped-3N-1s.toml": LUMPED_TINY,
+    "usdc-lumped-6N-1s.toml": LUMPED_TINY,
+    "usdc-lumped-9N-1s.toml": LUMPED_TINY,
     "usdc-transducer.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic_mesh_size_m=0.0025",
                              "harmonic.n_points=5", "harmonic.refine_extrema=false", "modal.n_modes=2"],
+    "usdc-fe.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic_mesh_size_m=0.0025",
+                     "transient.end_time_s=2e-4"],
     "validation/pzt4-bar-axisymmetric.toml": ["geometry.parameters.axial_divisions=8", "harmonic.n_points=5"],
     "validation/pzt4-bar-3d.toml": ["geometry.parameters.axial_divisions=8", "geometry.parameters.lateral_divisions=1"],
     "validation/pzt4-disc.toml": ["geometry.parameters.radial_divisions=10", "harmonic.n_points=5"],

@@ -50,6 +50,8 @@ def test_drill_transducer_design(shared_tmp):
     r = s["results"]
     assert r["modal"]["working_resonance_Hz"] == pytest.approx(20100.0, rel=1e-2)
     assert r["mass_kg"] == pytest.approx(0.300, rel=3e-2)
+    assert r["harmonic"]["admittance_peak_Hz"] == pytest.approx(r["modal"]["working_resonance_Hz"], rel=1e-4)
+    assert r["harmonic"]["admittance_trough_Hz"] == pytest.approx(r["modal"]["working_antiresonance_Hz"], rel=1e-4)
     volts = r["harmonic"]["voltage_for_target_amplitude_V"]
     per_volt = r["harmonic"]["displacement_tip_at_peak_amplitude_m"] / s["case"]["harmonic"]["voltage_V"]
     assert volts * per_volt == pytest.approx(15e-6, rel=1e-9)

@@ -116,8 +116,8 @@ class OutputSection:
 class Case:
     tier: Literal["fe", "lumped"] = param("fe", doc="model tier: full FE or lumped")
     title: str = param("", doc="free text shown in the log")
-    analyses: list[Analysis] = param(default_factory=lambda: ["modal"],
-                                     doc="analyses to run, in order: modal, harmonic, circuit, transient")
+    analyses: list[Analysis] | None = param(
+        None, doc="analyses to run: modal, harmonic, circuit, transient (tier fe; default modal) or lumped")
     geometry: GeometrySection | None = param(None, doc="mesh source (tier fe)")
     materials: dict[str, Material] = param(default_factory=dict, doc="named materials")
     regions: list[Region] = param(default_factory=list, doc="material and poling per cell group")
@@ -146,7 +146,7 @@ class Case:
                 if isinstance(region.poling, list) and (len(region.poling) != 3 or not any(region.poling)):
                     raise CaseError(file, f"regions[{i}].poling", "a poling vector needs 3 non-zero-norm entries")
         needs = {"modal": ("modal",), "harmonic": ("harmonic",), "circuit": ("modal", "harmonic", "circuit")}
-        for analysis in self.analyses:
+        for analysis in self.analyses or []:
             for section in needs.get(analysis, ()):
                 if getattr(self, section) is None:
                     raise CaseError(file, section, f"section required by analysis {analysis!r}")
@@ -191,7 +191,8 @@ def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
             raise CaseError(file, name, "this section is not supported by this build")
     case = from_dict(Case, raw, file)
     materials = {name: resolve(m, file, f"materials.{name}") for name, m in case.materials.items()}
-    case = replace(case, materials=materials, source=str(path.resolve()), **extra)
+    analyses = case.analyses if case.analyses is not None else (["lumped"] if case.tier == "lumped" else ["modal"])
+    case = replace(case, materials=materials, analyses=analyses, source=str(path.resolve()), **extra)
     if case.tier == "lumped" and case.lumped is None:
         raise CaseError(file, "lumped", "section required for tier = 'lumped'")
     if "transient" in case.analyses and case.transient is None:

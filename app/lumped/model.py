@@ -21,8 +21,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import expm
 
+from app.lumped.linalg import mode_caches
 from app.lumped.parameters import LumpedParameters
 
 N_STATE = 14
@@ -126,26 +126,6 @@ def ledger_forms(p: LumpedParameters, mode: int) -> np.ndarray:
     return q
 
 
-def _van_loan(a: np.ndarray, q: np.ndarray, step_s: float) -> np.ndarray:
-    """Integral over [0, step] of expm(A s)^T Q expm(A s) ds (Van Loan 1978)."""
-    n = a.shape[0]
-    block = np.zeros((2 * n, 2 * n))
-    block[:n, :n] = -a.T
-    block[:n, n:] = q
-    block[n:, n:] = a
-    f = expm(block * step_s)
-    return f[n:, n:].T @ f[:n, n:]
-
-
-def _integral_of_expm(a: np.ndarray, step_s: float) -> np.ndarray:
-    """Integral over [0, step] of expm(A s) ds."""
-    n = a.shape[0]
-    block = np.zeros((2 * n, 2 * n))
-    block[:n, :n] = a
-    block[:n, n:] = np.eye(n)
-    return expm(block * step_s)[:n, n:]
-
-
 def shortest_period_s(p: LumpedParameters) -> float:
     """Shortest oscillation period of any contact state and of the drive."""
     omega_max = p.drive_angular_frequency_rad_per_s
@@ -155,10 +135,20 @@ def shortest_period_s(p: LumpedParameters) -> float:
     return 2.0 * math.pi / omega_max
 
 
+def balancing_scales(p: LumpedParameters) -> np.ndarray:
+    """State scales D (positions 1/omega, velocities 1) so that D^-1 A D has entries ~ omega:
+    the matrix functions then need no more than a few squarings."""
+    d = np.ones(N_STATE)
+    for index in (IX, IZ, IW, IV, ID1, ID1 + 1, ID1 + 2):
+        d[index] = 1.0 / p.drive_angular_frequency_rad_per_s
+    return d
+
+
 class Propagators:
     """Per contact state and dyadic level j (step h / 2**j): expm, ledger Gramians, impulse rows.
 
-    Level 0 is the sampling step. Built once per parameter set; about 0.1 s."""
+    Level 0 is the sampling step. Built once per parameter set (~15 ms) by the numba routines of
+    ``app.lumped.linalg``, so the numbers do not depend on the BLAS thread count."""
 
     def __init__(self, p: LumpedParameters, step_s: float):
         self.step_s = step_s
@@ -169,35 +159,25 @@ class Propagators:
         self.event_slope = np.zeros((N_MODES, 3, N_STATE))
         forces = force_rows(p)
         gaps = gap_rows()
+        d = balancing_scales(p)
+        similar = np.outer(d, 1.0 / d)  # A = D B D^-1 elementwise
+        inverse_both = np.outer(1.0 / d, 1.0 / d)
         for mode in range(N_MODES):
             a = system_matrix(p, mode)
-            q = ledger_forms(p, mode)
-            # expm at every DIRECT_EVERY-th level; the levels between by squaring the next finer
-            # one (at most DIRECT_EVERY - 1 squarings, so round-off grows by at most 2**4)
-            for level in range(LEVELS, -1, -1):
-                if level % DIRECT_EVERY == 0 or level == LEVELS:
-                    self.expm[mode, level] = expm(a * (step_s / 2.0**level))
-                else:
-                    finer = self.expm[mode, level + 1]
-                    self.expm[mode, level] = finer @ finer
-            # Gramians and integrals at the finest level directly, then doubled upwards:
-            # G(2s) = G(s) + E(s)^T G(s) E(s) and Phi(2s) = Phi(s) + E(s) Phi(s) are exact.
-            finest = step_s / 2**LEVELS
-            gram = np.array([_van_loan(a, q[k], finest) for k in range(N_LEDGER)])
-            phi = _integral_of_expm(a, finest)
-            for level in range(LEVELS, -1, -1):
-                if level < LEVELS:
-                    e = self.expm[mode, level + 1]
-                    gram = gram + e.T @ gram @ e
-                    phi = phi + e @ phi
-                self.ledger[mode, level] = 0.5 * (gram + gram.transpose(0, 2, 1))
-                for i in range(3):
-                    if (mode >> i) & 1:
-                        self.impulse[mode, level, i] = forces[i] @ phi
+            b = a / similar
+            q = ledger_forms(p, mode) * np.outer(d, d)[None, :, :]
+            ex, gram, phi = mode_caches(b, q, step_s, LEVELS, DIRECT_EVERY)
+            self.expm[mode] = ex * similar
+            gram = gram * inverse_both
+            self.ledger[mode] = 0.5 * (gram + gram.transpose(0, 1, 3, 2))
+            phi = phi * similar
             for i in range(3):
+                if (mode >> i) & 1:
+                    # row @ phi without BLAS: numpy's pairwise sum has a fixed order
+                    self.impulse[mode, :, i] = np.sum(forces[i][None, :, None] * phi, axis=1)
                 row = forces[i] if (mode >> i) & 1 else gaps[i]
                 self.event_value[mode, i] = row
-                self.event_slope[mode, i] = row @ a
+                self.event_slope[mode, i] = np.sum(row[:, None] * a, axis=0)
         self.force_rows = forces
         self.gap_rows = gaps
         self.velocity_rows = penetration_rows()[1]

@@ -92,7 +92,11 @@ class SurfaceContact:
         self.u_mid, self.v_mid = fields.u_mid, fields.v_mid
         self.velocity_per_displacement = fields.velocity_per_displacement
         self.one_minus_alpha_f = fields.one_minus_alpha_f
-        self.body_position = fem.Constant(mesh, np.zeros(gdim))
+        # The body position enters as reference + displacement: the gap of a point is then
+        # (x - p_ref).n + (u - dz).n. Forming x + u - p directly would round at eps |x| (1e-17 m on
+        # a 0.1 m part), which a stiff penalty turns into residual noise that Newton cannot beat.
+        self.body_reference = fem.Constant(mesh, np.zeros(gdim))
+        self.body_displacement = fem.Constant(mesh, np.zeros(gdim))
         self.body_velocity = fem.Constant(mesh, np.zeros(gdim))
         self.stiffness = fem.Constant(mesh, float(stiffness_Pa_per_m))
         self.damping = fem.Constant(mesh, float(damping_Pa_s_per_m))
@@ -103,15 +107,16 @@ class SurfaceContact:
         x = ufl.SpatialCoordinate(mesh)
         u = displacement_of(self.u_mid)
         v = displacement_of(self.v_mid)
-        y = x + u
+        offset = ufl.as_vector(shape.offset_m or (0.0,) * gdim)
+        # y - point, with y = x + u and point = reference + dz + offset (see above)
+        relative = (x - self.body_reference - offset) + (u - self.body_displacement)
+        zero = ufl.as_vector((0.0,) * gdim)
         if shape.kind == "plane":
-            point = self.body_position + ufl.as_vector(shape.offset_m or (0.0,) * gdim)
             normal = ufl.as_vector(shape.normal)
-            gap = cf.plane_gap(y, point, normal)
+            gap = cf.plane_gap(relative, zero, normal)
         else:
-            point = self.body_position + ufl.as_vector(shape.offset_m or (0.0,) * gdim)
-            normal = cf.sphere_normal(y, point, shape.radius_m)
-            gap = cf.sphere_gap(y, point, shape.radius_m)
+            normal = cf.sphere_normal(relative, zero, shape.radius_m)
+            gap = cf.sphere_gap(relative, zero, shape.radius_m)
         relative_velocity = v - self.body_velocity
         gap_rate = ufl.dot(relative_velocity, normal)
         pressure = cf.normal_pressure(gap, gap_rate, self.stiffness, self.damping)
@@ -136,8 +141,13 @@ class SurfaceContact:
         self._coordinates = fe.dof_coordinates()
         self._node_dofs = self._group_dofs_by_node()
 
+    def set_body_reference(self, position_m: np.ndarray) -> None:
+        """Fix the reference position of the body (its initial position; any fixed value works,
+        a value close to the motion keeps the gap's round-off small)."""
+        self.body_reference.value[:] = position_m
+
     def set_body_state(self, position_m: np.ndarray, velocity_m_per_s: np.ndarray) -> None:
-        self.body_position.value[:] = position_m
+        self.body_displacement.value[:] = np.asarray(position_m) - self.body_reference.value
         self.body_velocity.value[:] = velocity_m_per_s
 
     def assemble_residual(self) -> PETSc.Vec:

@@ -25,12 +25,14 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from app.transient.contact import PointContact, SurfaceContact
 from app.transient.fe import EffectiveOperatorCache, LinearFE
 from app.transient.rigid import RigidSet
 from app.transient.state import TransientState
+from app.transient.threads import limit_blas_threads
 from forms.newmark import (
     TimeScheme,
     acceleration,
@@ -43,10 +45,13 @@ from forms.newmark import (
 SNES_PREFIX = "transient_"
 SNES_DEFAULTS = {
     "snes_type": "newtonls",
-    "snes_linesearch_type": "bt",
+    # Semi-smooth Newton: the penalty residual is piecewise linear with an exact tangent, so full
+    # steps converge in a few iterations once the active set settles; a backtracking search on
+    # this non-smooth residual only costs Jacobian products. Failure -> cut-back (control.py).
+    "snes_linesearch_type": "basic",
     "snes_rtol": 1e-10,
     "snes_stol": 1e-14,
-    "snes_max_it": 30,
+    "snes_max_it": 20,
 }
 
 
@@ -56,6 +61,7 @@ class CoupledSystem:
     def __init__(self, comm, scheme: TimeScheme, fe: LinearFE | None, rigid: RigidSet,
                  surface_contacts: list[SurfaceContact] = (), point_contacts: list[PointContact] = (),
                  relative_force_tolerance: float = 1e-10):
+        limit_blas_threads()    # MPI ranks are the parallelism (see app.transient.threads)
         self.comm, self.scheme, self.fe, self.rigid = comm, scheme, fe, rigid
         self.surface_contacts = list(surface_contacts)
         self.point_contacts = list(point_contacts)
@@ -63,6 +69,7 @@ class CoupledSystem:
         for c in self.surface_contacts:
             if c.body not in rigid.index:
                 raise ValueError(f"contact {c.name!r} names unknown rigid body {c.body!r}")
+            c.set_body_reference(rigid.bodies[rigid.index[c.body]].position_m)
         for c in self.point_contacts:
             for name in (c.lower, c.upper):
                 if name not in rigid.index:
@@ -82,9 +89,13 @@ class CoupledSystem:
             self._r = fe.new_vector()
             self._tmp = fe.new_vector()
             self._tmp2 = fe.new_vector()
+            self._u_pred = fe.new_vector()
+            self._r0 = fe.new_vector()
+            self._du = fe.new_vector()
         self._setup_snes()
         self.last_iterations = 0
         self.total_iterations = 0
+        self._evaluated = None
 
     # ----------------------------------------------------------------- setup
     def _setup_contact_dofs(self) -> None:
@@ -147,11 +158,15 @@ class CoupledSystem:
         if reason <= 0:
             return reason, None
         self._evaluate(self.X)
+        # Forces now, at the converged mid-point fields: other users of the shared fields (the
+        # contact monitor, energy account) overwrite them with end-of-step values afterwards.
+        self.last_forces_N = self.contact_forces_N()
         return reason, self._new_state()
 
     def _begin_step(self, state: TransientState, dt: float) -> None:
         s, fe, rigid = self.scheme, self.fe, self.rigid
         self.state0, self.dt = state, dt
+        self._evaluated = None
         self.t1 = state.t + dt
         self.t_mid = midpoint(self.t1, state.t, s.alpha_f)
         self.c_acc = acceleration_per_displacement(dt, s)
@@ -168,32 +183,39 @@ class CoupledSystem:
             v_hat = velocity(a_hat, v0, a0, dt, s)
             n = self.n_fe
             b, tmp, tmp2 = self._b, self._tmp, self._tmp2
+            # b = F(t_mid) - M a_const - C v_const - alpha_f K u_n, with every product formed
+            # once: K u_n, M a_n and F also give the force scale of the absolute tolerance
+            # (physical forces only: b holds u_n / (beta dt^2)-sized terms).
             fe.load_N(self.t_mid, b)
-            tmp.array_w[:] = ((1 - s.alpha_m) * a_hat + s.alpha_m * a0)[:n]
+            scale_sq += b.norm() ** 2
+            tmp.array_w[:] = u0[:n]
+            fe.K.mult(tmp, tmp2)
+            scale_sq += tmp2.norm() ** 2
+            if s.alpha_f:
+                b.axpy(-s.alpha_f, tmp2)
+            tmp.array_w[:] = a0[:n]
             fe.M.mult(tmp, tmp2)
-            b.axpy(-1.0, tmp2)
+            scale_sq += tmp2.norm() ** 2
+            if s.alpha_m:
+                b.axpy(-s.alpha_m, tmp2)
+            tmp.array_w[:] = a_hat[:n]
+            fe.M.mult(tmp, tmp2)
+            b.axpy(-(1 - s.alpha_m), tmp2)
             if fe.C is not None:
                 tmp.array_w[:] = ((1 - s.alpha_f) * v_hat + s.alpha_f * v0)[:n]
                 fe.C.mult(tmp, tmp2)
                 b.axpy(-1.0, tmp2)
-            if s.alpha_f:
-                tmp.array_w[:] = s.alpha_f * u0[:n]
-                fe.K.mult(tmp, tmp2)
-                b.axpy(-1.0, tmp2)
-            # Force scale for the absolute tolerance: physical forces only (b itself holds
-            # u_n / (beta dt^2)-sized terms that say nothing about the force level).
-            tmp.array_w[:] = u0[:n]
-            fe.K.mult(tmp, tmp2)
-            scale_sq += tmp2.norm() ** 2
-            tmp.array_w[:] = a0[:n]
-            fe.M.mult(tmp, tmp2)
-            scale_sq += tmp2.norm() ** 2
-            fe.load_N(self.t_mid, tmp2)
-            scale_sq += tmp2.norm() ** 2
-            predictor = self._u1.vector
+            # The FE unknown is the correction du = u_{n+1} - u_pred to a predictor that already
+            # carries the Dirichlet values of t_{n+1}. The residual is then r0 + K_eff du + contact
+            # with r0 = K_eff u_pred - b evaluated once: K_eff u_{n+1} - b itself cancels terms of
+            # size M u / (beta dt^2), and its round-off (~1e-10 relative) used to stall Newton at
+            # the tolerance and trigger line-search failures and cut-backs.
+            predictor = self._u_pred
             predictor.array_w[:] = (u0 + dt * v0 + 0.5 * dt * dt * a0)[:n]
             fe.apply_dirichlet(self.t1, predictor)
-            X[:n] = predictor.array_r
+            self.op.full.mult(predictor, self._r0)
+            self._r0.axpy(-1.0, b)
+            X[:n] = 0.0
         z0, zd0, zdd0 = state.z, state.zd, state.zdd
         self.zdd_hat = acceleration(0.0, 0.0, zd0, zdd0, dt, s)
         self.zd_hat = velocity(self.zdd_hat, zd0, zdd0, dt, s)
@@ -212,11 +234,21 @@ class CoupledSystem:
             X[self.n_fe:] = z1 - z0
 
     def _evaluate(self, X: PETSc.Vec) -> None:
-        """Set u_{n+1}, z_{n+1} and every derived (mid-point) quantity from the iterate X."""
-        s, st, dt = self.scheme, self.state0, self.dt
+        """Set u_{n+1}, z_{n+1} and every derived (mid-point) quantity from the iterate X.
+
+        SNES asks for the Jacobian at the point whose residual it has just evaluated, and the
+        accepted state is the last evaluated point: skip the re-evaluation then (the decision is
+        global, since the evaluation is collective)."""
         x = X.array_r
+        same = self._evaluated is not None and self._evaluated.shape == x.shape and np.array_equal(self._evaluated, x)
+        if self.comm.size > 1:
+            same = self.comm.allreduce(same, op=MPI.LAND)
+        if same:
+            return
+        self._evaluated = np.array(x)
+        s, st, dt = self.scheme, self.state0, self.dt
         if self.fe is not None:
-            self._u1.vector.array_w[:] = x[: self.n_fe]
+            self._u1.vector.array_w[:] = self._u_pred.array_r + x[: self.n_fe]
             self._u1.x.scatter_forward()
             u1 = self._u1.x.array
             self.a1 = acceleration(u1, st.u, st.v, st.a, dt, s)
@@ -249,9 +281,14 @@ class CoupledSystem:
         r_z = r_z + self.rigid.mass_diagonal * self.scheme.alpha_m * self.state0.zdd - self.rigid_force_ext
         out = R.array
         if self.fe is not None:
-            r = self._r
-            self.op.full.mult(self._u1.vector, r)
-            r.axpy(-1.0, self._b)
+            r, du = self._r, self._du
+            x_fe = X.array_r[: self.n_fe]
+            if x_fe.any():
+                du.array_w[:] = x_fe
+                self.op.full.mult(du, r)
+                r.axpy(1.0, self._r0)
+            else:                       # the first residual of a step is r0 (no mat-vec)
+                self._r0.copy(r)
             for c in self.surface_contacts:
                 rc = c.assemble_residual()
                 r.axpy(1.0, rc)
@@ -361,6 +398,11 @@ class CoupledSystem:
             y[n:] = self._L @ x_S + self._Kzz @ x_z
 
     # ------------------------------------------------------------ reporting
+    @property
+    def solution_vector(self) -> PETSc.Vec:
+        """u_{n+1} of the last solved step (FE space layout), for probes and field output."""
+        return self._u1.vector
+
     def contact_forces_N(self) -> dict[str, np.ndarray]:
         """Force on the rigid body (surface contacts) or on the upper body (point contacts) at the
         mid-point of the last evaluated iterate, as gdim vectors [N]."""

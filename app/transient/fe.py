@@ -11,7 +11,7 @@ sizes without refactorising.
 from __future__ import annotations
 
 from collections import OrderedDict
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import ufl
@@ -39,9 +39,12 @@ class LinearFE:
         self.comm = space.mesh.comm
         self.bcs = list(bcs)
         self.update_dirichlet = update_dirichlet
-        self.M = self._assemble(mass)
-        self.K = self._assemble(stiffness)
-        self.C = self._assemble(damping) if damping is not None else None
+        # Compiled forms are kept so that a reference implementation (bench/) can re-assemble.
+        self.forms = {"mass": fem.form(mass), "stiffness": fem.form(stiffness),
+                      "damping": fem.form(damping) if damping is not None else None}
+        self.M = self._assemble(self.forms["mass"])
+        self.K = self._assemble(self.forms["stiffness"])
+        self.C = self._assemble(self.forms["damping"]) if damping is not None else None
         self.loads = [(self._assemble_vector(form), scale) for form, scale in loads]
         index_map = space.dofmap.index_map
         self.block_size = space.dofmap.index_map_bs
@@ -53,7 +56,7 @@ class LinearFE:
 
     @staticmethod
     def _assemble(form):
-        A = assemble_matrix(fem.form(form))
+        A = assemble_matrix(form)
         A.assemble()
         return A
 

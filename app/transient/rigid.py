@@ -8,8 +8,8 @@ the same generalized-alpha scheme as the FE part, so the coupled step stays cons
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

@@ -145,7 +145,7 @@ class TimeStepper:
                     dt = smaller
                     continue
                 break
-            forces = self.system.contact_forces_N()
+            forces = self.system.last_forces_N
             if self.energy is not None:
                 self.energy.add_work(state, new_state)
             rec = self.record(new_state, dt_try, forces, new_status)

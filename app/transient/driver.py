@@ -1,0 +1,271 @@
+"""Runner entry point of the ``transient`` analysis: case -> FE model + rigid bodies + contacts ->
+time loop -> HDF5 time series, plots and a results dict for summary.json.
+
+Loads on the FE body: gravity and a constant total force (the downforce) are applied as
+mass-proportional body forces, i.e. the load vector of each axis k is M t_k (t_k the unit
+translation) times (g_k + F_k / m_total). The drive voltage U(t) is prescribed on the potential DOFs
+of electrodes of kind 'voltage'; supports, ground electrodes and non-piezoelectric regions are held
+at 0.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import ufl
+from dolfinx import fem
+
+from app.errors import CaseError
+from app.transient.contact import MidpointFields, ObstacleShape, PointContact, SurfaceContact
+from app.transient.control import StepController, StepSizes
+from app.transient.coupled import CoupledSystem
+from app.transient.fe import LinearFE
+from app.transient.history import Progress, TimeSeriesExport, plot_time_series
+from app.transient.rigid import RigidBody, RigidSet
+from app.transient.state import TransientState
+from app.transient.stepper import TimeStepper
+from forms.kinematics import volume_weight
+
+
+def _facet_tag(model, ref, file, key) -> int:
+    names = model.mesh_data.facet_names
+    if isinstance(ref, int) and ref in names.values():
+        return ref
+    if isinstance(ref, str) and ref in names:
+        return names[ref]
+    known = ", ".join(names) or "none"
+    raise CaseError(file, key, f"facet group {ref!r} is not in the mesh (mesh has: {known})")
+
+
+class VoltageDrive:
+    """U(t) = U0 sin(wt) (start at rest) or U0 cos(wt) (harmonic start) on the driven potential DOFs,
+    held in the Function the Dirichlet condition was built from."""
+
+    def __init__(self, values: fem.Function, dofs: np.ndarray, amplitude_V: float, frequency_Hz: float,
+                 cosine: bool):
+        self.values, self.dofs = values, dofs
+        self.amplitude_V, self.omega = amplitude_V, 2 * math.pi * frequency_Hz
+        self.phase = 0.5 * math.pi if cosine else 0.0
+
+    def voltage_V(self, t: float) -> float:
+        return self.amplitude_V * math.sin(self.omega * t + self.phase)
+
+    def __call__(self, t: float) -> None:
+        self.values.x.array[self.dofs] = self.voltage_V(t)
+
+
+class TransientModel:
+    """Builds the FE part, rigid bodies and contacts of a case (no time loop)."""
+
+    def __init__(self, case, comm, log):
+        from app.fe.model import build_model
+
+        self.case, self.comm, self.log = case, comm, log
+        self.cfg = cfg = case.transient
+        file = case.source
+        self.model = model = build_model(case, comm)
+        if model.electrodes_of("floating"):
+            raise CaseError(file, "electrodes", "floating electrodes are not supported by the transient analysis")
+        W = model.W
+        self.gdim = gdim = model.mesh.geometry.dim
+        weight = volume_weight(model.mesh, model.kind, case.geometry.thickness_m)
+        for i, body in enumerate(cfg.bodies):
+            if len(body.position_m) != gdim:
+                raise CaseError(file, f"transient.bodies[{i}].position_m", f"needs {gdim} coordinates (mesh axes)")
+        self.drive_point = cfg.drive.point if cfg.drive.point in case.points else None
+        if cfg.drive.tip_amplitude_m is not None and self.drive_point is None:
+            raise CaseError(file, "transient.drive.point", f"unknown point {cfg.drive.point!r}")
+        # Dirichlet DOFs: supports, grounded regions, ground and driven electrodes (values in g).
+        driven = [model.electrode_dofs[n] for n in model.electrodes_of("voltage")]
+        self.drive_dofs = np.unique(np.concatenate(driven)).astype(np.int32) if driven else np.zeros(0, np.int32)
+        held = [model.support_dofs, model.grounded_dofs, self.drive_dofs]
+        held += [model.electrode_dofs[n] for n in model.electrodes_of("ground")]
+        dofs = np.unique(np.concatenate(held)).astype(np.int32)
+        self.g = fem.Function(W)
+        bc = fem.dirichletbc(self.g, dofs)
+        self.total_mass_kg = model.total_mass_kg()
+        gravity = np.asarray(cfg.loads.gravity_m_per_s2 or [0.0] * gdim, dtype=float)
+        force = np.asarray(cfg.loads.fe_force_N or [0.0] * gdim, dtype=float)
+        if gravity.size != gdim:
+            raise CaseError(file, "transient.loads.gravity_m_per_s2", f"needs {gdim} components")
+        if force.size != gdim:
+            raise CaseError(file, "transient.loads.fe_force_N", f"needs {gdim} components")
+        self.fe_acceleration = gravity + force / self.total_mass_kg
+        self.translations = []
+        loads = []
+        for k in range(gdim):
+            t_k = fem.Function(W)
+            _, sub_dofs = W.sub(0).sub(k).collapse()
+            t_k.x.array[np.asarray(sub_dofs)] = 1.0
+            self.translations.append(np.asarray(sub_dofs))
+            if self.fe_acceleration[k]:
+                loads.append((ufl.action(model.mass, t_k), lambda t, s=float(self.fe_acceleration[k]): s))
+        self.damping_frequency_Hz = case.damping.reference_frequency_Hz or cfg.drive.frequency_Hz
+        self.drive = VoltageDrive(self.g, self.drive_dofs, 0.0, cfg.drive.frequency_Hz,
+                                  cosine=cfg.initial_state == "harmonic")
+        self.fe = LinearFE(W, W.sub(0), model.mass, model.stiffness, model.damping(self.damping_frequency_Hz),
+                           bcs=[bc], loads=loads, update_dirichlet=self.drive)
+        self.rigid = RigidSet([self._body(b, gravity) for b in cfg.bodies])
+        fields = MidpointFields(self.fe)
+        surface, point = [], []
+        for i, c in enumerate(cfg.contacts):
+            if c.kind == "surface":
+                tag = _facet_tag(model, c.facets, file, f"transient.contacts[{i}].facets")
+                if len(c.normal or [0.0] * gdim) != gdim:
+                    raise CaseError(file, f"transient.contacts[{i}].normal", f"needs {gdim} components")
+                try:
+                    shape = (ObstacleShape("plane", normal=tuple(c.normal)) if c.shape == "plane"
+                             else ObstacleShape("sphere", radius_m=c.radius_m))
+                except ValueError as exc:
+                    raise CaseError(file, f"transient.contacts[{i}].normal", str(exc)) from None
+                surface.append(SurfaceContact(c.name, self.fe, model.mesh_data.facet_tags, tag, c.body, shape,
+                                              c.stiffness, c.damping, weight=weight, fields=fields))
+            else:
+                if len(c.direction) != gdim:
+                    raise CaseError(file, f"transient.contacts[{i}].direction", f"needs {gdim} components")
+                point.append(PointContact(c.name, c.lower, c.upper, c.direction, c.touch_distance_m,
+                                          c.stiffness, c.damping))
+        self.system = CoupledSystem(comm, cfg.scheme.scheme(), self.fe, self.rigid, surface, point)
+
+    def _body(self, b, gravity) -> RigidBody:
+        n = len(b.position_m)
+        velocity = b.velocity_m_per_s or [0.0] * n
+        if b.fixed:
+            return RigidBody(b.name, b.mass_kg, b.position_m, [0.0] * n, [0.0] * n, prescribed_axes=(True,) * n)
+        force = np.asarray(b.applied_force_N, dtype=float) if b.applied_force_N else None
+        free = b.free_axes or [True] * n
+        return RigidBody(b.name, b.mass_kg, b.position_m, velocity, gravity,
+                         applied_force_N=(lambda t, f=force: f) if force is not None else None,
+                         prescribed_axes=tuple(not f for f in free))
+
+    # ----------------------------------------------------------- initial state
+    def initial_state(self) -> tuple[TransientState, float]:
+        """(state at t = 0, drive amplitude [V]). The harmonic start uses the steady state of
+        V cos(wt): x(t) = Re[(x_re + i x_im) e^{iwt}], so u0 = x_re, v0 = -w x_im, a0 = -w^2 x_re."""
+        cfg, model = self.cfg, self.model
+        voltage = cfg.drive.voltage_V
+        n = fem.Function(model.W).x.array.size
+        u0, v0, a0 = np.zeros(n), np.zeros(n), np.zeros(n)
+        if cfg.drive.tip_amplitude_m is not None or cfg.initial_state == "harmonic":
+            x_re, x_im, amplitude_per_V = self._harmonic_per_volt()
+            if cfg.drive.tip_amplitude_m is not None:
+                voltage = cfg.drive.tip_amplitude_m / amplitude_per_V
+            if cfg.initial_state == "harmonic":
+                omega = 2 * math.pi * cfg.drive.frequency_Hz
+                u0, v0, a0 = voltage * x_re, -omega * voltage * x_im, -omega**2 * voltage * x_re
+        for k, dofs in enumerate(self.translations):
+            a0[dofs] += self.fe_acceleration[k]
+        held = np.concatenate([self.model.support_dofs, self.model.grounded_dofs]).astype(np.int32)
+        v0[held] = 0.0
+        a0[held] = 0.0
+        self.drive.amplitude_V = voltage
+        self.drive(0.0)
+        z, zd, zdd = self.rigid.initial_state()
+        return TransientState(0.0, u0, v0, a0, z, zd, zdd), voltage
+
+    def _harmonic_per_volt(self):
+        """Local (with ghosts) arrays of the steady state per volt, and the amplitude per volt at
+        the drive point."""
+        from app.fe.operators import assemble_operators
+        from app.harmonic import HarmonicSolver
+
+        model = self.model
+        ops = assemble_operators(model, self.damping_frequency_Hz)
+        solver = HarmonicSolver(model, ops, 1.0, prefix="transient_harmonic_")
+        point = solver.solve(self.cfg.drive.frequency_Hz)
+        out = []
+        for vec in (solver.x_full_re, solver.x_full_im):
+            f = fem.Function(model.W)
+            f.vector.array_w[:] = vec.array_r
+            f.x.scatter_forward()
+            out.append(f.x.array.copy())
+        amplitude = abs(point.displacement_m[self.drive_point]) if self.drive_point else float("nan")
+        solver.destroy()
+        ops.destroy()
+        return out[0], out[1], amplitude
+
+
+def _units(tm: TransientModel, case) -> dict[str, str]:
+    units = {"time_s": "s", "dt_s": "s", "drive_voltage_V": "V"}
+    for name in case.points:
+        units[f"{name}_displacement_m"] = "m"
+    for b in tm.rigid.bodies:
+        units[f"{b.name}_position_m"] = "m"
+        units[f"{b.name}_velocity_m_per_s"] = "m/s"
+    for c in case.transient.contacts:
+        units[f"{c.name}_force_N"] = "N (on the rigid body / upper body)"
+        units[f"{c.name}_closed"] = "1 = closed"
+    return units
+
+
+def run(case, out_dir, comm, log) -> dict:
+    cfg = case.transient
+    out_dir = Path(out_dir)
+    tm = TransientModel(case, comm, log)
+    state, voltage = tm.initial_state()
+    log(f"transient: {cfg.initial_state} start, drive {voltage:.4g} V at {cfg.drive.frequency_Hz:.2f} Hz, "
+        f"{len(tm.rigid.bodies)} rigid bodies, {len(cfg.contacts)} contacts, {cfg.end_time_s * 1e3:.4g} ms")
+    h5_path = out_dir / "transient.h5"
+    series = TimeSeriesExport(h5_path, _units(tm, case), comm)
+    system, model = tm.system, tm.model
+    contact_names = [c.name for c in cfg.contacts]
+
+    def on_step(rec):
+        row = {"time_s": rec["time_s"], "dt_s": rec["dt_s"], "drive_voltage_V": tm.drive.voltage_V(rec["time_s"])}
+        for name, value in model.point_values(system.solution_vector).items():
+            row[f"{name}_displacement_m"] = value
+        for b in tm.rigid.bodies:
+            sl = tm.rigid.dofs(b.name)
+            row[f"{b.name}_position_m"] = rec["position_m"][sl]
+            row[f"{b.name}_velocity_m_per_s"] = rec["velocity_m_per_s"][sl]
+        for j, name in enumerate(contact_names):
+            row[f"{name}_force_N"] = rec["contact_force_N"][name]
+            row[f"{name}_closed"] = float(rec["contact_closed"][j])
+        series.write(row)
+        stats_rows.append((rec["time_s"], rec["dt_s"], [np.linalg.norm(rec["contact_force_N"][n]) for n in
+                                                        contact_names], rec["contact_closed"].copy()))
+
+    stats_rows: list = []
+    s = cfg.steps
+    sizes = StepSizes(open_s=s.open_s, closed_s=s.closed_s, change_s=s.change_s, min_s=s.min_s)
+    progress = Progress(comm, 0.0, cfg.end_time_s)
+    stepper = TimeStepper(system, StepController(sizes), progress=progress)
+    start = time.perf_counter()
+    try:
+        stepper.run(state, cfg.end_time_s, on_step=on_step)
+    finally:
+        progress.close()
+        series.close()
+    wall = time.perf_counter() - start
+    results = dict(stepper.stats.as_dict())
+    results.update({"simulated_time_s": cfg.end_time_s, "wall_s_per_simulated_ms": wall / (cfg.end_time_s * 1e3),
+                    "drive_voltage_V": voltage, "drive_frequency_Hz": cfg.drive.frequency_Hz,
+                    "initial_state": cfg.initial_state, "time_series": h5_path.name,
+                    "contacts": _contact_summary(contact_names, stats_rows)})
+    log(f"transient: {results['steps']} steps, {results['newton_iterations']} Newton iterations, "
+        f"{results['cutbacks']} cut-backs, {results['factorisations']} factorisations, {wall:.1f} s wall")
+    if case.output.plots and comm.rank == 0:
+        bodies = [b.name for b in tm.rigid.bodies if b.free_axes_mask.any()]
+        force_contact = contact_names[-1] if contact_names else None
+        results["plots"] = plot_time_series(h5_path, out_dir / "transient_motion.png", out_dir / "transient_force.png",
+                                            tm.drive_point, bodies, force_contact)
+    system.destroy()
+    return results
+
+
+def _contact_summary(names, rows) -> dict:
+    out = {}
+    if not rows:
+        return out
+    dt = np.array([r[1] for r in rows])
+    forces = np.array([r[2] for r in rows]).reshape(len(rows), len(names))
+    closed = np.array([r[3] for r in rows]).reshape(len(rows), len(names))
+    for j, name in enumerate(names):
+        impacts = int(np.sum(np.diff(np.concatenate([[0], closed[:, j]])) == 1))
+        out[name] = {"impacts": impacts, "max_force_N": float(forces[:, j].max()),
+                     "impulse_N_s": float(np.sum(forces[:, j] * dt)),
+                     "closed_time_s": float(np.sum(dt * (closed[:, j] > 0)))}
+    return out

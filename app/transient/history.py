@@ -1,0 +1,129 @@
+"""Outputs of a transient run: the HDF5 time series (h5py, rank 0) and the progress bar.
+
+The time series holds one row per accepted step. Rows are buffered and appended to resizable,
+chunked datasets, and the file is flushed after every block, so a run that is killed leaves a
+readable file with everything up to the last flush. Units are attributes of every dataset.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+class TimeSeriesExport:
+    """``write(row)`` with ``row`` a dict name -> scalar or 1-D array; ``units`` maps each name to
+    its unit. Only rank 0 opens the file (the rows are replicated on every rank)."""
+
+    def __init__(self, path: Path, units: dict[str, str], comm, block_rows: int = 2000):
+        self.path = Path(path)
+        self.units = dict(units)
+        self.block_rows = block_rows
+        self.active = comm.rank == 0
+        self._rows: list[dict] = []
+        self._file = None
+        self.rows_written = 0
+
+    def _open(self, row: dict) -> None:
+        import h5py
+
+        self._file = h5py.File(self.path, "w")
+        for name, value in row.items():
+            shape = np.shape(value)
+            ds = self._file.create_dataset(name, shape=(0, *shape), maxshape=(None, *shape), dtype="f8",
+                                           chunks=(min(self.block_rows, 4096), *shape))
+            ds.attrs["unit"] = self.units.get(name, "")
+
+    def write(self, row: dict) -> None:
+        if not self.active:
+            return
+        self._rows.append(row)
+        if len(self._rows) >= self.block_rows:
+            self.flush()
+
+    def flush(self) -> None:
+        if not self.active or not self._rows:
+            return
+        if self._file is None:
+            self._open(self._rows[0])
+        n = len(self._rows)
+        for name in self._rows[0]:
+            ds = self._file[name]
+            ds.resize(self.rows_written + n, axis=0)
+            ds[self.rows_written:] = np.array([r[name] for r in self._rows], dtype=float)
+        self.rows_written += n
+        self._rows.clear()
+        self._file.flush()
+
+    def close(self) -> None:
+        self.flush()
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+
+class Progress:
+    """tqdm bar on rank 0 in simulated milliseconds (with ETA); silent elsewhere."""
+
+    def __init__(self, comm, t_start_s: float, t_end_s: float, enabled: bool = True):
+        self.bar = None
+        self.t_last = t_start_s
+        if enabled and comm.rank == 0:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=round((t_end_s - t_start_s) * 1e3, 6), unit="ms", desc="transient",
+                            file=sys.stderr, mininterval=1.0, bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} "
+                            "simulated ms [{elapsed}<{remaining}]")
+
+    def update(self, t_s: float) -> None:
+        if self.bar is not None:
+            self.bar.update((t_s - self.t_last) * 1e3)
+        self.t_last = t_s
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def plot_time_series(h5_path: Path, png_motion: Path, png_force: Path, point: str | None, bodies: list[str],
+                     force_contact: str | None) -> list[str]:
+    """Fig. 7/9-like displacement plot (tip, bodies, vertical component) and Fig. 5-like force plot."""
+    import h5py
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    with h5py.File(h5_path, "r") as f:
+        if "time_s" not in f:
+            return written
+        t_ms = f["time_s"][:] * 1e3
+        fig, ax = plt.subplots(figsize=(8, 4))
+        if point and f"{point}_displacement_m" in f:
+            ax.plot(t_ms, f[f"{point}_displacement_m"][:] * 1e6, label=f"{point} (FE)", lw=0.8)
+        for body in bodies:
+            key = f"{body}_position_m"
+            if key in f:
+                z = f[key][:, -1]
+                ax.plot(t_ms, (z - z[0]) * 1e6, label=body, lw=0.8)
+        ax.set_xlabel("time [ms]")
+        ax.set_ylabel("axial displacement [µm]")
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(png_motion, dpi=120)
+        plt.close(fig)
+        written.append(png_motion.name)
+        key = f"{force_contact}_force_N" if force_contact else None
+        if key and key in f:
+            fig, ax = plt.subplots(figsize=(8, 3))
+            ax.plot(t_ms, np.linalg.norm(f[key][:], axis=1), lw=0.8)
+            ax.set_xlabel("time [ms]")
+            ax.set_ylabel(f"{force_contact} force [N]")
+            fig.tight_layout()
+            fig.savefig(png_force, dpi=120)
+            plt.close(fig)
+            written.append(png_force.name)
+    return written
