@@ -109,7 +109,7 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
         from app.transient import driver as transient_driver
 
         with timer.phase("transient"):
-            results["transient"] = transient_driver.run(case, out, comm, log)
+            results["transient"] = transient_driver.run(case, out, comm, log, resume=resume)
     print_table(results, log)
 
 

@@ -92,6 +92,16 @@ class StepController:
         self.event_refinements = 0
         self._cap = math.inf
 
+    def snapshot(self) -> dict:
+        """JSON-able state (for checkpoints): the growth cap after cut-backs and the counters."""
+        return {"cap_s": None if self._cap == math.inf else self._cap, "cutbacks": self.cutbacks,
+                "event_refinements": self.event_refinements}
+
+    def restore(self, snap: dict) -> None:
+        self._cap = math.inf if snap["cap_s"] is None else float(snap["cap_s"])
+        self.cutbacks = int(snap["cutbacks"])
+        self.event_refinements = int(snap["event_refinements"])
+
     def _snap(self, level_s: float, dt: float) -> float:
         """Largest level_s / 2^k not above dt."""
         if dt >= level_s:

@@ -19,6 +19,7 @@ import ufl
 from dolfinx import fem
 
 from app.errors import CaseError
+from app.transient.checkpoint import POINTER, CheckpointWriter, case_digest, load_checkpoint
 from app.transient.contact import MidpointFields, ObstacleShape, PointContact, SurfaceContact
 from app.transient.control import StepController, StepSizes
 from app.transient.coupled import CoupledSystem
@@ -166,6 +167,10 @@ class TransientModel:
         z, zd, zdd = self.rigid.initial_state()
         return TransientState(0.0, u0, v0, a0, z, zd, zdd), voltage
 
+    def resume_drive(self, voltage_V: float) -> None:
+        """Drive amplitude of a resumed run (saved in the checkpoint: no harmonic solve)."""
+        self.drive.amplitude_V = voltage_V
+
     def _harmonic_per_volt(self):
         """Local (with ghosts) arrays of the steady state per volt, and the amplitude per volt at
         the drive point."""
@@ -201,17 +206,31 @@ def _units(tm: TransientModel, case) -> dict[str, str]:
     return units
 
 
-def run(case, out_dir, comm, log) -> dict:
+def run(case, out_dir, comm, log, resume: bool = False) -> dict:
+    """Run the transient analysis of ``case`` into ``out_dir``; with ``resume`` continue from the
+    checkpoint in ``out_dir`` (same case except the end time) and append to its time series."""
     cfg = case.transient
     out_dir = Path(out_dir)
     tm = TransientModel(case, comm, log)
-    state, voltage = tm.initial_state()
+    digest = case_digest(case)
+    resumed = None
+    if resume:
+        resumed = load_checkpoint(out_dir, comm, case, digest, fem.Function(tm.model.W).x.array.size)
+        state, voltage = resumed.state, resumed.voltage_V
+        tm.resume_drive(voltage)
+        log(f"transient: resuming at t = {state.t * 1e3:.6g} ms from {out_dir / 'checkpoint'} "
+            f"({resumed.rows} time-series rows kept)")
+    else:
+        state, voltage = tm.initial_state()
+    t_start = state.t
     log(f"transient: {cfg.initial_state} start, drive {voltage:.4g} V at {cfg.drive.frequency_Hz:.2f} Hz, "
         f"{len(tm.rigid.bodies)} rigid bodies, {len(cfg.contacts)} contacts, {cfg.end_time_s * 1e3:.4g} ms")
     h5_path = out_dir / "transient.h5"
-    series = TimeSeriesExport(h5_path, _units(tm, case), comm)
+    series = TimeSeriesExport(h5_path, _units(tm, case), comm,
+                              resume_rows=resumed.rows if resumed is not None else None)
     system, model = tm.system, tm.model
     contact_names = [c.name for c in cfg.contacts]
+    stats_rows: list = _rows_from_series(h5_path, contact_names, resumed.rows, comm) if resumed else []
 
     def on_step(rec):
         row = {"time_s": rec["time_s"], "dt_s": rec["dt_s"], "drive_voltage_V": tm.drive.voltage_V(rec["time_s"])}
@@ -228,22 +247,29 @@ def run(case, out_dir, comm, log) -> dict:
         stats_rows.append((rec["time_s"], rec["dt_s"], [np.linalg.norm(rec["contact_force_N"][n]) for n in
                                                         contact_names], rec["contact_closed"].copy()))
 
-    stats_rows: list = []
     s = cfg.steps
     sizes = StepSizes(open_s=s.open_s, closed_s=s.closed_s, change_s=s.change_s, min_s=s.min_s)
-    progress = Progress(comm, 0.0, cfg.end_time_s)
+    progress = Progress(comm, t_start, cfg.end_time_s)
     stepper = TimeStepper(system, StepController(sizes), progress=progress)
+    if resumed is not None:
+        stepper.restore(resumed.stepper)
+    checkpoint = CheckpointWriter(out_dir, comm, cfg.checkpoint_interval_steps, voltage, digest, flush=series.flush,
+                                  seq=resumed.seq if resumed is not None else 0)
     start = time.perf_counter()
     try:
-        stepper.run(state, cfg.end_time_s, on_step=on_step)
+        stepper.run(state, cfg.end_time_s, on_step=on_step,
+                    checkpoint=_SeriesCheckpoint(checkpoint, series))
     finally:
         progress.close()
         series.close()
     wall = time.perf_counter() - start
     results = dict(stepper.stats.as_dict())
-    results.update({"simulated_time_s": cfg.end_time_s, "wall_s_per_simulated_ms": wall / (cfg.end_time_s * 1e3),
+    simulated = cfg.end_time_s - t_start
+    results.update({"simulated_time_s": cfg.end_time_s, "resumed_from_s": t_start if resumed else None,
+                    "wall_s_per_simulated_ms": wall / (simulated * 1e3) if simulated > 0 else None,
                     "drive_voltage_V": voltage, "drive_frequency_Hz": cfg.drive.frequency_Hz,
                     "initial_state": cfg.initial_state, "time_series": h5_path.name,
+                    "checkpoint": f"{checkpoint.dir.name}/{POINTER}", "checkpoints_written": checkpoint.written,
                     "contacts": _contact_summary(contact_names, stats_rows)})
     log(f"transient: {results['steps']} steps, {results['newton_iterations']} Newton iterations, "
         f"{results['cutbacks']} cut-backs, {results['factorisations']} factorisations, {wall:.1f} s wall")
@@ -254,6 +280,38 @@ def run(case, out_dir, comm, log) -> dict:
                                             tm.drive_point, bodies, force_contact)
     system.destroy()
     return results
+
+
+class _SeriesCheckpoint:
+    """The checkpoint writer as the stepper sees it: the row count comes from the time series."""
+
+    def __init__(self, writer: CheckpointWriter, series: TimeSeriesExport):
+        self.writer, self.series = writer, series
+
+    def due(self, steps: int) -> bool:
+        return self.writer.due(steps)
+
+    def write(self, state, snapshot) -> None:
+        self.writer.write(state, snapshot, rows_of=lambda: self.series.rows_written)
+
+
+def _rows_from_series(h5_path: Path, names: list[str], rows: int, comm) -> list:
+    """The per-step rows of the contact summary, read back from the first ``rows`` rows of the time
+    series of a resumed run (rank 0 reads, every rank gets them)."""
+    out = None
+    if comm.rank == 0:
+        out = []
+        if rows:
+            import h5py
+
+            with h5py.File(h5_path, "r") as f:
+                t, dt = f["time_s"][:rows], f["dt_s"][:rows]
+                forces = [np.linalg.norm(f[f"{n}_force_N"][:rows], axis=1) for n in names]
+                closed = [f[f"{n}_closed"][:rows] for n in names]
+            for i in range(rows):
+                out.append((float(t[i]), float(dt[i]), [float(fc[i]) for fc in forces],
+                            np.array([c[i] for c in closed], dtype=np.int8)))
+    return comm.bcast(out, root=0)
 
 
 def _contact_summary(names, rows) -> dict:

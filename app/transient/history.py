@@ -17,7 +17,8 @@ class TimeSeriesExport:
     """``write(row)`` with ``row`` a dict name -> scalar or 1-D array; ``units`` maps each name to
     its unit. Only rank 0 opens the file (the rows are replicated on every rank)."""
 
-    def __init__(self, path: Path, units: dict[str, str], comm, block_rows: int = 2000):
+    def __init__(self, path: Path, units: dict[str, str], comm, block_rows: int = 2000,
+                 resume_rows: int | None = None):
         self.path = Path(path)
         self.units = dict(units)
         self.block_rows = block_rows
@@ -25,11 +26,30 @@ class TimeSeriesExport:
         self._rows: list[dict] = []
         self._file = None
         self.rows_written = 0
+        if resume_rows is not None and self.active:
+            self._reopen(resume_rows)
+
+    def _reopen(self, rows: int) -> None:
+        """Continue an existing series after its first ``rows`` rows (a resumed run): rows written
+        after the checkpoint by the killed run are dropped."""
+        if rows == 0 and not self.path.exists():
+            return
+        import h5py
+
+        self._file = h5py.File(self.path, "a")
+        for name in self._file:
+            ds = self._file[name]
+            if ds.shape[0] < rows:
+                raise ValueError(f"{self.path}: {name} has {ds.shape[0]} rows, the checkpoint needs {rows}")
+            ds.resize(rows, axis=0)
+        self.rows_written = rows
+        self._file.flush()
 
     def _open(self, row: dict) -> None:
         import h5py
 
-        self._file = h5py.File(self.path, "w")
+        if self._file is None:
+            self._file = h5py.File(self.path, "w")
         for name, value in row.items():
             shape = np.shape(value)
             ds = self._file.create_dataset(name, shape=(0, *shape), maxshape=(None, *shape), dtype="f8",
@@ -46,7 +66,7 @@ class TimeSeriesExport:
     def flush(self) -> None:
         if not self.active or not self._rows:
             return
-        if self._file is None:
+        if self._file is None or not len(self._file):
             self._open(self._rows[0])
         n = len(self._rows)
         for name in self._rows[0]:

@@ -123,6 +123,8 @@ class LoadSection:
 class TransientSection:
     end_time_s: float = param(gt=0, unit="s", doc="simulated time")
     output_interval_s: float = param(gt=0, unit="s", doc="time between field outputs and progress updates")
+    checkpoint_interval_steps: int = param(
+        1000, ge=0, doc="write a checkpoint (for `piezodyn run --resume DIR`) every N steps and at the end; 0: end only")
     scheme: SchemeSection = param(default_factory=SchemeSection, doc="see [transient.scheme]")
     steps: StepSection = param(default_factory=StepSection, doc="see [transient.steps]")
     drive: DriveSection = param(default_factory=DriveSection, doc="see [transient.drive]")

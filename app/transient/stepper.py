@@ -112,6 +112,8 @@ class TimeStepper:
         self.energy = EnergyAccount(system) if track_energy else None
         self.progress = progress
         self.stats = RunStatistics()
+        self.changed = False                # did the last accepted step change the contact set?
+        self._factorisations_before = 0     # factorisations of the run before a resume
 
     def record(self, state: TransientState, dt: float, forces: dict, status) -> dict:
         rec = {"time_s": state.t, "dt_s": dt, "position_m": state.z.copy(), "velocity_m_per_s": state.zd.copy(),
@@ -121,17 +123,49 @@ class TimeStepper:
             rec["external_work_J"] = self.energy.work_J
         return rec
 
-    def run(self, state: TransientState, t_end_s: float, on_step=None) -> TransientState:
+    # ------------------------------------------------------------ checkpoints
+    def snapshot(self) -> dict:
+        """Everything besides the state that the next steps depend on (JSON-able): the controller's
+        cap and counters, whether the last step changed the contact set, and the statistics."""
+        ctl, stats = self.controller, self.stats
+        return {"changed": bool(self.changed), "controller": ctl.snapshot(),
+                "newton_iterations": self.system.total_iterations,
+                "factorisations": self._factorisations(),
+                "statistics": {k: v for k, v in stats.as_dict().items() if k not in _DERIVED},
+                "failure_reasons": {str(k): v for k, v in stats.failure_reasons.items()}}
+
+    def restore(self, snap: dict) -> None:
+        ctl, stats = self.controller, self.stats
+        self.changed = bool(snap["changed"])
+        ctl.restore(snap["controller"])
+        self.system.total_iterations = int(snap["newton_iterations"])
+        self._factorisations_before = int(snap["factorisations"])
+        for key, value in snap["statistics"].items():
+            setattr(stats, key, value)
+        stats.failure_reasons = {int(k): v for k, v in snap["failure_reasons"].items()}
+
+    def _factorisations(self) -> int:
+        cache = self.system.cache
+        return self._factorisations_before + (cache.factorisations if cache else 0)
+
+    def _step_size(self, dt: float, t: float, t_end_s: float) -> float:
+        """dt, or the remainder to t_end_s; a remainder within round-off of dt is dt itself (a
+        time reached by summing steps must not produce a sliver step or a new factorisation)."""
+        remainder = t_end_s - t
+        return dt if remainder >= dt * (1 - 1e-9) else remainder
+
+    def run(self, state: TransientState, t_end_s: float, on_step=None, checkpoint=None) -> TransientState:
+        """``checkpoint`` (optional) has ``due(steps)`` and ``write(state, snapshot)``; it is written
+        after a step is complete (exported, state shifted, dt adapted) and at the end."""
         ctl, stats = self.controller, self.stats
         start = time.perf_counter()
         status = self.monitor.status(state)
-        changed = False
         if self.energy is not None:
             self.energy.initial = self.energy.energy_J(state)
         while state.t < t_end_s * (1 - 1e-12):
-            dt = ctl.propose(status, changed)
+            dt = ctl.propose(status, self.changed)
             while True:
-                dt_try = min(dt, t_end_s - state.t)
+                dt_try = self._step_size(dt, state.t, t_end_s)
                 stats.attempts += 1
                 reason, new_state = self.system.solve_step(state, dt_try)   # loads updated inside
                 if new_state is None:                                       # convergence reason
@@ -153,16 +187,31 @@ class TimeStepper:
                 export.write(rec)
             if on_step is not None:
                 on_step(rec)
-            state, status = new_state, new_status                           # shift state
+            state, status, self.changed = new_state, new_status, changed    # shift state
             ctl.accepted(dt_try)                                            # adapt dt
             stats.steps += 1
             stats.dt_min_used_s = min(stats.dt_min_used_s, dt_try)
             stats.dt_max_used_s = max(stats.dt_max_used_s, dt_try)
             if self.progress is not None:
                 self.progress.update(state.t)
+            if checkpoint is not None and checkpoint.due(stats.steps):
+                checkpoint.write(state, self._finish_statistics(start))
+                start = time.perf_counter()
+        snap = self._finish_statistics(start)
+        if checkpoint is not None:
+            checkpoint.write(state, snap)
+        return state
+
+    def _finish_statistics(self, start: float) -> dict:
+        """Bring the counters in ``stats`` up to date (adds the wall time since ``start``) and
+        return the snapshot."""
+        ctl, stats = self.controller, self.stats
         stats.cutbacks = ctl.cutbacks
         stats.event_refinements = ctl.event_refinements
         stats.newton_iterations = self.system.total_iterations
-        stats.factorisations = self.system.cache.factorisations if self.system.cache else 0
+        stats.factorisations = self._factorisations()
         stats.wall_time_s += time.perf_counter() - start
-        return state
+        return self.snapshot()
+
+
+_DERIVED = ("failure_reasons",)
