@@ -28,7 +28,14 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    import logging
+
+    import ffcx  # noqa: F401  (installs its root log handler, which the JIT's compiler chatter reaches)
     from mpi4py import MPI
+
+    # setuptools lowers the root logger to INFO while the JIT compiles; filter at the handlers instead
+    for handler in logging.getLogger().handlers:
+        handler.setLevel(logging.WARNING)
 
     from app.errors import CaseError, NumericalFailure
 

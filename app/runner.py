@@ -56,7 +56,7 @@ def run_case(case_path: str | Path, overrides: list[str] | None = None, out_dir:
 
 def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, resume: bool) -> None:
     from app.fe.model import build_model
-    from app.fe.operators import assemble_operators
+    from app.fe.operators import add_damping, assemble_operators
 
     results = summary["results"]
     with timer.phase("mesh"):
@@ -68,11 +68,13 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
     log(f"mesh: {cells} cells, {imap.size_global} DOFs, mass {results['mass_kg'] * 1e3:.2f} g")
     modal = harmonic = None
     f_r = f_a = None
+    frequency_domain = {"modal", "harmonic", "circuit"} & set(case.analyses)
+    if frequency_domain:
+        with timer.phase("assemble"):
+            ops = assemble_operators(model)
     if "modal" in case.analyses:
         from app.modal import modal_summary, run_modal
 
-        with timer.phase("assemble"):
-            ops = assemble_operators(model)
         with timer.phase("modal"):
             modal = run_modal(model, ops)
             results["modal"] = modal_summary(model, modal)
@@ -82,13 +84,14 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
         if case.output.fields:
             with timer.phase("export"):
                 write_modes(model, modal, out, summary)
-        ops.destroy()
     damping_f = case.damping.reference_frequency_Hz or f_r or (case.modal.target_frequency_Hz if case.modal else None)
+    if damping_f is None and case.harmonic is not None and case.harmonic.f_start_Hz is not None:
+        damping_f = 0.5 * (case.harmonic.f_start_Hz + case.harmonic.f_stop_Hz)
     if "harmonic" in case.analyses or "circuit" in case.analyses:
         from app.harmonic import harmonic_summary, run_harmonic
 
         with timer.phase("assemble"):
-            ops = assemble_operators(model, damping_f)
+            add_damping(ops, model, damping_f)
         if "harmonic" in case.analyses:
             with timer.phase("harmonic"):
                 harmonic = run_harmonic(model, ops, f_r, f_a, log)
@@ -98,13 +101,14 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
 
             with timer.phase("circuit"):
                 results["circuit"] = equivalent_circuit(model, ops, modal, harmonic, case.circuit.point)
-        ops.destroy()
         if harmonic is not None and case.output.plots and comm.rank == 0:
             from app.plots import admittance_plot
 
             with timer.phase("export"):
                 admittance_plot(out / "admittance.png", results["harmonic"], f_r, f_a, results.get("circuit"))
                 summary["outputs"].append("admittance.png")
+    if frequency_domain:
+        ops.destroy()
     if "transient" in case.analyses:
         from app.transient import driver as transient_driver
 

@@ -35,14 +35,20 @@ def _assemble(form) -> PETSc.Mat:
 
 
 def assemble_operators(model: FEModel, damping_frequency_Hz: float | None = None) -> Operators:
-    K = _assemble(model.stiffness)
-    M = _assemble(model.mass)
-    C = None
+    ops = Operators(_assemble(model.stiffness), _assemble(model.mass))
     if damping_frequency_Hz is not None:
-        damping = model.damping(damping_frequency_Hz)
-        if damping is not None:
-            C = _assemble(damping)
-    return Operators(K, M, C)
+        add_damping(ops, model, damping_frequency_Hz)
+    return ops
+
+
+def add_damping(ops: Operators, model: FEModel, frequency_Hz: float) -> None:
+    """(Re)assemble C for the material betas at ``frequency_Hz``; K and M are reused."""
+    if ops.C is not None:
+        ops.C.destroy()
+        ops.C = None
+    damping = model.damping(frequency_Hz)
+    if damping is not None:
+        ops.C = _assemble(damping)
 
 
 def electrical_state(model: FEModel, state: str) -> ConstraintSet:
