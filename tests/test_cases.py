@@ -50,4 +50,6 @@ def test_case_runs(case, ranks, tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["mpi_size"] == max(ranks, 1)
     assert summary["results"]
+    for name in summary.get("outputs", []):
+        assert (tmp_path / name).is_file(), f"summary lists {name} but it was not written"
     assert "Traceback" not in result.stderr

@@ -61,3 +61,24 @@ def test_drill_transducer_design(shared_tmp):
     assert circuit["admittance_at_peak_circuit_S"] == pytest.approx(circuit["admittance_at_peak_fe_S"], rel=1e-2)
     # damping from Q_m (steel 1000, PZT 400) and beta = 8e-9 s gives an overall Q between 250 and 1000
     assert 250 < circuit["mechanical_quality_factor"] < 1000
+
+
+def test_mode_shapes_are_valid_xdmf(tmp_path):
+    """XDMF + HDF5 that ParaView reads: one displacement field per mode, each non-zero."""
+    import xml.etree.ElementTree as ET
+
+    import h5py
+    import numpy as np
+
+    summary = run_case_quiet("validation/pzt4-bar-axisymmetric.toml", tmp_path, 'analyses=["modal"]',
+                             "geometry.parameters.axial_divisions=8")
+    n_modes = len(summary["results"]["modal"]["modes"])
+    tree = ET.parse(tmp_path / "modes_short.xdmf")
+    grids = [g for g in tree.iter("Grid") if g.get("GridType") != "Collection" and g.find("Attribute") is not None]
+    assert len(grids) == n_modes
+    with h5py.File(tmp_path / "modes_short.h5", "r") as h5:
+        fields = h5["Function"]["displacement"]
+        assert len(fields) == n_modes
+        for key in fields:
+            values = np.asarray(fields[key])
+            assert values.shape[1] == 3 and np.abs(values).max() > 0
