@@ -33,6 +33,9 @@ from forms.newmark import TimeScheme  # noqa: E402
 class RefactorEveryIteration(CoupledSystem):
     """(b): rebuilds and refactorises K_eff (and its contact columns) in every Jacobian call."""
 
+    def _contact_free_step(self, atol):
+        return None     # the naive loop goes through SNES (and refactorises) on every step
+
     def _jacobian_callback(self, snes, X, J, P):
         previous = getattr(self, "_naive_op", None)
         if previous is not None:

@@ -71,6 +71,7 @@ def test_ball_drop_force_free_restitution_is_one_without_damping():
     assert duration == pytest.approx(duration_cf, rel=0.01)
 
 
+@pytest.mark.mpi
 def test_ball_chattering_on_shaken_block_finishes():
     """Table acceleration A w^2 ~ 11 g at 3 kHz: the ball is thrown off and lands again, again."""
     system, state = vibrating_block_with_ball(MPI.COMM_WORLD, TimeScheme.generalized_alpha(0.7),
@@ -86,6 +87,7 @@ def test_ball_chattering_on_shaken_block_finishes():
     assert np.all(np.isfinite(heights))
 
 
+@pytest.mark.mpi
 def test_grazing_impact_finishes():
     """The ball skims the block's top face with a tiny normal speed and a large tangential one."""
     system, state = vibrating_block_with_ball(MPI.COMM_WORLD, TimeScheme.generalized_alpha(0.7),

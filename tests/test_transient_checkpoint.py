@@ -29,6 +29,13 @@ def read_series(path: Path) -> dict[str, np.ndarray]:
         return {name: f[name][:] for name in f}
 
 
+def xdmf_times(out: Path) -> list[float]:
+    import re
+
+    text = (out / "transient_fields.xdmf").read_text()
+    return [float(v) for v in re.findall(r'<Time Value="([^"]+)"', text)]
+
+
 def assert_same_series(a: dict, b: dict, rtol=0.0):
     assert sorted(a) == sorted(b)
     assert a["time_s"].shape == b["time_s"].shape
@@ -61,14 +68,22 @@ def test_resume_from_half_time_equals_one_run(one_go, shared_tmp):
                       resume=True)
     MPI.COMM_WORLD.barrier()
     if MPI.COMM_WORLD.rank == 0:
-        assert_same_series(reference, read_series(shared_tmp / "transient.h5"))
+        # One rank: bit-identical. Several: the mesh partition (and so MUMPS' round-off) is not
+        # reproducible from run to run, so equal to solver tolerance.
+        assert_same_series(reference, read_series(shared_tmp / "transient.h5"),
+                           rtol=0.0 if MPI.COMM_WORLD.size == 1 else 1e-7)
+        # The XDMF field series continues too: same output times, each the first step at or after
+        # a multiple of the output interval, and no step written twice.
+        times_ref, times = xdmf_times(out_ref), xdmf_times(shared_tmp)
+        np.testing.assert_allclose(times, times_ref, rtol=1e-12)
     res_ref, res = summary_ref["results"]["transient"], second["results"]["transient"]
     assert res["resumed_from_s"] == pytest.approx(t_half, rel=1e-15)
     for key in ("steps", "attempts", "cutbacks", "event_refinements", "newton_iterations"):
         assert res[key] == res_ref[key], key
     assert sorted(res["contacts"]) == sorted(res_ref["contacts"])
     for name, ref in res_ref["contacts"].items():
-        assert res["contacts"][name] == pytest.approx(ref, rel=1e-12, abs=1e-300), name
+        rel = 1e-12 if MPI.COMM_WORLD.size == 1 else 1e-6
+        assert res["contacts"][name] == pytest.approx(ref, rel=rel, abs=1e-300), name
 
 
 def test_resume_of_a_different_case_is_refused(one_go, tmp_path):
@@ -113,3 +128,37 @@ def test_killed_run_is_readable_and_resumes_to_the_same_series(one_go, tmp_path)
                      *[a for o in overrides for a in ("--set", o)])
     assert result.returncode == 0, result.stderr[-3000:]
     assert_same_series(read_series(out_ref / "transient.h5"), read_series(tmp_path / "transient.h5"))
+    # The field series is closed between outputs, so the killed run's file is appended to as well.
+    np.testing.assert_allclose(xdmf_times(tmp_path), xdmf_times(out_ref), rtol=1e-12)
+
+
+def test_tiny_drill_run_has_ball_tip_impacts(one_go):
+    """The tip's axis node carries the ball contact (Hertz node contact): even the 4 mm test mesh,
+    whose tip facets never see the 0.1 mm contact disc, has the tip hitting the ball."""
+    _, summary = one_go
+    contacts = summary["results"]["transient"]["contacts"]
+    assert contacts["tip_ball"]["impacts"] >= 1
+    assert contacts["tip_ball"]["max_force_N"] > 1.0
+    assert summary["results"]["transient"]["cutbacks"] == 0
+
+
+def test_field_series_written_at_the_output_interval(one_go):
+    """P1 displacement and potential at t = 0 and at the first step reaching each multiple of
+    transient.output_interval_s (1e-4 s)."""
+    import h5py
+
+    out, summary = one_go
+    if MPI.COMM_WORLD.rank != 0:
+        return
+    times = xdmf_times(out)
+    assert summary["results"]["transient"]["field_outputs"] == 3
+    n = len(times) // 2                                 # displacement and potential series
+    assert times[:n] == times[n:]
+    for k, t in enumerate(times[:n]):
+        assert k * 1e-4 <= t < k * 1e-4 + 1e-6 + 1e-12
+    with h5py.File(out / "transient_fields.h5", "r") as f:
+        vertices = f["Mesh/mesh/geometry"].shape[0]
+        shapes = {f["Function/displacement"][k].shape for k in f["Function/displacement"]}
+        assert shapes == {(vertices, 3)}                 # P1: one value per vertex
+        amplitude = max(np.abs(f["Function/displacement"][k][:, 1]).max() for k in f["Function/displacement"])
+    assert 1e-6 < amplitude < 30e-6                     # the tip vibrates at ~15 um

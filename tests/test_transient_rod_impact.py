@@ -93,6 +93,7 @@ def test_rod_impact_converges_under_refinement():
     assert errors[-1] < 0.02
 
 
+@pytest.mark.mpi
 @pytest.mark.skipif(MPI.COMM_WORLD.size == 1, reason="compares a parallel run with a serial one")
 def test_rod_impact_parallel_equals_serial():
     rod = RodImpact(elements_along=40)

@@ -1,16 +1,20 @@
 """Checkpoints of a transient run, and resuming from them.
 
 A checkpoint holds everything needed to continue a run bit-identically: the FE displacement,
-velocity and acceleration (local arrays incl. ghosts, one file per MPI rank), the rigid-body
-states, t, the step controller (cap after cut-backs, counters), whether the last step changed the
-contact set (the next dt depends on it), the run statistics, the drive voltage and the number of
-HDF5 time-series rows written. The contact state itself (which contacts are closed) is a function
-of the saved fields, so it is recomputed.
+velocity and acceleration, the rigid-body states, t, the step controller (cap after cut-backs,
+counters), whether the last step changed the contact set (the next dt depends on it), the run
+statistics, the drive voltage and the number of HDF5 time-series rows written. The contact state
+itself (which contacts are closed) is a function of the saved fields, so it is recomputed.
 
-Layout in ``DIR/checkpoint/``: ``state-<seq>-rank<r>.npz`` per rank and ``checkpoint.json``
-(written by rank 0 last, through a temporary file and a rename). The JSON names the ``seq`` of a
-complete set of rank files, so a run killed at any moment leaves either the previous or the new
-checkpoint, never a mix. Older rank files are removed after the JSON points past them.
+FE fields are stored per cell, keyed by the mesh's original (input) cell index: row c holds the
+values of the DOFs of input cell c in the element's DOF order. That layout does not depend on the
+MPI partition (which is not reproducible from run to run on several ranks), so a run can resume
+on any number of ranks; on the same single rank it continues bit-identically.
+
+Layout in ``DIR/checkpoint/``: ``state-<seq>.npz`` and ``checkpoint.json``, both written by rank 0
+through a temporary file, fsync and a rename, the JSON last. The JSON names the ``seq`` of a
+complete state file, so a run killed at any moment leaves either the previous or the new
+checkpoint, never a mix. The older state file is removed after the JSON points past it.
 """
 
 from __future__ import annotations
@@ -48,10 +52,11 @@ class CheckpointWriter:
     at the end of a run. ``flush`` is called first so that the time series on disk has exactly
     ``rows`` rows when the checkpoint names them."""
 
-    def __init__(self, out_dir: Path, comm, interval_steps: int, voltage_V: float, case_digest: dict,
+    def __init__(self, out_dir: Path, layout: CellLayout, interval_steps: int, voltage_V: float, case_digest: dict,
                  flush=None, seq: int = 0):
         self.dir = Path(out_dir) / CHECKPOINT_DIR
-        self.comm = comm
+        self.layout = layout
+        self.comm = comm = layout.comm
         self.interval_steps = int(interval_steps)
         self.voltage_V = float(voltage_V)
         self.case_digest = case_digest
@@ -65,8 +70,8 @@ class CheckpointWriter:
     def due(self, steps: int) -> bool:
         return self.interval_steps > 0 and steps % self.interval_steps == 0
 
-    def _rank_file(self, seq: int, rank: int) -> Path:
-        return self.dir / f"state-{seq}-rank{rank}.npz"
+    def _state_file(self, seq: int) -> Path:
+        return self.dir / f"state-{seq}.npz"
 
     def write(self, state: TransientState, stepper: dict, rows_of=None) -> None:
         """Collective. ``rows_of()`` returns the number of time-series rows on disk (after flush)."""
@@ -74,33 +79,70 @@ class CheckpointWriter:
             self.flush()
         rows = int(rows_of()) if rows_of is not None else 0
         rows = self.comm.bcast(rows, root=0)
+        fields = {k: self.layout.gather(getattr(state, k)) for k in ("u", "v", "a")}
         seq = self.seq + 1
-        path = self._rank_file(seq, self.comm.rank)
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "wb") as fh:
-            np.savez(fh, u=state.u, v=state.v, a=state.a, z=state.z, zd=state.zd, zdd=state.zdd)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-        local_sizes = self.comm.gather(int(state.u.size), root=0)
-        self.comm.barrier()                                  # every rank file is complete
         if self.comm.rank == 0:
-            meta = {"format": FORMAT, "seq": seq, "t_s": state.t, "mpi_size": self.comm.size,
-                    "local_sizes": local_sizes, "rows": rows, "voltage_V": self.voltage_V,
-                    "stepper": stepper, "case": self.case_digest}
-            pointer = self.dir / POINTER
-            tmp = pointer.with_name(POINTER + ".tmp")
-            with open(tmp, "w") as fh:
-                json.dump(meta, fh, indent=1)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, pointer)
-        self.comm.barrier()                                  # the pointer names seq now
-        old = self._rank_file(self.seq, self.comm.rank)
-        if self.seq and old.exists():
-            old.unlink()
+            path = self._state_file(seq)
+            _atomic_write(path, lambda fh: np.savez(fh, z=state.z, zd=state.zd, zdd=state.zdd, **fields))
+            meta = {"format": FORMAT, "seq": seq, "t_s": state.t, "mpi_size": self.comm.size, "rows": rows,
+                    "voltage_V": self.voltage_V, "stepper": stepper, "case": self.case_digest}
+            _atomic_write(self.dir / POINTER, lambda fh: fh.write(json.dumps(meta, indent=1).encode()))
+            old = self._state_file(self.seq)
+            if self.seq and old.exists():
+                old.unlink()
+        self.comm.barrier()
         self.seq = seq
         self.written += 1
+
+
+def _atomic_write(path: Path, write) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        write(fh)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+class CellLayout:
+    """Partition-independent storage of a FE Function's local array: per input cell, the values of
+    its DOFs. ``gather`` collects the owned cells on rank 0 (n_cells_global x DOFs per cell);
+    ``scatter`` fills a local array (owned + ghost DOFs) from that table."""
+
+    def __init__(self, space):
+        msh = space.mesh
+        comm = msh.comm
+        tdim = msh.topology.dim
+        imap = msh.topology.index_map(tdim)
+        self.comm = comm
+        self.n_owned = imap.size_local
+        n_local = imap.size_local + imap.num_ghosts
+        self.n_global = imap.size_global
+        self.original = np.asarray(msh.topology.original_cell_index, dtype=np.int64)[:n_local]
+        dofmap = space.dofmap
+        bs = dofmap.bs
+        cells = np.asarray(dofmap.list.array, dtype=np.int64).reshape(n_local, -1)
+        self.dofs = (cells[:, :, None] * bs + np.arange(bs)).reshape(n_local, -1)
+        index_map = dofmap.index_map
+        self.local_size = (index_map.size_local + index_map.num_ghosts) * dofmap.index_map_bs
+
+    def gather(self, values: np.ndarray) -> np.ndarray | None:
+        own = slice(0, self.n_owned)
+        parts = self.comm.gather((self.original[own], values[self.dofs[own]]), root=0)
+        if self.comm.rank != 0:
+            return None
+        table = np.zeros((self.n_global, self.dofs.shape[1]))
+        for index, rows in parts:
+            table[index] = rows
+        return table
+
+    def scatter(self, table: np.ndarray) -> np.ndarray:
+        if table.shape != (self.n_global, self.dofs.shape[1]):
+            raise ValueError(f"checkpoint field has shape {table.shape}, the mesh needs "
+                             f"{(self.n_global, self.dofs.shape[1])}")
+        out = np.zeros(self.local_size)
+        out[self.dofs] = table[self.original]
+        return out
 
 
 def case_digest(case) -> dict:
@@ -126,9 +168,10 @@ def _differences(a, b, prefix="") -> list[str]:
     return [] if a == b else [prefix]
 
 
-def load_checkpoint(out_dir: Path, comm, case, digest: dict, local_size: int) -> Resumed:
+def load_checkpoint(out_dir: Path, layout: CellLayout, case, digest: dict) -> Resumed:
     """Read the checkpoint of ``out_dir`` on every rank; CaseError (exit 2) when there is none or it
-    does not belong to this case / MPI size / mesh partition."""
+    belongs to a different case or mesh."""
+    comm = layout.comm
     file = case.source
     directory = Path(out_dir) / CHECKPOINT_DIR
     pointer = directory / POINTER
@@ -140,16 +183,18 @@ def load_checkpoint(out_dir: Path, comm, case, digest: dict, local_size: int) ->
         raise CaseError(str(out_dir), "--resume", f"no checkpoint in {out_dir} (expected {pointer})")
     if meta.get("format") != FORMAT:
         raise CaseError(str(pointer), "format", f"unknown checkpoint format {meta.get('format')!r}")
-    if meta["mpi_size"] != comm.size:
-        raise CaseError(str(pointer), "mpi_size",
-                        f"checkpoint was written by {meta['mpi_size']} MPI rank(s); resume with the same number "
-                        f"(this run has {comm.size})")
     changed = _differences(meta["case"], digest)
     if changed:
         raise CaseError(file, changed[0], "differs from the checkpointed run (only transient.end_time_s, "
                                           "transient.checkpoint_interval_steps and output.* may change on resume)")
-    if meta["local_sizes"][comm.rank] != local_size:
-        raise CaseError(str(pointer), "local_sizes", "the mesh partition differs from the checkpointed run")
-    with np.load(directory / f"state-{meta['seq']}-rank{comm.rank}.npz") as data:
-        state = TransientState(float(meta["t_s"]), *(np.array(data[k]) for k in ("u", "v", "a", "z", "zd", "zdd")))
+    data = None
+    if comm.rank == 0:
+        with np.load(directory / f"state-{meta['seq']}.npz") as npz:
+            data = {k: np.array(npz[k]) for k in npz.files}
+    data = comm.bcast(data, root=0)
+    try:
+        u, v, a = (layout.scatter(data[k]) for k in ("u", "v", "a"))
+    except ValueError as exc:
+        raise CaseError(str(pointer), "mesh", str(exc)) from None
+    state = TransientState(float(meta["t_s"]), u, v, a, data["z"], data["zd"], data["zdd"])
     return Resumed(state, meta["stepper"], float(meta["voltage_V"]), int(meta["rows"]), int(meta["seq"]))

@@ -249,3 +249,92 @@ class PointContact:
     def elastic_energy_J(self, delta: float) -> float:
         return 0.5 * self.stiffness_N_per_m * max(delta, 0.0) ** 2
 
+
+
+class NodeContact:
+    """One FE node against a sphere of a rigid body, with a Hertz force law (node-to-body contact).
+
+    For the axisymmetric drill, a ball touching the tip face loads a disc of radius
+    a = sqrt(R delta) (~0.1 mm at 100 N), far below practical element sizes, so no facet quadrature
+    point sees it. The tip's axis node carries the contact instead, with the Hertz law of a sphere
+    on a flat (Johnson, *Contact Mechanics*, eq. 4.23): F = (4/3) E* sqrt(R) delta^(3/2), where
+    1/E* = (1 - nu_1^2)/E_1 + (1 - nu_2^2)/E_2; ``stiffness_N_per_m1_5`` is (4/3) E* sqrt(R). The
+    local Hertz indentation is what the mesh cannot resolve; the bulk compliance of the tip stays
+    with the FE model. An optional damper adds c d(delta)/dt (clipped: no pull).
+
+    Gap along the unit ``normal`` (from the body centre towards the FE node):
+    g = normal . (y - c) - R, y = x_node + u (the node stays on the line of centres; the
+    axisymmetric axis). ``local_dofs``/``dof_axes`` are the node's owned displacement DOFs with a
+    non-zero normal component (empty on the other ranks); the residual on them is -F n_k."""
+
+    def __init__(self, name: str, fe: LinearFE, point_m, body: str, radius_m: float, normal,
+                 stiffness_N_per_m1_5: float, damping_N_s_per_m: float = 0.0, fields: MidpointFields | None = None):
+        if not stiffness_N_per_m1_5 > 0:
+            raise ValueError(f"contact {name!r}: stiffness must be > 0")
+        if not radius_m > 0:
+            raise ValueError(f"contact {name!r}: radius must be > 0")
+        n = np.asarray(normal, dtype=float)
+        if n.size != fe.gdim or not np.isclose(np.linalg.norm(n), 1.0):
+            raise ValueError(f"contact {name!r}: normal must be a unit vector with {fe.gdim} components")
+        self.name, self.body, self.fe = name, body, fe
+        self.fields = fields if fields is not None else MidpointFields(fe)
+        self.normal = n
+        self.radius_m = float(radius_m)
+        self.stiffness = float(stiffness_N_per_m1_5)
+        self.damping = float(damping_N_s_per_m)
+        self.comm = fe.comm
+        coords = fe.dof_coordinates()
+        point = np.asarray(point_m, dtype=float)[: fe.gdim]
+        dofs, axes = [], []
+        for k in range(fe.gdim):
+            _, sub = fe.displacement_space.sub(k).collapse()
+            sub = np.asarray(sub)
+            sub = sub[sub < fe.n_owned]
+            dist = np.linalg.norm(coords[sub] - point, axis=1) if sub.size else np.zeros(0)
+            best = float(dist.min()) if sub.size else np.inf
+            owner_best = self.comm.allreduce((best, self.comm.rank), op=MPI.MINLOC)
+            if owner_best[1] == self.comm.rank and n[k] != 0.0:
+                dofs.append(int(sub[np.argmin(dist)]))
+                axes.append(k)
+            self.node_distance_m = owner_best[0]
+        keep = [i for i, d in enumerate(dofs) if d not in set(fe.bc_local_owned.tolist())]
+        self.local_dofs = np.array([dofs[i] for i in keep], dtype=np.int32)
+        self.dof_axes = np.array([axes[i] for i in keep], dtype=int)
+        self.owner = self.comm.allreduce(self.comm.rank if self.local_dofs.size else self.comm.size, op=MPI.MIN)
+        if self.owner == self.comm.size:
+            raise ValueError(f"contact {name!r}: the node at {point.tolist()} has no free displacement DOF")
+        x_node = coords[self.local_dofs[0]] if self.comm.rank == self.owner else None
+        self.x_node = self.comm.bcast(x_node, root=self.owner)
+        self.body_reference = np.zeros(fe.gdim)
+
+    def set_body_reference(self, position_m) -> None:
+        self.body_reference = np.asarray(position_m, dtype=float).copy()
+
+    def _node_values(self, arr: np.ndarray) -> np.ndarray:
+        """The node's displacement-like vector from a local DOF array (owner), broadcast (gdim)."""
+        out = np.zeros(self.fe.gdim)
+        if self.comm.rank == self.owner:
+            out[self.dof_axes] = arr[self.local_dofs]
+        return self.comm.bcast(out, root=self.owner) if self.comm.size > 1 else out
+
+    def penetration(self, u: np.ndarray, v: np.ndarray, body_position, body_velocity) -> tuple[float, float]:
+        """(delta [m], d delta/dt [m/s]) for local arrays u, v and the body state. The gap is formed
+        as normal.(x - p_ref) + normal.(u - dz) - R (small differences, no round-off of |x|)."""
+        n = self.normal
+        du = self._node_values(u) - (np.asarray(body_position) - self.body_reference)
+        gap = n @ (self.x_node - self.body_reference) + n @ du - self.radius_m
+        rate = n @ (self._node_values(v) - np.asarray(body_velocity))
+        return -float(gap), -float(rate)
+
+    def force(self, delta: float, rate: float) -> tuple[float, float, float]:
+        """(F [N], dF/d delta [N/m], dF/d rate [N s/m]) of the Hertz spring + damper, F >= 0."""
+        if delta <= 0.0:
+            return 0.0, 0.0, 0.0
+        root = np.sqrt(delta)
+        f = self.stiffness * delta * root + self.damping * rate
+        if f <= 0.0:
+            return 0.0, 0.0, 0.0
+        return float(f), 1.5 * self.stiffness * float(root), self.damping
+
+    def elastic_energy_J(self, delta: float) -> float:
+        return 0.4 * self.stiffness * max(delta, 0.0) ** 2.5

@@ -74,6 +74,12 @@ class ContactMonitor:
             approaching = (gap > 0) & (rate < 0)
             local_closure = float(np.min(gap[approaching] / -rate[approaching])) if approaching.any() else math.inf
             closure = min(closure, sysm.comm.allreduce(local_closure, op=MPI.MIN))
+        for c in sysm.node_contacts:
+            sl = rigid.dofs(c.body)
+            delta, rate = c.penetration(state.u, state.v, state.z[sl], state.zd[sl])
+            closed.append(delta > 0)
+            if delta <= 0 and rate > 0:
+                closure = min(closure, -delta / rate)
         for c in sysm.point_contacts:
             lo, up = rigid.dofs(c.lower), rigid.dofs(c.upper)
             delta, rate = c.penetration(state.z[lo], state.z[up], state.zd[lo], state.zd[up])

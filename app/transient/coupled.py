@@ -28,7 +28,7 @@ import scipy.linalg
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from app.transient.contact import PointContact, SurfaceContact
+from app.transient.contact import NodeContact, PointContact, SurfaceContact
 from app.transient.fe import EffectiveOperatorCache, LinearFE
 from app.transient.rigid import RigidSet
 from app.transient.state import TransientState
@@ -60,13 +60,18 @@ class CoupledSystem:
 
     def __init__(self, comm, scheme: TimeScheme, fe: LinearFE | None, rigid: RigidSet,
                  surface_contacts: list[SurfaceContact] = (), point_contacts: list[PointContact] = (),
-                 relative_force_tolerance: float = 1e-10):
+                 relative_force_tolerance: float = 1e-10, node_contacts: list[NodeContact] = ()):
         limit_blas_threads()    # MPI ranks are the parallelism (see app.transient.threads)
         self.comm, self.scheme, self.fe, self.rigid = comm, scheme, fe, rigid
         self.surface_contacts = list(surface_contacts)
         self.point_contacts = list(point_contacts)
+        self.node_contacts = list(node_contacts)
         self.relative_force_tolerance = relative_force_tolerance
         for c in self.surface_contacts:
+            if c.body not in rigid.index:
+                raise ValueError(f"contact {c.name!r} names unknown rigid body {c.body!r}")
+            c.set_body_reference(rigid.bodies[rigid.index[c.body]].position_m)
+        for c in self.node_contacts:
             if c.body not in rigid.index:
                 raise ValueError(f"contact {c.name!r} names unknown rigid body {c.body!r}")
             c.set_body_reference(rigid.bodies[rigid.index[c.body]].position_m)
@@ -95,18 +100,21 @@ class CoupledSystem:
         self._setup_snes()
         self.last_iterations = 0
         self.total_iterations = 0
+        self.linear_steps = 0           # steps solved by the contact-free fast path
         self._evaluated = None
 
     # ----------------------------------------------------------------- setup
     def _setup_contact_dofs(self) -> None:
-        if self.fe is None or not self.surface_contacts:
+        fe_contacts = self.surface_contacts + self.node_contacts
+        if self.fe is None or not fe_contacts:
             self.contact_local = np.zeros(0, dtype=np.int32)
             self.contact_global = np.zeros(0, dtype=PETSc.IntType)
             self.translation_S = np.zeros((0, self.rigid.gdim))
             self._S_offset = 0
+            self._node_S = []
             return
         axes = {}
-        for c in self.surface_contacts:
+        for c in fe_contacts:
             axes.update(zip(c.local_dofs.tolist(), c.dof_axes.tolist()))
         local = np.array(sorted(axes), dtype=np.int32)
         gathered = self.comm.allgather(local + self.fe.first_global)
@@ -117,12 +125,20 @@ class CoupledSystem:
         self.translation_S = np.zeros((self.contact_global.size, self.fe.gdim))
         self.translation_S[np.arange(all_axes.size), all_axes] = 1.0
         self._S_offset = sum(g.size for g in gathered[: self.comm.rank])
+        position = {int(g): i for i, g in enumerate(self.contact_global)}
+        self._node_S = []
+        for c in self.node_contacts:
+            mine = [(int(d + self.fe.first_global), int(k)) for d, k in zip(c.local_dofs, c.dof_axes)]
+            pairs = self.comm.bcast(mine, root=c.owner)
+            self._node_S.append((np.array([position[g] for g, _ in pairs], dtype=int),
+                                 np.array([k for _, k in pairs], dtype=int)))
 
     def _setup_snes(self) -> None:
         n_local = self.n_fe + self.m_local
         sizes = (n_local, PETSc.DECIDE)
         self.X = PETSc.Vec().createMPI(sizes, comm=self.comm)
         self.R = self.X.duplicate()
+        self._step_vector = self.X.duplicate()
         self.J = PETSc.Mat().createPython((sizes, sizes), context=_JacobianShell(self), comm=self.comm)
         self.J.setUp()
         opts = PETSc.Options()
@@ -146,14 +162,19 @@ class CoupledSystem:
     def solve_step(self, state: TransientState, dt: float) -> tuple[int, TransientState | None]:
         """Try one step from ``state``. Returns (SNES converged reason, new state or None)."""
         self._begin_step(state, dt)
-        self.snes.setTolerances(atol=self.relative_force_tolerance * self._force_scale + self._roundoff_force
-                                + 1e-300)
+        atol = self.relative_force_tolerance * self._force_scale + self._roundoff_force + 1e-300
         try:
-            self.snes.solve(None, self.X)
+            reason = self._contact_free_step(atol)
+            if reason is None:
+                self.snes.setTolerances(atol=atol)
+                self.snes.solve(None, self.X)
+                reason = self.snes.getConvergedReason()
+                self.last_iterations = self.snes.getIterationNumber()
+            else:
+                self.last_iterations = 1
+                self.linear_steps += 1
         except (PETSc.Error, FloatingPointError, np.linalg.LinAlgError, ValueError):
             return PETSc.SNES.ConvergedReason.DIVERGED_FUNCTION_DOMAIN, None
-        reason = self.snes.getConvergedReason()
-        self.last_iterations = self.snes.getIterationNumber()
         self.total_iterations += self.last_iterations
         if reason <= 0:
             return reason, None
@@ -162,6 +183,51 @@ class CoupledSystem:
         # contact monitor, energy account) overwrite them with end-of-step values afterwards.
         self.last_forces_N = self.contact_forces_N()
         return reason, self._new_state()
+
+    def _contact_free_step(self, atol: float):
+        """A step in which no FE contact (surface, node) carries force, neither at the predictor nor
+        at the result, needs no FE contact tangent: take one Newton step with zero FE contact blocks
+        (the rigid block keeps mass and Kelvin-Voigt links) without SNES and its Python callbacks,
+        check the residual with the same absolute/relative test as SNES, and return the converged
+        reason; None (X left at a valid guess) hands the step to SNES. Same arithmetic as SNES'
+        first iteration (basic line search), so the result does not depend on the path; if a
+        rigid-rigid link opens or closes within the step, the residual test fails and SNES
+        iterates."""
+        X, R = self.X, self.R
+        self._residual_callback(None, X, R)
+        if self._fe_contact_active:
+            return None
+        norm0 = R.norm()
+        if not np.isfinite(norm0):
+            raise FloatingPointError("non-finite residual")
+        if norm0 <= atol:
+            return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
+        self._set_contact_free_jacobian()
+        Y = self._step_vector
+        self.apply_inverse(R.array_r, Y.array)
+        X.axpy(-1.0, Y)
+        self._residual_callback(None, X, R)
+        norm1 = R.norm()
+        if self._fe_contact_active or not np.isfinite(norm1):
+            return None
+        rtol = SNES_DEFAULTS["snes_rtol"]
+        if norm1 <= atol:
+            return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
+        if norm1 <= rtol * norm0:
+            return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_RELATIVE
+        return None
+
+    def _set_contact_free_jacobian(self) -> None:
+        """The bordered-solve data of a Jacobian with every FE contact block zero, as
+        ``_jacobian_callback`` builds it when no FE contact is active."""
+        s_count, m = self.contact_global.size, self.m
+        Kzz = self._rigid_block(np.diag((1 - self.scheme.alpha_m) * self.c_acc * self.rigid.mass_diagonal))
+        self._Kss = np.zeros((s_count, s_count))
+        self._B = np.zeros((s_count, m))
+        self._L = np.zeros((m, s_count))
+        self._Kzz = Kzz
+        Z = np.block([[np.eye(s_count), np.zeros((s_count, m))], [np.zeros((m, s_count)), Kzz]])
+        self._Z_lu = scipy.linalg.lu_factor(Z, check_finite=True) if Z.size else None
 
     def _begin_step(self, state: TransientState, dt: float) -> None:
         s, fe, rigid = self.scheme, self.fe, self.rigid
@@ -253,10 +319,12 @@ class CoupledSystem:
             u1 = self._u1.x.array
             self.a1 = acceleration(u1, st.u, st.v, st.a, dt, s)
             self.v1 = velocity(self.a1, st.v, st.a, dt, s)
+            self.u_mid = midpoint(u1, st.u, s.alpha_f)
+            self.v_mid = midpoint(self.v1, st.v, s.alpha_f)
             for f in self.fields:
-                f.u_mid.x.array[:] = midpoint(u1, st.u, s.alpha_f)
-                f.v_mid.x.array[:] = midpoint(self.v1, st.v, s.alpha_f)
-        dz = self.comm.bcast(np.array(x[self.n_fe:]) if self.comm.rank == 0 else None, root=0)
+                f.u_mid.x.array[:] = self.u_mid
+                f.v_mid.x.array[:] = self.v_mid
+        dz = self._rigid_part(x)
         z1 = st.z + dz
         self.z1 = z1
         self.zdd1 = acceleration(dz, 0.0, st.zd, st.zdd, dt, s)
@@ -277,6 +345,7 @@ class CoupledSystem:
     # ------------------------------------------------------------- residual
     def _residual_callback(self, snes, X, R) -> None:
         self._evaluate(X)
+        forces = {}
         r_z = self.rigid.mass_diagonal * (1 - self.scheme.alpha_m) * self.zdd1
         r_z = r_z + self.rigid.mass_diagonal * self.scheme.alpha_m * self.state0.zdd - self.rigid_force_ext
         out = R.array
@@ -293,21 +362,70 @@ class CoupledSystem:
                 rc = c.assemble_residual()
                 r.axpy(1.0, rc)
                 sl = self.rigid.dofs(c.body)
-                r_z[sl] -= np.array([rc.dot(tk) for tk in self.translations])
+                forces[c.name] = np.array([rc.dot(tk) for tk in self.translations])
+                r_z[sl] -= forces[c.name]
+            for c in self.node_contacts:
+                f, _, _ = self._node_force(c)
+                if c.local_dofs.size:
+                    r.array_w[c.local_dofs] -= f * c.normal[c.dof_axes]
+                r_z[self.rigid.dofs(c.body)] += f * c.normal
+                forces[c.name] = -f * c.normal
             self.fe.zero_constrained(r)
             out[: self.n_fe] = r.array_r
         for c in self.point_contacts:
             f, _, _ = self._point_force(c)
             r_z[self.rigid.dofs(c.upper)] -= f * c.normal
             r_z[self.rigid.dofs(c.lower)] += f * c.normal
+            forces[c.name] = f * c.normal
+        # Forces at this iterate (reported without re-assembly if it is the converged one); a
+        # surface contact's rc.dot is collective, so "any force" is the same on every rank.
+        self._forces = forces
+        self._forces_at = self._evaluated
+        fe_names = {c.name for c in self.surface_contacts + self.node_contacts}
+        self._fe_contact_active = any(np.any(forces[n] != 0.0) for n in fe_names)
         r_z[~self.rigid.free_mask] = 0.0
         if self.m_local:
             out[self.n_fe:] = r_z
+
+    def _node_force(self, c: NodeContact):
+        sl = self.rigid.dofs(c.body)
+        delta, rate = c.penetration(self.u_mid, self.v_mid, self.z_mid[sl], self.zd_mid[sl])
+        return c.force(delta, rate)
 
     def _point_force(self, c: PointContact):
         lo, up = self.rigid.dofs(c.lower), self.rigid.dofs(c.upper)
         delta, rate = c.penetration(self.z_mid[lo], self.z_mid[up], self.zd_mid[lo], self.zd_mid[up])
         return c.force(delta, rate)
+
+    def _rigid_block(self, Kzz: np.ndarray) -> np.ndarray:
+        """Add the Kelvin-Voigt links between rigid bodies to the rigid block ``Kzz`` and put
+        identity rows/columns on the prescribed axes."""
+        one_minus_af = 1 - self.scheme.alpha_f
+        for c in self.point_contacts:
+            _, k_f, c_f = self._point_force(c)
+            stiffness = one_minus_af * (k_f + c_f * self.c_vel) * np.outer(c.normal, c.normal)
+            lo, up = self.rigid.dofs(c.lower), self.rigid.dofs(c.upper)
+            Kzz[up, up] += stiffness
+            Kzz[lo, lo] += stiffness
+            Kzz[up, lo] -= stiffness
+            Kzz[lo, up] -= stiffness
+        fixed = ~self.rigid.free_mask
+        Kzz[fixed, :] = 0.0
+        Kzz[:, fixed] = 0.0
+        Kzz[fixed, fixed] = 1.0
+        return Kzz
+
+    def _rigid_part(self, x: np.ndarray) -> np.ndarray:
+        """The rigid entries of a packed local array (held by rank 0), on every rank."""
+        if self.comm.size == 1:
+            return np.array(x[self.n_fe:])
+        return self.comm.bcast(np.array(x[self.n_fe:]) if self.comm.rank == 0 else None, root=0)
+
+    def _gather_S(self, local: np.ndarray) -> np.ndarray:
+        """Values at all contact DOFs (every rank's owned ones, in contact_global order)."""
+        if self.comm.size == 1:
+            return local[self.contact_local]
+        return np.concatenate(self.comm.allgather(local[self.contact_local]))
 
     # ------------------------------------------------------------- Jacobian
     def _gather_rows(self, local_rows: np.ndarray) -> np.ndarray:
@@ -335,18 +453,18 @@ class CoupledSystem:
             L[sl, :] -= T.T @ block
             Kzz[sl, sl] += T.T @ block @ T
         one_minus_af = 1 - self.scheme.alpha_f
-        for c in self.point_contacts:
-            _, k_f, c_f = self._point_force(c)
-            stiffness = one_minus_af * (k_f + c_f * self.c_vel) * np.outer(c.normal, c.normal)
-            lo, up = self.rigid.dofs(c.lower), self.rigid.dofs(c.upper)
-            Kzz[up, up] += stiffness
-            Kzz[lo, lo] += stiffness
-            Kzz[up, lo] -= stiffness
-            Kzz[lo, up] -= stiffness
+        for c, (S, axes) in zip(self.node_contacts, self._node_S):
+            _, k_f, c_f = self._node_force(c)
+            block = np.zeros((s_count, s_count))
+            n_S = c.normal[axes]
+            block[np.ix_(S, S)] = one_minus_af * (k_f + c_f * self.c_vel) * np.outer(n_S, n_S)
+            Kss += block
+            sl = self.rigid.dofs(c.body)
+            B[:, sl] -= block @ T
+            L[sl, :] -= T.T @ block
+            Kzz[sl, sl] += T.T @ block @ T
+        Kzz = self._rigid_block(Kzz)
         fixed = ~self.rigid.free_mask
-        Kzz[fixed, :] = 0.0
-        Kzz[:, fixed] = 0.0
-        Kzz[fixed, fixed] = 1.0
         L[fixed, :] = 0.0
         B[:, fixed] = 0.0
         G_S = (self._gather_rows(self.op.columns[self.contact_local]) if self.fe is not None
@@ -359,12 +477,12 @@ class CoupledSystem:
     def apply_inverse(self, x: np.ndarray, y: np.ndarray) -> None:
         """y = J^-1 x for local arrays of the packed vector."""
         n, s_count = self.n_fe, self.contact_global.size
-        r_z = self.comm.bcast(np.array(x[n:]) if self.comm.rank == 0 else None, root=0)
+        r_z = self._rigid_part(x)
         if self.fe is not None:
             self._tmp.array_w[:] = x[:n]
             self.op.solve(self._tmp, self._tmp2)
             w = self._tmp2.array_r.copy()
-            w_S = np.concatenate(self.comm.allgather(w[self.contact_local])) if s_count else np.zeros(0)
+            w_S = self._gather_S(w) if s_count else np.zeros(0)
         else:
             w, w_S = np.zeros(0), np.zeros(0)
         if self._Z_lu is not None:
@@ -381,13 +499,12 @@ class CoupledSystem:
     def apply_jacobian(self, x: np.ndarray, y: np.ndarray) -> None:
         """y = J x for local arrays of the packed vector."""
         n, s_count = self.n_fe, self.contact_global.size
-        x_z = self.comm.bcast(np.array(x[n:]) if self.comm.rank == 0 else None, root=0)
+        x_z = self._rigid_part(x)
         if self.fe is not None:
             self._tmp.array_w[:] = x[:n]
             self.op.constrained.mult(self._tmp, self._tmp2)
             y_u = self._tmp2.array_r.copy()
-            x_S = (np.concatenate(self.comm.allgather(x[:n][self.contact_local])) if s_count
-                   else np.zeros(0))
+            x_S = self._gather_S(x[:n]) if s_count else np.zeros(0)
             if s_count:
                 local = slice(self._S_offset, self._S_offset + self.contact_local.size)
                 y_u[self.contact_local] += (self._Kss @ x_S + self._B @ x_z)[local]
@@ -398,6 +515,11 @@ class CoupledSystem:
             y[n:] = self._L @ x_S + self._Kzz @ x_z
 
     # ------------------------------------------------------------ reporting
+    def show_state(self, state: TransientState) -> None:
+        """Make ``solution_vector`` show the displacement of ``state`` (e.g. the initial state)."""
+        if self.fe is not None:
+            self._u1.x.array[:] = state.u
+
     @property
     def solution_vector(self) -> PETSc.Vec:
         """u_{n+1} of the last solved step (FE space layout), for probes and field output."""
@@ -406,19 +528,29 @@ class CoupledSystem:
     def contact_forces_N(self) -> dict[str, np.ndarray]:
         """Force on the rigid body (surface contacts) or on the upper body (point contacts) at the
         mid-point of the last evaluated iterate, as gdim vectors [N]."""
+        if getattr(self, "_forces_at", None) is self._evaluated and self._evaluated is not None:
+            return dict(self._forces)
         out = {}
         for c in self.surface_contacts:
             rc = c.assemble_residual()
             out[c.name] = np.array([rc.dot(tk) for tk in self.translations])
+        for c in self.node_contacts:
+            f, _, _ = self._node_force(c)
+            out[c.name] = -f * c.normal
         for c in self.point_contacts:
             f, _, _ = self._point_force(c)
             out[c.name] = f * c.normal
         return out
 
+    @property
+    def contact_names(self) -> list[str]:
+        """Contact names in the order of ``ContactStatus.closed``."""
+        return [c.name for c in self.surface_contacts + self.node_contacts + self.point_contacts]
+
     def destroy(self) -> None:
         if self.cache is not None:
             self.cache.destroy()
-        for obj in (self.snes, self.J, self.X, self.R):
+        for obj in (self.snes, self.J, self.X, self.R, self._step_vector):
             obj.destroy()
 
 

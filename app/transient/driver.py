@@ -19,11 +19,12 @@ import ufl
 from dolfinx import fem
 
 from app.errors import CaseError
-from app.transient.checkpoint import POINTER, CheckpointWriter, case_digest, load_checkpoint
-from app.transient.contact import MidpointFields, ObstacleShape, PointContact, SurfaceContact
+from app.transient.checkpoint import POINTER, CellLayout, CheckpointWriter, case_digest, load_checkpoint
+from app.transient.contact import MidpointFields, NodeContact, ObstacleShape, PointContact, SurfaceContact
 from app.transient.control import StepController, StepSizes
 from app.transient.coupled import CoupledSystem
 from app.transient.fe import LinearFE
+from app.transient.fields import FieldSeriesExport
 from app.transient.history import Progress, TimeSeriesExport, plot_time_series
 from app.transient.rigid import RigidBody, RigidSet
 from app.transient.state import TransientState
@@ -111,7 +112,7 @@ class TransientModel:
                            bcs=[bc], loads=loads, update_dirichlet=self.drive)
         self.rigid = RigidSet([self._body(b, gravity) for b in cfg.bodies])
         fields = MidpointFields(self.fe)
-        surface, point = [], []
+        surface, point, node = [], [], []
         for i, c in enumerate(cfg.contacts):
             if c.kind == "surface":
                 tag = _facet_tag(model, c.facets, file, f"transient.contacts[{i}].facets")
@@ -124,12 +125,22 @@ class TransientModel:
                     raise CaseError(file, f"transient.contacts[{i}].normal", str(exc)) from None
                 surface.append(SurfaceContact(c.name, self.fe, model.mesh_data.facet_tags, tag, c.body, shape,
                                               c.stiffness, c.damping, weight=weight, fields=fields))
+            elif c.kind == "node":
+                key = f"transient.contacts[{i}]"
+                if c.node_point not in case.points:
+                    raise CaseError(file, f"{key}.node_point", f"unknown point {c.node_point!r} (see [points])")
+                try:
+                    node.append(NodeContact(c.name, self.fe, case.points[c.node_point].coordinates_m, c.body,
+                                            c.radius_m, c.normal, c.stiffness, c.damping, fields=fields))
+                except ValueError as exc:
+                    raise CaseError(file, f"{key}.normal", str(exc)) from None
             else:
                 if len(c.direction) != gdim:
                     raise CaseError(file, f"transient.contacts[{i}].direction", f"needs {gdim} components")
                 point.append(PointContact(c.name, c.lower, c.upper, c.direction, c.touch_distance_m,
                                           c.stiffness, c.damping))
-        self.system = CoupledSystem(comm, cfg.scheme.scheme(), self.fe, self.rigid, surface, point)
+        self.system = CoupledSystem(comm, cfg.scheme.scheme(), self.fe, self.rigid, surface, point,
+                                    node_contacts=node)
 
     def _body(self, b, gravity) -> RigidBody:
         n = len(b.position_m)
@@ -213,9 +224,10 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     out_dir = Path(out_dir)
     tm = TransientModel(case, comm, log)
     digest = case_digest(case)
+    layout = CellLayout(tm.model.W)
     resumed = None
     if resume:
-        resumed = load_checkpoint(out_dir, comm, case, digest, fem.Function(tm.model.W).x.array.size)
+        resumed = load_checkpoint(out_dir, layout, case, digest)
         state, voltage = resumed.state, resumed.voltage_V
         tm.resume_drive(voltage)
         log(f"transient: resuming at t = {state.t * 1e3:.6g} ms from {out_dir / 'checkpoint'} "
@@ -229,10 +241,20 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     series = TimeSeriesExport(h5_path, _units(tm, case), comm,
                               resume_rows=resumed.rows if resumed is not None else None)
     system, model = tm.system, tm.model
-    contact_names = [c.name for c in cfg.contacts]
+    contact_names = system.contact_names
     stats_rows: list = _rows_from_series(h5_path, contact_names, resumed.rows, comm) if resumed else []
 
+    fields = None
+    if case.output.fields:
+        fields = FieldSeriesExport(out_dir / "transient_fields.xdmf", model, lambda: system.solution_vector,
+                                   cfg.output_interval_s, resume_from_s=t_start if resumed else None)
+        if not resumed:
+            system.show_state(state)
+            fields.write(state.t)
+
     def on_step(rec):
+        if fields is not None:
+            fields.write(rec["time_s"])
         row = {"time_s": rec["time_s"], "dt_s": rec["dt_s"], "drive_voltage_V": tm.drive.voltage_V(rec["time_s"])}
         for name, value in model.point_values(system.solution_vector).items():
             row[f"{name}_displacement_m"] = value
@@ -253,7 +275,7 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     stepper = TimeStepper(system, StepController(sizes), progress=progress)
     if resumed is not None:
         stepper.restore(resumed.stepper)
-    checkpoint = CheckpointWriter(out_dir, comm, cfg.checkpoint_interval_steps, voltage, digest, flush=series.flush,
+    checkpoint = CheckpointWriter(out_dir, layout, cfg.checkpoint_interval_steps, voltage, digest, flush=series.flush,
                                   seq=resumed.seq if resumed is not None else 0)
     start = time.perf_counter()
     try:
@@ -262,6 +284,8 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     finally:
         progress.close()
         series.close()
+        if fields is not None:
+            fields.close()
     wall = time.perf_counter() - start
     results = dict(stepper.stats.as_dict())
     simulated = cfg.end_time_s - t_start
@@ -270,7 +294,9 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                     "drive_voltage_V": voltage, "drive_frequency_Hz": cfg.drive.frequency_Hz,
                     "initial_state": cfg.initial_state, "time_series": h5_path.name,
                     "checkpoint": f"{checkpoint.dir.name}/{POINTER}", "checkpoints_written": checkpoint.written,
-                    "contacts": _contact_summary(contact_names, stats_rows)})
+                    "contacts": _contact_summary(contact_names, stats_rows),
+                    "fields": (fields.path.name if fields is not None else None),
+                    "field_outputs": (fields.written if fields is not None else 0)})
     log(f"transient: {results['steps']} steps, {results['newton_iterations']} Newton iterations, "
         f"{results['cutbacks']} cut-backs, {results['factorisations']} factorisations, {wall:.1f} s wall")
     if case.output.plots and comm.rank == 0:

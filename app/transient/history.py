@@ -98,8 +98,8 @@ class Progress:
                             "simulated ms [{elapsed}<{remaining}]")
 
     def update(self, t_s: float) -> None:
-        if self.bar is not None:
-            self.bar.update((t_s - self.t_last) * 1e3)
+        if self.bar is not None:     # never past the total (tqdm warns on round-off overshoot)
+            self.bar.update(max(min((t_s - self.t_last) * 1e3, self.bar.total - self.bar.n), 0.0))
         self.t_last = t_s
 
     def close(self) -> None:

@@ -230,5 +230,75 @@ def vibrating_block_with_ball(comm, scheme: TimeScheme, amplitude_m: float = 5e-
     return system, TransientState(0.0, np.zeros(n), np.zeros(n), np.zeros(n), z, zd, zdd)
 
 
-__all__ = ["RodImpact", "build_rod_impact", "rod_step_sizes", "BallDrop", "ball_drop_closed_form",
+@dataclass(frozen=True)
+class FrictionBlock:
+    """An elastic steel block (plane strain, per metre of thickness) pressed on a rigid plane by a
+    uniform body load (total normal force N) and pulled by a tangential body load T(t) ramped up
+    after the normal contact has settled. Coulomb: it sticks while T < mu_s N and slides with
+    friction force mu_d N (or the TAUMAX cap x contact width) above."""
+
+    width_m: float = 10e-3
+    height_m: float = 5e-3
+    normal_acceleration_m_per_s2: float = 1000.0    # N = m * this
+    tangential_force_N: float = 0.0                 # T (per metre of thickness)
+    ramp_start_s: float = 1e-4
+    ramp_s: float = 2e-4
+    penalty_Pa_per_m: float = 4e12
+    normal_damping_Pa_s_per_m: float = 2.5e7        # ~ critical for the block bouncing on the penalty
+    mu_dynamic: float = 0.3
+    static_ratio: float = 1.3                       # FACT
+    decay_s_per_m: float = 100.0                    # DC
+    shear_cap_Pa: float = 1e20                      # TAUMAX
+    regularisation_speed_m_per_s: float = 1e-4
+
+    @property
+    def mass_kg(self) -> float:
+        return STEEL_DENSITY_kg_per_m3 * self.width_m * self.height_m
+
+    @property
+    def normal_force_N(self) -> float:
+        return self.mass_kg * self.normal_acceleration_m_per_s2
+
+    def tangential_scale(self, t: float) -> float:
+        return min(max((t - self.ramp_start_s) / self.ramp_s, 0.0), 1.0)
+
+
+def build_friction_block(comm, block: FrictionBlock, scheme: TimeScheme, elements: int = 2):
+    """-> (CoupledSystem, initial state) of :class:`FrictionBlock`: the block rests on the plane y = 0
+    (the fixed body "ground"), contact "block_ground" on its bottom facets with friction."""
+    from app.transient.contact import Friction
+
+    msh = mesh.create_rectangle(comm, [np.array([0.0, 0.0]), np.array([block.width_m, block.height_m])],
+                                [2 * elements, elements], cell_type=mesh.CellType.quadrilateral,
+                                ghost_mode=mesh.GhostMode.shared_facet)
+    V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
+    u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
+    dx = ufl.dx(domain=msh)
+    c = fem.Constant(msh, isotropic_stiffness(STEEL_YOUNG_Pa, 0.3))
+    rho = fem.Constant(msh, STEEL_DENSITY_kg_per_m3)
+    m_form = mass(u, w, rho, dx)
+    loads = []
+    for k, scale in ((1, lambda t: -block.normal_acceleration_m_per_s2),
+                     (0, lambda t: block.tangential_force_N / block.mass_kg * block.tangential_scale(t))):
+        t_k = fem.Function(V)
+        t_k.interpolate(lambda x, k=k: np.vstack([np.full(x.shape[1], float(i == k)) for i in range(2)]))
+        loads.append((ufl.action(m_form, t_k), scale))
+    fe = LinearFE(V, V, m_form, elastic_stiffness(u, w, c, "plane_strain", dx), loads=loads)
+    fdim = msh.topology.dim - 1
+    bottom = mesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[1], 0.0))
+    tags = mesh.meshtags(msh, fdim, np.sort(bottom), np.full(bottom.size, 1, dtype=np.int32))
+    rigid = RigidSet([fixed_body("ground", [0.0, 0.0])])
+    friction = Friction(block.mu_dynamic, block.static_ratio, block.decay_s_per_m, block.shear_cap_Pa,
+                        block.regularisation_speed_m_per_s)
+    contact = SurfaceContact("block_ground", fe, tags, 1, "ground", ObstacleShape("plane", normal=(0.0, 1.0)),
+                             block.penalty_Pa_per_m, block.normal_damping_Pa_s_per_m, friction=friction,
+                             fields=MidpointFields(fe))
+    system = CoupledSystem(comm, scheme, fe, rigid, [contact])
+    z, zd, zdd = rigid.initial_state()
+    n = fem.Function(V).x.array.size
+    return system, TransientState(0.0, np.zeros(n), np.zeros(n), np.zeros(n), z, zd, zdd)
+
+
+__all__ = ["FrictionBlock", "build_friction_block",
+           "RodImpact", "build_rod_impact", "rod_step_sizes", "BallDrop", "ball_drop_closed_form",
            "build_ball_drop", "ball_step_sizes", "run_scene", "vibrating_block_with_ball", "harmonic_motion"]

@@ -77,15 +77,19 @@ class BodySection:
 @dataclass(frozen=True)
 class ContactSection:
     name: str = param(doc="contact name (time series key)")
-    kind: Literal["surface", "point"] = param(doc="FE facets vs rigid body, or rigid vs rigid (Kelvin-Voigt)")
-    stiffness: float = param(gt=0, doc="penalty: Pa/m (surface, FKN as absolute value) or N/m (point)")
-    damping: float = param(0.0, ge=0, doc="normal damping: Pa s/m (surface) or N s/m (point)")
+    kind: Literal["surface", "point", "node"] = param(
+        doc="FE facets vs rigid body, rigid vs rigid (Kelvin-Voigt), or one FE node vs a rigid sphere (Hertz)")
+    stiffness: float = param(gt=0, doc="penalty: Pa/m (surface, FKN as absolute value), N/m (point) or "
+                                       "N/m^1.5 (node: Hertz (4/3) E* sqrt(R))")
+    damping: float = param(0.0, ge=0, doc="normal damping: Pa s/m (surface) or N s/m (point, node)")
     # surface contacts
     facets: TagRef | None = param(None, doc="facet group of the FE surface (surface)")
-    body: str | None = param(None, doc="rigid body the surface touches (surface)")
+    body: str | None = param(None, doc="rigid body the surface or node touches (surface, node)")
+    node_point: str | None = param(None, doc="named [points] entry; its nearest FE node is the contact node (node)")
     shape: Literal["plane", "sphere"] = param("plane", doc="obstacle shape of the body (surface)")
-    normal: list[float] | None = param(None, doc="plane: outward unit normal, towards the FE body")
-    radius_m: float | None = param(None, gt=0, unit="m", doc="sphere radius")
+    normal: list[float] | None = param(
+        None, doc="plane: outward unit normal, towards the FE body; node: unit vector from sphere centre to node")
+    radius_m: float | None = param(None, gt=0, unit="m", doc="sphere radius (surface sphere, node)")
     # point contacts
     lower: str | None = param(None, doc="lower body (point)")
     upper: str | None = param(None, doc="upper body (point)")
@@ -101,6 +105,10 @@ class ContactSection:
                 raise CaseError(file, f"{prefix}.normal", "a plane obstacle needs a normal")
             if self.shape == "sphere" and self.radius_m is None:
                 raise CaseError(file, f"{prefix}.radius_m", "a sphere obstacle needs a radius")
+        elif self.kind == "node":
+            for key in ("body", "node_point", "radius_m", "normal"):
+                if getattr(self, key) is None:
+                    raise CaseError(file, f"{prefix}.{key}", "required for a node contact")
         else:
             for key in ("lower", "upper", "direction"):
                 if getattr(self, key) is None:
@@ -108,7 +116,7 @@ class ContactSection:
 
     def bodies(self) -> list[tuple[str, str]]:
         """(key, body name) pairs this contact refers to."""
-        keys = ("body",) if self.kind == "surface" else ("lower", "upper")
+        keys = ("body",) if self.kind in ("surface", "node") else ("lower", "upper")
         return [(k, getattr(self, k)) for k in keys]
 
 
@@ -124,7 +132,7 @@ class TransientSection:
     end_time_s: float = param(gt=0, unit="s", doc="simulated time")
     output_interval_s: float = param(gt=0, unit="s", doc="time between field outputs and progress updates")
     checkpoint_interval_steps: int = param(
-        1000, ge=0, doc="write a checkpoint (for `piezodyn run --resume DIR`) every N steps and at the end; 0: end only")
+        1000, ge=0, doc="checkpoint (for `piezodyn run --resume DIR`) every N steps and at the end; 0: end only")
     scheme: SchemeSection = param(default_factory=SchemeSection, doc="see [transient.scheme]")
     steps: StepSection = param(default_factory=StepSection, doc="see [transient.steps]")
     drive: DriveSection = param(default_factory=DriveSection, doc="see [transient.drive]")

@@ -24,6 +24,7 @@ class RunStatistics:
     cutbacks: int = 0
     event_refinements: int = 0
     newton_iterations: int = 0
+    linear_steps: int = 0
     factorisations: int = 0
     wall_time_s: float = 0.0
     dt_min_used_s: float = float("inf")
@@ -34,6 +35,7 @@ class RunStatistics:
         return {
             "steps": self.steps, "attempts": self.attempts, "cutbacks": self.cutbacks,
             "event_refinements": self.event_refinements, "newton_iterations": self.newton_iterations,
+            "linear_steps": self.linear_steps,
             "factorisations": self.factorisations, "wall_time_s": self.wall_time_s,
             "dt_min_used_s": self.dt_min_used_s, "dt_max_used_s": self.dt_max_used_s,
             "failure_reasons": dict(self.failure_reasons),
@@ -74,6 +76,10 @@ class EnergyAccount:
                 sl = sysm.rigid.dofs(c.body)
                 c.set_body_state(state.z[sl], state.zd[sl])
                 out["contact_J"] += c.elastic_energy_J()
+            for c in sysm.node_contacts:
+                sl = sysm.rigid.dofs(c.body)
+                delta, _ = c.penetration(state.u, state.v, state.z[sl], state.zd[sl])
+                out["contact_J"] += c.elastic_energy_J(delta)
         out["kinetic_rigid_J"] = 0.5 * float(np.sum(sysm.rigid.mass_diagonal * state.zd**2))
         for c in sysm.point_contacts:
             lo, up = sysm.rigid.dofs(c.lower), sysm.rigid.dofs(c.upper)
@@ -130,6 +136,7 @@ class TimeStepper:
         ctl, stats = self.controller, self.stats
         return {"changed": bool(self.changed), "controller": ctl.snapshot(),
                 "newton_iterations": self.system.total_iterations,
+                "linear_steps": self.system.linear_steps,
                 "factorisations": self._factorisations(),
                 "statistics": {k: v for k, v in stats.as_dict().items() if k not in _DERIVED},
                 "failure_reasons": {str(k): v for k, v in stats.failure_reasons.items()}}
@@ -139,6 +146,7 @@ class TimeStepper:
         self.changed = bool(snap["changed"])
         ctl.restore(snap["controller"])
         self.system.total_iterations = int(snap["newton_iterations"])
+        self.system.linear_steps = int(snap.get("linear_steps", 0))
         self._factorisations_before = int(snap["factorisations"])
         for key, value in snap["statistics"].items():
             setattr(stats, key, value)
@@ -209,6 +217,7 @@ class TimeStepper:
         stats.cutbacks = ctl.cutbacks
         stats.event_refinements = ctl.event_refinements
         stats.newton_iterations = self.system.total_iterations
+        stats.linear_steps = self.system.linear_steps
         stats.factorisations = self._factorisations()
         stats.wall_time_s += time.perf_counter() - start
         return self.snapshot()
