@@ -81,6 +81,9 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
         f_r, f_a = modal.working_mode.frequency_Hz, modal.antiresonance_Hz()
         log(f"modal: working mode f_r = {f_r:.2f} Hz" + (f", f_a = {f_a:.2f} Hz, k_eff = "
                                                           f"{results['modal']['working_k_eff']:.4f}" if f_a else ""))
+        if f_a is None and modal.open:
+            log("modal: warning: the working mode has no open-circuit partner in the window; "
+                "raise modal.n_modes or move modal.target_frequency_Hz between f_r and f_a")
         if case.output.fields:
             with timer.phase("export"):
                 write_modes(model, modal, out, summary)
