@@ -7,9 +7,12 @@
     and one back-substitution) for every step (a) took; also the bare back-substitution alone.
 Errors of (a) and (b): relative L2 of the contact force history vs a 4x finer-dt run of (a).
 
-    /usr/bin/python3 bench/bench_transient.py [--elements 300]
+    /work/main/.venv/bin/python bench/bench_transient.py [--elements 300] [--drill-ms 0.1]
 
 300 P2 elements along the rod = 1803 nodes, the drill paper's mesh scale (~1800 nodes).
+``--drill-ms T`` also runs (a), (b) and (c) on the first T ms of the drill scene
+(cases/usdc-fe.toml, default mesh, harmonic start, 0 N); error there = relative L2 of the ball's
+displacement history against (a) at 4x finer step sizes.
 """
 
 from __future__ import annotations
@@ -69,10 +72,82 @@ def run(rod, sizes, system_class=CoupledSystem):
     return time.perf_counter() - start, records, stepper.stats
 
 
+def run_drill(end_s, system_class=CoupledSystem, refine=1.0):
+    """One run of the drill scene to ``end_s``: (wall s of the time loop, ball displacement
+    history (t, z - z0), statistics, the system)."""
+    import app.transient.driver as driver
+    from app.case.schema import load_case
+    from app.transient.control import StepController, StepSizes
+    from app.transient.stepper import TimeStepper
+
+    case = load_case(Path(__file__).resolve().parents[1] / "cases" / "usdc-fe.toml",
+                     [f"transient.end_time_s={end_s!r}"])
+    original = driver.CoupledSystem
+    driver.CoupledSystem = system_class
+    try:
+        tm = driver.TransientModel(case, MPI.COMM_WORLD, lambda *a: None)
+    finally:
+        driver.CoupledSystem = original
+    state, _ = tm.initial_state()
+    s = case.transient.steps
+    sizes = StepSizes(open_s=s.open_s / refine, closed_s=s.closed_s / refine, change_s=s.change_s / refine,
+                      min_s=s.min_s)
+    stepper = TimeStepper(tm.system, StepController(sizes))
+    ball = tm.rigid.dofs("ball")
+    z0 = state.z[ball][-1]
+    hist = []
+    start = time.perf_counter()
+    stepper.run(state, end_s, on_step=lambda rec: hist.append((rec["time_s"], rec["position_m"][ball][-1] - z0)))
+    wall = time.perf_counter() - start
+    return wall, np.array(hist), stepper.stats, tm.system
+
+
+def drill(end_ms):
+    end_s = end_ms * 1e-3
+    _, ref, _, _ = run_drill(end_s, refine=4.0)
+    rows = []
+    for label, cls in (("(a) factor once per dt + bordered contact", CoupledSystem),
+                       ("(b) refactorise every Newton iteration", RefactorEveryIteration)):
+        wall, hist, stats, system = run_drill(end_s, cls)
+        err = np.sqrt(np.trapz((np.interp(ref[:, 0], hist[:, 0], hist[:, 1]) - ref[:, 1]) ** 2, ref[:, 0])
+                      / np.trapz(ref[:, 1] ** 2, ref[:, 0]))
+        rows.append((label, wall / end_ms, stats.steps, stats.newton_iterations, stats.factorisations, err))
+        if cls is CoupledSystem:
+            steps, op_dt, floor_system = stats.steps, stats.dt_min_used_s, system
+        else:
+            system.destroy()
+    fe = floor_system.fe
+    op = floor_system.cache.get(op_dt)
+    rhs, out, tmp = fe.new_vector(), fe.new_vector(), fe.new_vector()
+    rhs.set(1.0)
+    start = time.perf_counter()
+    for _ in range(steps):
+        fe.M.mult(rhs, tmp)
+        fe.K.mult(rhs, out)
+        op.solve(tmp, out)
+    floor = time.perf_counter() - start
+    rows.append(("(c) floor: linear Newmark step (2 mat-vecs + 1 solve) per step of (a)", floor / end_ms,
+                 steps, 0, 1, float("nan")))
+    if MPI.COMM_WORLD.rank == 0:
+        print(f"drill scene (cases/usdc-fe.toml), {fe.n_owned} owned DOFs on rank 0, {end_ms} ms simulated, "
+              f"MPI size {MPI.COMM_WORLD.size}, K_eff LU: {getattr(op, 'solver_type', 'mumps')}")
+        print("| variant | wall s per simulated ms | steps | Newton its | factorisations | rel. L2 ball error |")
+        print("|---|---|---|---|---|---|")
+        for label, per_ms, n, its, facts, err in rows:
+            print(f"| {label} | {per_ms:.3g} | {n} | {its} | {facts} | {err:.2e} |")
+    floor_system.destroy()
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--elements", type=int, default=300)
+    parser.add_argument("--drill-ms", type=float, default=0.0, help="also run the drill scene for this long")
+    parser.add_argument("--skip-rod", action="store_true")
     args = parser.parse_args()
+    if args.drill_ms > 0:
+        drill(args.drill_ms)
+    if args.skip_rod:
+        return
     rod = RodImpact(elements_along=args.elements, degree=2)
     sizes = rod_step_sizes(rod)
     fine = rod_step_sizes(rod, steps_per_element=4.0)

@@ -162,3 +162,24 @@ def test_field_series_written_at_the_output_interval(one_go):
         assert shapes == {(vertices, 3)}                 # P1: one value per vertex
         amplitude = max(np.abs(f["Function/displacement"][k][:, 1]).max() for k in f["Function/displacement"])
     assert 1e-6 < amplitude < 30e-6                     # the tip vibrates at ~15 um
+
+
+@pytest.mark.mpi
+def test_point_sampler_equals_point_values():
+    """The time series' precomputed probe weights give ``model.point_values`` of any field."""
+    from app.case.schema import load_case
+    from app.transient.driver import PointSampler, TransientModel
+
+    case = load_case(CASES / CASE, [*TINY, "transient.end_time_s=2e-4"])
+    tm = TransientModel(case, MPI.COMM_WORLD, lambda *a: None)
+    u = tm.system._u1
+    rng = np.random.default_rng(7)
+    u.x.array[:] = rng.standard_normal(u.x.array.size)
+    u.x.scatter_forward()
+    sampled = PointSampler(tm.model).values(tm.system.solution_array)
+    expected = tm.model.point_values(tm.system.solution_vector)
+    assert sampled.keys() == expected.keys() and sampled
+    for name, value in expected.items():
+        assert sampled[name] == pytest.approx(value, rel=1e-12, abs=1e-14)
+        assert abs(value) > 1e-3           # a random field: the probe sees non-trivial values
+    tm.system.destroy()

@@ -106,3 +106,36 @@ def test_rod_impact_parallel_equals_serial():
     f_p = np.array([r["contact_force_N"]["rod_wall"][0] for r in parallel])
     f_s = np.array([r["contact_force_N"]["rod_wall"][0] for r in serial])
     np.testing.assert_allclose(f_p, f_s, rtol=1e-7, atol=1e-7 * rod.contact_force_N)
+
+
+def test_effective_operator_lu_matches_mumps():
+    """The serial K_eff factorisation (PETSc's LU, checked by its backward error) solves like MUMPS;
+    a failed check (threshold below any achievable error) falls back to MUMPS."""
+    from app.transient.fe import EffectiveOperator
+
+    rod = RodImpact(elements_along=20)
+    system, _ = build_rod_impact(MPI.COMM_WORLD, rod, TimeScheme.generalized_alpha(0.5))
+    op = system.cache.get(rod_step_sizes(rod).closed_s)
+    assert op.solver_type == ("petsc" if MPI.COMM_WORLD.size == 1 else "mumps")
+    assert op._backward_error() < 1e-13
+    mumps = EffectiveOperator._factorise(MPI.COMM_WORLD, op.constrained, "mumps")
+    rhs = op.constrained.createVecRight()
+    lo, hi = rhs.getOwnershipRange()
+    rhs.array_w[:] = np.cos(np.arange(lo, hi) * 0.37)
+    x, y = rhs.duplicate(), rhs.duplicate()
+    op.solve(rhs, x)
+    mumps.solve(rhs, y)
+    y.axpy(-1.0, x)
+    assert y.norm() < 1e-10 * x.norm()
+    import app.transient.fe as fe_module
+
+    original = fe_module.EffectiveOperator._backward_error
+    fe_module.EffectiveOperator._backward_error = lambda self: 1.0
+    try:
+        fallback = EffectiveOperator(system.fe, op.dt, system.scheme, system.contact_global)
+    finally:
+        fe_module.EffectiveOperator._backward_error = original
+    assert fallback.solver_type == "mumps"
+    fallback.destroy()
+    mumps.destroy()
+    system.destroy()

@@ -525,6 +525,11 @@ class CoupledSystem:
         """u_{n+1} of the last solved step (FE space layout), for probes and field output."""
         return self._u1.vector
 
+    @property
+    def solution_array(self) -> np.ndarray:
+        """u_{n+1} of the last solved step as the local array (owned + ghosts, scattered)."""
+        return self._u1.x.array
+
     def contact_forces_N(self) -> dict[str, np.ndarray]:
         """Force on the rigid body (surface contacts) or on the upper body (point contacts) at the
         mid-point of the last evaluated iterate, as gdim vectors [N]."""
