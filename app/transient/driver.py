@@ -185,11 +185,12 @@ class TransientModel:
     def _harmonic_per_volt(self):
         """Local (with ghosts) arrays of the steady state per volt, and the amplitude per volt at
         the drive point."""
-        from app.fe.operators import assemble_operators
+        from app.fe.operators import Operators
         from app.harmonic import HarmonicSolver
 
         model = self.model
-        ops = assemble_operators(model, self.damping_frequency_Hz)
+        # the transient's own K, M, C (same forms, assembled without BCs): no second assembly
+        ops = Operators(self.fe.K, self.fe.M, self.fe.C)
         solver = HarmonicSolver(model, ops, 1.0, prefix="transient_harmonic_")
         point = solver.solve(self.cfg.drive.frequency_Hz)
         out = []
@@ -200,7 +201,6 @@ class TransientModel:
             out.append(f.x.array.copy())
         amplitude = abs(point.displacement_m[self.drive_point]) if self.drive_point else float("nan")
         solver.destroy()
-        ops.destroy()
         return out[0], out[1], amplitude
 
 
