@@ -11,6 +11,7 @@ from conftest import CASES, run_cli
 LUMPED_TINY = ["lumped.duration_s=0.005", "lumped.output.plots=false"]
 TINY = {
     "usdc-lumped.toml": LUMPED_TINY,
+    "usdc-lumped-fe-scene.toml": LUMPED_TINY,
     "usdc-lumped-0N.toml": LUMPED_TINY,
     "usdc-lumped-3N.toml": LUMPED_TINY,
     "usdc-lumped-6N.toml": LUMPED_TINY,

@@ -1,24 +1,35 @@
-"""One implicit step of FE + rigid bodies + penalty contact, solved by PETSc SNES with a bordered
-linear solve.
+"""One implicit step of FE + rigid bodies + penalty contact: the FE part is condensed onto the
+contact DOFs, and PETSc SNES solves the small nonlinear system that remains.
 
-Unknowns of a step: the FE displacement u_{n+1} (owned DOFs) and the rigid positions z_{n+1}
-(held by rank 0), packed in one PETSc Vec. The Newton matrix is
+The FE equations of a step are linear: with the correction du = u_{n+1} - u_pred to a predictor,
+their residual is r0 + A du + E rc_S, where A = K_eff is constant for a given dt (factorised once
+by :class:`EffectiveOperator`), E holds the unit columns of the s contact DOFs and rc_S is the
+contact residual on them. Every solution is therefore
 
-    [ A + E Kss E^T    E B ] [du]   [r_u]
-    [ L E^T            Kzz ] [dz] = [r_z]
+    du = w - G g,    w = -A^-1 r0 (one back-substitution per step),  G = A^-1 E (once per dt),
 
-with A = K_eff (constant for a given dt, factorised once by :class:`EffectiveOperator`), E the
-unit columns of the s contact DOFs, Kss the s x s contact tangent, B/L the contact coupling to
-the rigid DOFs and Kzz the rigid block (mass, Kelvin-Voigt links, contact). With w = A^-1 r_u and
-G = A^-1 E (precomputed per dt), du = w - G y where the (s + m) dense system
+for the contact forces g the FE side must carry. Newton then runs on the s + m unknowns (g, dz),
+dz the rigid-body increments, with the residual
 
-    [ I + Kss G_S   -B  ] [y ]   [ Kss w_S     ]
-    [ -L G_S        Kzz ] [dz] = [ r_z - L w_S ]
+    F_g = rc_S(w_S - G_SS g, dz) - g,    F_z = r_z(w_S - G_SS g, dz)    (forces, N)
 
-gives the contact correction y and dz (G_S = E^T G). The exact Newton step thus costs one
-back-substitution with the constant factorisation plus an n x s product: contact never triggers
-a refactorisation. SNES (prefix ``transient_``) drives the iteration with a line search through a
-shell preconditioner applying this inverse and a shell matrix applying J.
+and the dense Jacobian [[-(I + Kss G_SS), B], [-L G_SS, Kzz]] (Kss, B: contact tangent w.r.t. the
+contact DOFs and the rigid DOFs; L, Kzz: rigid rows). The full FE residual at du = w - G g is
+E (rc_S - g), so |(F_g, F_z)| is the norm of the full residual and the tolerances mean what they
+meant for the full system. A contact iteration costs an n x s product, no back-substitution, no
+mat-vec and no refactorisation. SNES (prefix ``transient_``) drives the iteration (line search,
+converged reason) through a shell Jacobian and a shell preconditioner holding the dense LU.
+:mod:`app.transient.fullspace` keeps the same step as a Newton iteration on all n + m unknowns,
+the reference the tests and ``bench/`` compare against.
+
+The right-hand side avoids the u_n / (beta dt^2)-sized terms of the textbook form: with the
+predictor u_pred = u_n + dt v_n + dt^2/2 a_n (Dirichlet values of t_{n+1} set, their change
+delta), a_pred = a_n + delta / (beta dt^2) and v_pred = v_n + dt a_n + gamma delta / (beta dt), so
+
+    r0 = M [(1 - a_m) a_pred + a_m a_n] + C [(1 - a_f) v_pred + a_f v_n]
+         + K [(1 - a_f) u_pred + a_f u_n] - F(t_{n+1-a_f})
+
+is three mat-vecs of physical-size vectors, free of cancellation.
 """
 
 from __future__ import annotations
@@ -45,7 +56,7 @@ from forms.newmark import (
 SNES_PREFIX = "transient_"
 SNES_DEFAULTS = {
     "snes_type": "newtonls",
-    # Semi-smooth Newton: the penalty residual is piecewise linear with an exact tangent, so full
+    # Semi-smooth Newton: the penalty residual is piecewise smooth with an exact tangent, so full
     # steps converge in a few iterations once the active set settles; a backtracking search on
     # this non-smooth residual only costs Jacobian products. Failure -> cut-back (control.py).
     "snes_linesearch_type": "basic",
@@ -56,7 +67,7 @@ SNES_DEFAULTS = {
 
 
 class CoupledSystem:
-    """Residual, Jacobian and bordered solve of one generalized-alpha step."""
+    """Residual, Jacobian and condensed solve of one generalized-alpha step."""
 
     def __init__(self, comm, scheme: TimeScheme, fe: LinearFE | None, rigid: RigidSet,
                  surface_contacts: list[SurfaceContact] = (), point_contacts: list[PointContact] = (),
@@ -67,11 +78,7 @@ class CoupledSystem:
         self.point_contacts = list(point_contacts)
         self.node_contacts = list(node_contacts)
         self.relative_force_tolerance = relative_force_tolerance
-        for c in self.surface_contacts:
-            if c.body not in rigid.index:
-                raise ValueError(f"contact {c.name!r} names unknown rigid body {c.body!r}")
-            c.set_body_reference(rigid.bodies[rigid.index[c.body]].position_m)
-        for c in self.node_contacts:
+        for c in self.surface_contacts + self.node_contacts:
             if c.body not in rigid.index:
                 raise ValueError(f"contact {c.name!r} names unknown rigid body {c.body!r}")
             c.set_body_reference(rigid.bodies[rigid.index[c.body]].position_m)
@@ -90,17 +97,17 @@ class CoupledSystem:
 
             self._u1 = fem.Function(fe.space)
             self.translations = fe.translation_vectors()
-            self._b = fe.new_vector()
             self._r = fe.new_vector()
             self._tmp = fe.new_vector()
             self._tmp2 = fe.new_vector()
             self._u_pred = fe.new_vector()
             self._r0 = fe.new_vector()
             self._du = fe.new_vector()
+            self._w = fe.new_vector()
         self._setup_snes()
         self.last_iterations = 0
         self.total_iterations = 0
-        self.linear_steps = 0           # steps solved by the contact-free fast path
+        self.linear_steps = 0           # steps solved without SNES (no FE contact force)
         self._evaluated = None
 
     # ----------------------------------------------------------------- setup
@@ -133,9 +140,12 @@ class CoupledSystem:
             self._node_S.append((np.array([position[g] for g, _ in pairs], dtype=int),
                                  np.array([k for _, k in pairs], dtype=int)))
 
+    def _unknowns_local(self) -> int:
+        """Local size of the SNES unknown: (g, dz), held by rank 0."""
+        return self.contact_global.size + self.m if self.comm.rank == 0 else 0
+
     def _setup_snes(self) -> None:
-        n_local = self.n_fe + self.m_local
-        sizes = (n_local, PETSc.DECIDE)
+        sizes = (self._unknowns_local(), PETSc.DECIDE)
         self.X = PETSc.Vec().createMPI(sizes, comm=self.comm)
         self.R = self.X.duplicate()
         self._step_vector = self.X.duplicate()
@@ -153,7 +163,7 @@ class CoupledSystem:
         ksp.setType("preonly")
         pc = ksp.getPC()
         pc.setType("python")
-        pc.setPythonContext(_BorderedInverse(self))
+        pc.setPythonContext(_ShellInverse(self))
         snes.setFromOptions()
         ksp.setType("preonly")
         self.snes = snes
@@ -161,9 +171,9 @@ class CoupledSystem:
     # ------------------------------------------------------------- one step
     def solve_step(self, state: TransientState, dt: float) -> tuple[int, TransientState | None]:
         """Try one step from ``state``. Returns (SNES converged reason, new state or None)."""
-        self._begin_step(state, dt)
-        atol = self.relative_force_tolerance * self._force_scale + self._roundoff_force + 1e-300
         try:
+            self._begin_step(state, dt)
+            atol = self.relative_force_tolerance * self._force_scale + self._roundoff_force + 1e-300
             reason = self._contact_free_step(atol)
             if reason is None:
                 self.snes.setTolerances(atol=atol)
@@ -185,14 +195,13 @@ class CoupledSystem:
         return reason, self._new_state()
 
     def _contact_free_step(self, atol: float):
-        """A step in which no FE contact (surface, node) carries force, neither at the predictor nor
-        at the result, needs no FE contact tangent: take one Newton step with zero FE contact blocks
-        (the rigid block keeps mass and Kelvin-Voigt links) without SNES and its Python callbacks,
-        check the residual with the same absolute/relative test as SNES, and return the converged
-        reason; None (X left at a valid guess) hands the step to SNES. Same arithmetic as SNES'
-        first iteration (basic line search), so the result does not depend on the path; if a
-        rigid-rigid link opens or closes within the step, the residual test fails and SNES
-        iterates."""
+        """A step in which no FE contact carries force, neither at the initial guess nor at the
+        result, needs no contact tangent: take one Newton step with zero FE contact blocks (the
+        rigid block keeps mass and Kelvin-Voigt links) without SNES and its Python callbacks, check
+        the residual with the same absolute/relative test as SNES and return the converged reason;
+        None (X left at a valid guess) hands the step to SNES. Same arithmetic as SNES' first
+        iteration (basic line search), so the result does not depend on the path; if a rigid-rigid
+        link opens or closes within the step, the residual test fails and SNES iterates."""
         X, R = self.X, self.R
         self._residual_callback(None, X, R)
         if self._fe_contact_active:
@@ -210,24 +219,18 @@ class CoupledSystem:
         norm1 = R.norm()
         if self._fe_contact_active or not np.isfinite(norm1):
             return None
-        rtol = SNES_DEFAULTS["snes_rtol"]
         if norm1 <= atol:
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
-        if norm1 <= rtol * norm0:
+        if norm1 <= SNES_DEFAULTS["snes_rtol"] * norm0:
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_RELATIVE
         return None
 
     def _set_contact_free_jacobian(self) -> None:
-        """The bordered-solve data of a Jacobian with every FE contact block zero, as
-        ``_jacobian_callback`` builds it when no FE contact is active."""
+        """The Jacobian data with every FE contact block zero, as ``_jacobian_callback`` builds it
+        when no FE contact is active."""
         s_count, m = self.contact_global.size, self.m
         Kzz = self._rigid_block(np.diag((1 - self.scheme.alpha_m) * self.c_acc * self.rigid.mass_diagonal))
-        self._Kss = np.zeros((s_count, s_count))
-        self._B = np.zeros((s_count, m))
-        self._L = np.zeros((m, s_count))
-        self._Kzz = Kzz
-        Z = np.block([[np.eye(s_count), np.zeros((s_count, m))], [np.zeros((m, s_count)), Kzz]])
-        self._Z_lu = scipy.linalg.lu_factor(Z, check_finite=True) if Z.size else None
+        self._set_jacobian(np.zeros((s_count, s_count)), np.zeros((s_count, m)), np.zeros((m, s_count)), Kzz)
 
     def _begin_step(self, state: TransientState, dt: float) -> None:
         s, fe, rigid = self.scheme, self.fe, self.rigid
@@ -240,48 +243,11 @@ class CoupledSystem:
         for f in self.fields:
             f.velocity_per_displacement.value = self.c_vel
             f.one_minus_alpha_f.value = 1 - s.alpha_f
-        X = self.X.array
         scale_sq = 0.0
         if fe is not None:
             self.op = self.cache.get(dt)
-            u0, v0, a0 = state.u, state.v, state.a
-            a_hat = acceleration(0.0, u0, v0, a0, dt, s)
-            v_hat = velocity(a_hat, v0, a0, dt, s)
-            n = self.n_fe
-            b, tmp, tmp2 = self._b, self._tmp, self._tmp2
-            # b = F(t_mid) - M a_const - C v_const - alpha_f K u_n, with every product formed
-            # once: K u_n, M a_n and F also give the force scale of the absolute tolerance
-            # (physical forces only: b holds u_n / (beta dt^2)-sized terms).
-            fe.load_N(self.t_mid, b)
-            scale_sq += b.norm() ** 2
-            tmp.array_w[:] = u0[:n]
-            fe.K.mult(tmp, tmp2)
-            scale_sq += tmp2.norm() ** 2
-            if s.alpha_f:
-                b.axpy(-s.alpha_f, tmp2)
-            tmp.array_w[:] = a0[:n]
-            fe.M.mult(tmp, tmp2)
-            scale_sq += tmp2.norm() ** 2
-            if s.alpha_m:
-                b.axpy(-s.alpha_m, tmp2)
-            tmp.array_w[:] = a_hat[:n]
-            fe.M.mult(tmp, tmp2)
-            b.axpy(-(1 - s.alpha_m), tmp2)
-            if fe.C is not None:
-                tmp.array_w[:] = ((1 - s.alpha_f) * v_hat + s.alpha_f * v0)[:n]
-                fe.C.mult(tmp, tmp2)
-                b.axpy(-1.0, tmp2)
-            # The FE unknown is the correction du = u_{n+1} - u_pred to a predictor that already
-            # carries the Dirichlet values of t_{n+1}. The residual is then r0 + K_eff du + contact
-            # with r0 = K_eff u_pred - b evaluated once: K_eff u_{n+1} - b itself cancels terms of
-            # size M u / (beta dt^2), and its round-off (~1e-10 relative) used to stall Newton at
-            # the tolerance and trigger line-search failures and cut-backs.
-            predictor = self._u_pred
-            predictor.array_w[:] = (u0 + dt * v0 + 0.5 * dt * dt * a0)[:n]
-            fe.apply_dirichlet(self.t1, predictor)
-            self.op.full.mult(predictor, self._r0)
-            self._r0.axpy(-1.0, b)
-            X[:n] = 0.0
+            scale_sq = self._predictor_residual(state, dt)
+            self._condense()
         z0, zd0, zdd0 = state.z, state.zd, state.zdd
         self.zdd_hat = acceleration(0.0, 0.0, zd0, zdd0, dt, s)
         self.zd_hat = velocity(self.zdd_hat, zd0, zdd0, dt, s)
@@ -289,15 +255,73 @@ class CoupledSystem:
         self.rigid_inertia_const = rigid.mass_diagonal * ((1 - s.alpha_m) * self.zdd_hat + s.alpha_m * zdd0)
         rigid_scale_sq = float(np.sum(self.rigid_force_ext**2 + (rigid.mass_diagonal * zdd0) ** 2))
         self._force_scale = float(np.sqrt(scale_sq + rigid_scale_sq))
-        # Below ~eps |b| the residual is round-off: never ask for less.
-        roundoff_sq = (b.norm() ** 2 if fe is not None else 0.0) + float(np.sum(self.rigid_inertia_const**2))
+        # Below ~eps |terms| the residual is round-off: never ask for less. The rigid inertia is
+        # formed from z / (beta dt^2)-sized terms; the FE terms are physical forces (see above).
+        roundoff_sq = scale_sq + float(np.sum(self.rigid_inertia_const**2))
         self._roundoff_force = 10 * np.finfo(float).eps * float(np.sqrt(roundoff_sq))
         z1 = z0 + dt * zd0 + 0.5 * dt * dt * zdd0
         rigid.apply_prescribed(self.t1, z1)
+        self._initial_guess(z1 - z0)
+
+    def _predictor_residual(self, state: TransientState, dt: float) -> float:
+        """u_pred and r0 = residual of the FE equations at u_pred (three mat-vecs, module doc);
+        returns the squared force scale |M a| ^2 + |C v| ^2 + |K u| ^2 + |F| ^2 of the tolerance."""
+        s, fe, n = self.scheme, self.fe, self.n_fe
+        u0, v0, a0 = state.u[:n], state.v[:n], state.a[:n]
+        taylor = u0 + dt * v0 + 0.5 * dt * dt * a0
+        predictor = self._u_pred
+        predictor.array_w[:] = taylor
+        fe.apply_dirichlet(self.t1, predictor)
+        delta = predictor.array_r - taylor
+        r0, x, y = self._r0, self._tmp, self._tmp2
+        fe.load_N(self.t_mid, r0)
+        scale_sq = r0.norm() ** 2
+        r0.scale(-1.0)
+        terms = [(fe.M, a0 + (1 - s.alpha_m) * self.c_acc * delta),
+                 (fe.K, u0 + (1 - s.alpha_f) * (predictor.array_r - u0))]
+        if fe.C is not None:
+            terms.append((fe.C, v0 + (1 - s.alpha_f) * (dt * a0 + self.c_vel * delta)))
+        for matrix, vector in terms:
+            x.array_w[:] = vector
+            matrix.mult(x, y)
+            scale_sq += y.norm() ** 2
+            r0.axpy(1.0, y)
+        fe.zero_constrained(r0)
+        return scale_sq
+
+    def _condense(self) -> None:
+        """w = -K_eff^-1 r0 (the FE solution without contact forces) and its contact entries."""
+        self.op.solve(self._r0, self._w)
+        self._w.scale(-1.0)
+        self._w_S = self._gather_S(self._w.array_r)
+
+    def _contact_block(self) -> np.ndarray:
+        """G_SS = E^T K_eff^-1 E of the current operator (s x s, every rank), formed once per dt."""
+        if self.fe is None:
+            return np.zeros((0, 0))
+        if not hasattr(self.op, "contact_block"):
+            self.op.contact_block = self._gather_rows(self.op.columns[self.contact_local])
+        return self.op.contact_block
+
+    def _initial_guess(self, dz: np.ndarray) -> None:
+        """g = 0 (no contact force), dz = rigid predictor increment."""
+        X = self.X.array
+        X[:] = 0.0
         if self.m_local:
             # The rigid unknowns are the increments z_{n+1} - z_n: absolute positions divided by
             # beta dt^2 would drown the accelerations in round-off at small dt.
-            X[self.n_fe:] = z1 - z0
+            X[self.contact_global.size:] = dz
+
+    def _split(self, x: np.ndarray) -> tuple[np.ndarray | None, np.ndarray]:
+        """(du owned entries or None without FE, dz on every rank) of the iterate ``x`` (local
+        array of the unknown (g, dz))."""
+        self._unknown = unknown = self._replicated(x)
+        s_count = self.contact_global.size
+        du = None
+        if self.fe is not None:
+            g = unknown[:s_count]
+            du = self._w.array_r - self.op.columns @ g if g.any() else self._w.array_r
+        return du, unknown[s_count:]
 
     def _evaluate(self, X: PETSc.Vec) -> None:
         """Set u_{n+1}, z_{n+1} and every derived (mid-point) quantity from the iterate X.
@@ -312,9 +336,10 @@ class CoupledSystem:
         if same:
             return
         self._evaluated = np.array(x)
+        du, dz = self._split(x)
         s, st, dt = self.scheme, self.state0, self.dt
         if self.fe is not None:
-            self._u1.vector.array_w[:] = self._u_pred.array_r + x[: self.n_fe]
+            self._u1.vector.array_w[:] = self._u_pred.array_r + du
             self._u1.x.scatter_forward()
             u1 = self._u1.x.array
             self.a1 = acceleration(u1, st.u, st.v, st.a, dt, s)
@@ -324,7 +349,6 @@ class CoupledSystem:
             for f in self.fields:
                 f.u_mid.x.array[:] = self.u_mid
                 f.v_mid.x.array[:] = self.v_mid
-        dz = self._rigid_part(x)
         z1 = st.z + dz
         self.z1 = z1
         self.zdd1 = acceleration(dz, 0.0, st.zd, st.zdd, dt, s)
@@ -343,35 +367,28 @@ class CoupledSystem:
         return TransientState(self.t1, u, v, a, self.z1.copy(), self.zd1.copy(), self.zdd1.copy())
 
     # ------------------------------------------------------------- residual
-    def _residual_callback(self, snes, X, R) -> None:
-        self._evaluate(X)
+    def _contact_terms(self, r: PETSc.Vec | None) -> tuple[dict, np.ndarray, np.ndarray]:
+        """Contact forces at the evaluated iterate: (forces by name, the FE contact residual at the
+        contact DOFs rc_S (all ranks' entries), the rigid residual r_z). With ``r`` (an FE vector
+        holding the rest of the FE residual) the contact residual is also added to it."""
         forces = {}
         r_z = self.rigid.mass_diagonal * (1 - self.scheme.alpha_m) * self.zdd1
         r_z = r_z + self.rigid.mass_diagonal * self.scheme.alpha_m * self.state0.zdd - self.rigid_force_ext
-        out = R.array
-        if self.fe is not None:
-            r, du = self._r, self._du
-            x_fe = X.array_r[: self.n_fe]
-            if x_fe.any():
-                du.array_w[:] = x_fe
-                self.op.full.mult(du, r)
-                r.axpy(1.0, self._r0)
-            else:                       # the first residual of a step is r0 (no mat-vec)
-                self._r0.copy(r)
-            for c in self.surface_contacts:
-                rc = c.assemble_residual()
+        rc_S = np.zeros(self.contact_global.size)
+        for c in self.surface_contacts:
+            rc = c.assemble_residual()
+            if r is not None:
                 r.axpy(1.0, rc)
-                sl = self.rigid.dofs(c.body)
-                forces[c.name] = np.array([rc.dot(tk) for tk in self.translations])
-                r_z[sl] -= forces[c.name]
-            for c in self.node_contacts:
-                f, _, _ = self._node_force(c)
-                if c.local_dofs.size:
-                    r.array_w[c.local_dofs] -= f * c.normal[c.dof_axes]
-                r_z[self.rigid.dofs(c.body)] += f * c.normal
-                forces[c.name] = -f * c.normal
-            self.fe.zero_constrained(r)
-            out[: self.n_fe] = r.array_r
+            rc_S += self._gather_S(rc.array_r)
+            forces[c.name] = np.array([rc.dot(tk) for tk in self.translations])
+            r_z[self.rigid.dofs(c.body)] -= forces[c.name]
+        for c, (S, axes) in zip(self.node_contacts, self._node_S):
+            f, _, _ = self._node_force(c)
+            if r is not None and c.local_dofs.size:
+                r.array_w[c.local_dofs] -= f * c.normal[c.dof_axes]
+            rc_S[S] -= f * c.normal[axes]
+            r_z[self.rigid.dofs(c.body)] += f * c.normal
+            forces[c.name] = -f * c.normal
         for c in self.point_contacts:
             f, _, _ = self._point_force(c)
             r_z[self.rigid.dofs(c.upper)] -= f * c.normal
@@ -384,8 +401,16 @@ class CoupledSystem:
         fe_names = {c.name for c in self.surface_contacts + self.node_contacts}
         self._fe_contact_active = any(np.any(forces[n] != 0.0) for n in fe_names)
         r_z[~self.rigid.free_mask] = 0.0
-        if self.m_local:
-            out[self.n_fe:] = r_z
+        return forces, rc_S, r_z
+
+    def _residual_callback(self, snes, X, R) -> None:
+        self._evaluate(X)
+        _, rc_S, r_z = self._contact_terms(None)
+        out = R.array   # on every rank: write access bumps the Vec state, so no rank reuses a cached norm
+        if self.comm.rank == 0:
+            s_count = self.contact_global.size
+            out[:s_count] = rc_S - self._unknown[:s_count]
+            out[s_count:] = r_z
 
     def _node_force(self, c: NodeContact):
         sl = self.rigid.dofs(c.body)
@@ -415,11 +440,11 @@ class CoupledSystem:
         Kzz[fixed, fixed] = 1.0
         return Kzz
 
-    def _rigid_part(self, x: np.ndarray) -> np.ndarray:
-        """The rigid entries of a packed local array (held by rank 0), on every rank."""
+    def _replicated(self, x: np.ndarray) -> np.ndarray:
+        """The unknown (held by rank 0) on every rank."""
         if self.comm.size == 1:
-            return np.array(x[self.n_fe:])
-        return self.comm.bcast(np.array(x[self.n_fe:]) if self.comm.rank == 0 else None, root=0)
+            return np.array(x)
+        return self.comm.bcast(np.array(x) if self.comm.rank == 0 else None, root=0)
 
     def _gather_S(self, local: np.ndarray) -> np.ndarray:
         """Values at all contact DOFs (every rank's owned ones, in contact_global order)."""
@@ -427,15 +452,16 @@ class CoupledSystem:
             return local[self.contact_local]
         return np.concatenate(self.comm.allgather(local[self.contact_local]))
 
-    # ------------------------------------------------------------- Jacobian
     def _gather_rows(self, local_rows: np.ndarray) -> np.ndarray:
         """Stack per-rank row blocks (each rank's contact rows) into the full s x k array."""
         if self.comm.size == 1:
             return local_rows
         return np.vstack(self.comm.allgather(local_rows))
 
-    def _jacobian_callback(self, snes, X, J, P) -> None:
-        self._evaluate(X)
+    # ------------------------------------------------------------- Jacobian
+    def _contact_tangents(self):
+        """(Kss, B, L, Kzz) at the evaluated iterate: d rc_S / d u_S, d rc_S / d z, d r_z / d u_S,
+        d r_z / d z (prescribed rigid axes eliminated)."""
         s_count, m = self.contact_global.size, self.m
         Kss = np.zeros((s_count, s_count))
         B = np.zeros((s_count, m))
@@ -467,52 +493,42 @@ class CoupledSystem:
         fixed = ~self.rigid.free_mask
         L[fixed, :] = 0.0
         B[:, fixed] = 0.0
-        G_S = (self._gather_rows(self.op.columns[self.contact_local]) if self.fe is not None
-               else np.zeros((0, 0)))
-        Z = np.block([[np.eye(s_count) + Kss @ G_S, -B], [-L @ G_S, Kzz]])
-        self._Kss, self._B, self._L, self._Kzz = Kss, B, L, Kzz
+        return Kss, B, L, Kzz
+
+    def _jacobian_callback(self, snes, X, J, P) -> None:
+        self._evaluate(X)
+        self._set_jacobian(*self._contact_tangents())
+
+    def _set_jacobian(self, Kss, B, L, Kzz) -> None:
+        s_count = self.contact_global.size
+        G_SS = self._contact_block()
+        Z = np.block([[-(np.eye(s_count) + Kss @ G_SS), B], [-L @ G_SS, Kzz]])
+        self._Z = Z
         self._Z_lu = scipy.linalg.lu_factor(Z, check_finite=True) if Z.size else None
 
-    # ------------------------------------------------------- bordered solve
     def apply_inverse(self, x: np.ndarray, y: np.ndarray) -> None:
-        """y = J^-1 x for local arrays of the packed vector."""
-        n, s_count = self.n_fe, self.contact_global.size
-        r_z = self._rigid_part(x)
-        if self.fe is not None:
-            self._tmp.array_w[:] = x[:n]
-            self.op.solve(self._tmp, self._tmp2)
-            w = self._tmp2.array_r.copy()
-            w_S = self._gather_S(w) if s_count else np.zeros(0)
-        else:
-            w, w_S = np.zeros(0), np.zeros(0)
-        if self._Z_lu is not None:
-            rhs = np.concatenate([self._Kss @ w_S, r_z - self._L @ w_S])
-            sol = scipy.linalg.lu_solve(self._Z_lu, rhs)
-            y_contact, dz = sol[:s_count], sol[s_count:]
-        else:
-            y_contact, dz = np.zeros(0), np.zeros(0)
-        if self.fe is not None:
-            y[:n] = w - self.op.columns @ y_contact if s_count else w
-        if self.m_local:
-            y[n:] = dz
+        """y = J^-1 x for local arrays of the unknown (rank 0 holds it all)."""
+        if x.size:
+            y[:] = scipy.linalg.lu_solve(self._Z_lu, x)
 
     def apply_jacobian(self, x: np.ndarray, y: np.ndarray) -> None:
-        """y = J x for local arrays of the packed vector."""
-        n, s_count = self.n_fe, self.contact_global.size
-        x_z = self._rigid_part(x)
-        if self.fe is not None:
-            self._tmp.array_w[:] = x[:n]
-            self.op.constrained.mult(self._tmp, self._tmp2)
-            y_u = self._tmp2.array_r.copy()
-            x_S = self._gather_S(x[:n]) if s_count else np.zeros(0)
-            if s_count:
-                local = slice(self._S_offset, self._S_offset + self.contact_local.size)
-                y_u[self.contact_local] += (self._Kss @ x_S + self._B @ x_z)[local]
-            y[:n] = y_u
-        else:
-            x_S = np.zeros(0)
-        if self.m_local:
-            y[n:] = self._L @ x_S + self._Kzz @ x_z
+        """y = J x for local arrays of the unknown."""
+        if x.size:
+            y[:] = self._Z @ x
+
+    # ------------------------------------------------------------ checks
+    def full_residual_norm(self) -> float:
+        """|r0 + A du + E rc| of the FE equations plus the rigid residual at the evaluated iterate:
+        the residual of the uncondensed system (one extra mat-vec; for tests and diagnostics)."""
+        self._evaluated = None          # the shared mid-point fields may hold other values by now
+        self._evaluate(self.X)
+        r = self._r
+        self._du.array_w[:] = self._u1.vector.array_r - self._u_pred.array_r
+        self.op.full.mult(self._du, r)
+        r.axpy(1.0, self._r0)
+        _, _, r_z = self._contact_terms(r)
+        self.fe.zero_constrained(r)
+        return float(np.sqrt(r.norm() ** 2 + float(np.sum(r_z**2))))
 
     # ------------------------------------------------------------ reporting
     def show_state(self, state: TransientState) -> None:
@@ -567,7 +583,7 @@ class _JacobianShell:
         self.system.apply_jacobian(x.array_r, y.array)
 
 
-class _BorderedInverse:
+class _ShellInverse:
     def __init__(self, system: CoupledSystem):
         self.system = system
 

@@ -26,6 +26,7 @@ from app.transient.coupled import CoupledSystem
 from app.transient.fe import LinearFE
 from app.transient.fields import FieldSeriesExport
 from app.transient.history import Progress, TimeSeriesExport, plot_time_series
+from app.transient.impacts import statistics_from_file
 from app.transient.rigid import RigidBody, RigidSet
 from app.transient.state import TransientState
 from app.transient.stepper import TimeStepper
@@ -335,6 +336,8 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                     "field_outputs": (fields.written if fields is not None else 0)})
     log(f"transient: {results['steps']} steps, {results['newton_iterations']} Newton iterations, "
         f"{results['cutbacks']} cut-backs, {results['factorisations']} factorisations, {wall:.1f} s wall")
+    statistics = statistics_from_file(h5_path, case.transient) if comm.rank == 0 else None
+    results["statistics"] = comm.bcast(statistics, root=0)
     if case.output.plots and comm.rank == 0:
         bodies = [b.name for b in tm.rigid.bodies if b.free_axes_mask.any()]
         force_contact = contact_names[-1] if contact_names else None

@@ -65,8 +65,8 @@ class RodImpact:
         return self.penalty_factor * self.young_Pa / self.element_length_m
 
 
-def build_rod_impact(comm, rod: RodImpact, scheme: TimeScheme):
-    """-> (CoupledSystem, initial state)."""
+def build_rod_impact(comm, rod: RodImpact, scheme: TimeScheme, system_class=CoupledSystem):
+    """-> (``system_class`` instance, initial state)."""
     msh = mesh.create_rectangle(comm, [np.array([0.0, 0.0]), np.array([rod.length_m, rod.height_m])],
                                 [rod.elements_along, 1], cell_type=mesh.CellType.quadrilateral,
                                 ghost_mode=mesh.GhostMode.shared_facet)
@@ -85,7 +85,7 @@ def build_rod_impact(comm, rod: RodImpact, scheme: TimeScheme):
     fields = MidpointFields(fe)
     contact = SurfaceContact("rod_wall", fe, tags, 1, "wall", ObstacleShape("plane", normal=(-1.0, 0.0)),
                              rod.penalty_Pa_per_m, fields=fields)
-    system = CoupledSystem(comm, scheme, fe, rigid, [contact])
+    system = system_class(comm, scheme, fe, rigid, [contact])
     u0 = fem.Function(V)
     v0 = fem.Function(V)
     v0.interpolate(lambda x: np.vstack([np.full(x.shape[1], rod.speed_m_per_s), np.zeros(x.shape[1])]))
@@ -188,7 +188,8 @@ def run_scene(system, state, sizes: StepSizes, t_end_s: float, exports=(), track
 
 def vibrating_block_with_ball(comm, scheme: TimeScheme, amplitude_m: float = 5e-6, frequency_Hz: float = 2000.0,
                               ball_diameter_m: float = 8e-3, contact_stiffness_Pa_per_m: float = 1e13,
-                              elements: int = 4, ball_velocity_m_per_s=(0.0, 0.0), ball_gap_m: float = -1e-7):
+                              elements: int = 4, ball_velocity_m_per_s=(0.0, 0.0), ball_gap_m: float = -1e-7,
+                              system_class=CoupledSystem):
     """An elastic steel block (plane strain, 10 x 5 mm) shaken at its base, with a rigid ball
     (cylinder per metre of thickness, mass of an 8 mm steel ball per mm) resting on its top face:
     the ball chatters when the table acceleration exceeds g. -> (system, state)."""
@@ -224,7 +225,7 @@ def vibrating_block_with_ball(comm, scheme: TimeScheme, amplitude_m: float = 5e-
     fields = MidpointFields(fe)
     contact = SurfaceContact("block_ball", fe, tags, 1, "ball", ObstacleShape("sphere", radius_m=radius),
                              contact_stiffness_Pa_per_m, damping_Pa_s_per_m=0.0, fields=fields)
-    system = CoupledSystem(comm, scheme, fe, rigid, [contact])
+    system = system_class(comm, scheme, fe, rigid, [contact])
     z, zd, zdd = rigid.initial_state()
     n = fem.Function(V).x.array.size
     return system, TransientState(0.0, np.zeros(n), np.zeros(n), np.zeros(n), z, zd, zdd)

@@ -141,6 +141,8 @@ class TransientSection:
     loads: LoadSection = param(default_factory=LoadSection, doc="see [transient.loads]")
     bodies: list[BodySection] = param(default_factory=list, doc="rigid bodies")
     contacts: list[ContactSection] = param(default_factory=list, doc="penalty contacts")
+    min_flight_rise_m: float = param(
+        50e-6, gt=0, unit="m", doc="statistics: a flight of the FE body rises at least this much (as the lumped tier)")
 
     def check(self, file, prefix):
         steps = self.steps

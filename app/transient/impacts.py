@@ -1,0 +1,130 @@
+"""Impact statistics of a transient run, read from its HDF5 time series, in the terms the lumped tier
+reports (app/lumped/stats.py), so the two tiers can be compared line by line.
+
+- every contact: impacts (open -> closed transitions) and their rate per second;
+- a contact whose lower body is fixed (the rock foundation): impulse per impact, mean force, and
+  the mean power delivered into it, P = (1/T) integral f d(delta) (f the contact force, delta the
+  penetration), which over closed intervals is the energy the foundation absorbs;
+- the FE body (the transducer): its rigid motion, taken as the drive point's displacement averaged
+  over one drive period (the vibration averages out); its largest rise above the start; and its
+  flights: intervals with every FE contact open in which that average rises by at least
+  ``min_rise_m`` (the lumped tier's threshold: flights one could film);
+- every free rigid body: its largest rise above its start and its RMS velocity.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def closed_intervals(closed: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) row of every run of closed rows (closed is 0/1 per row)."""
+    flag = np.concatenate([[0], (np.asarray(closed) > 0).astype(np.int8), [0]])
+    edges = np.diff(flag)
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1) - 1
+    return list(zip(starts.tolist(), ends.tolist()))
+
+
+def period_average(t_s: np.ndarray, x: np.ndarray, period_s: float, samples_per_period: int = 32):
+    """(t, mean of x over the drive period centred at t) on a uniform grid of period / samples."""
+    h = period_s / samples_per_period
+    if t_s[-1] - t_s[0] < 2 * period_s:
+        return t_s, x
+    grid = np.arange(t_s[0], t_s[-1], h)
+    values = np.interp(grid, t_s, x)
+    kernel = np.ones(samples_per_period) / samples_per_period
+    mean = np.convolve(values, kernel, mode="valid")
+    centre = grid[: mean.size] + 0.5 * (samples_per_period - 1) * h
+    return centre, mean
+
+
+def statistics_from_file(h5_path: Path, cfg) -> dict:
+    """:func:`run_statistics` of the time series in ``h5_path`` (rank 0 only)."""
+    import h5py
+
+    with h5py.File(h5_path, "r") as f:
+        data = {name: f[name][:] for name in f}
+    return run_statistics(data, cfg)
+
+
+def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
+    """Statistics of a transient run: ``data`` holds the time series by name (one row per step,
+    the keys of transient.h5), ``cfg`` is the case's [transient] section."""
+    if "time_s" not in data or data["time_s"].shape[0] < 2:
+        return {}
+    t = data["time_s"]
+    series = data.__getitem__
+    duration = float(t[-1] - t[0])
+    stats: dict = {"simulated_time_s": duration}
+    fixed = {b.name for b in cfg.bodies if b.fixed}
+    counts, rates = {}, {}
+    fe_closed = np.zeros(t.size, dtype=bool)
+    for c in cfg.contacts:
+        closed = series(f"{c.name}_closed")
+        intervals = closed_intervals(closed)
+        impacts = sum(1 for a, _ in intervals if a > 0)     # closed from the first step: no impact
+        counts[c.name] = impacts
+        rates[c.name] = impacts / duration
+        if c.kind in ("surface", "node"):
+            fe_closed |= closed > 0
+        if c.kind == "point" and c.lower in fixed:
+            force = np.linalg.norm(series(f"{c.name}_force_N"), axis=1)
+            normal = np.asarray(c.direction, dtype=float) / np.linalg.norm(c.direction)
+            # The recorded force acts at the step's generalised mid-point; the work it does is
+            # f . d(delta) per step (the scheme's own energy pairing), with d(delta) = -n . dz.
+            penetration_step = -np.diff(series(f"{c.upper}_position_m") @ normal, prepend=np.nan)
+            penetration_step[0] = 0.0
+            dt = series("dt_s") if "dt_s" in data else np.diff(t, prepend=t[0])
+            impulses = [float(np.sum(force[a:b + 1] * dt[a:b + 1])) for a, b in intervals]
+            work = float(np.sum(force * penetration_step))
+            stats[f"{c.name}_foundation"] = {
+                "impulse_per_impact_mean_N_s": float(np.mean(impulses)) if impulses else 0.0,
+                "impulse_per_impact_max_N_s": float(np.max(impulses)) if impulses else 0.0,
+                "mean_force_N": float(np.sum(force * dt)) / duration,
+                "mean_power_W": work / duration,
+                "energy_per_impact_mean_J": work / max(impacts, 1),
+                "peak_force_N": float(force.max()),
+            }
+    stats["impact_count"] = counts
+    stats["impact_rate_per_s"] = rates
+
+    point = cfg.drive.point if f"{cfg.drive.point}_displacement_m" in data else None
+    if point is not None:
+        period = 1.0 / cfg.drive.frequency_Hz
+        tip = series(f"{point}_displacement_m")
+        t_mean, z_mean = period_average(t, tip, period)
+        z_start = z_mean[0]
+        flights, apexes = [], []
+        open_rows = closed_intervals(~fe_closed) if fe_closed.any() else []
+        for a, b in open_rows:
+            if a == 0:
+                continue      # open from the start: no take-off
+            inside = (t_mean >= t[a]) & (t_mean <= t[b])
+            if not inside.any():
+                continue
+            rise = float(z_mean[inside].max() - np.interp(t[a], t_mean, z_mean))
+            if rise >= cfg.min_flight_rise_m:
+                flights.append(t[b] - t[a])
+                apexes.append(float(z_mean[inside].max() - z_start))
+        stats["transducer"] = {
+            "max_rise_m": float(z_mean.max() - z_start),
+            "mean_displacement_m": float(np.mean(z_mean - z_start)),
+            "flight_count": len(flights),
+            "flight_rate_per_s": len(flights) / duration,
+            "flight_duration_mean_s": float(np.mean(flights)) if flights else 0.0,
+            "flight_apex_max_m": float(np.max(apexes)) if apexes else 0.0,
+            "min_flight_rise_m": cfg.min_flight_rise_m,
+        }
+    bodies = {}
+    for b in cfg.bodies:
+        if b.fixed or f"{b.name}_position_m" not in data:
+            continue
+        z = series(f"{b.name}_position_m")[:, -1]
+        v = series(f"{b.name}_velocity_m_per_s")[:, -1]
+        bodies[b.name] = {"max_rise_m": float(z.max() - z[0]),
+                          "rms_velocity_m_per_s": float(np.sqrt(np.trapz(v**2, t) / duration))}
+    stats["bodies"] = bodies
+    return stats

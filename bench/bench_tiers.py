@@ -1,0 +1,102 @@
+"""Speed against error between the tiers of the drill scene: full transient FE (cases/usdc-fe.toml)
+and the lumped model of the same scene (cases/usdc-lumped-fe-scene.toml), at 0/3/6/9 N downforce.
+
+The FE runs are long (minutes per 200 ms), so they are read from their output directories (run
+them first, e.g. ``piezodyn run cases/usdc-fe.toml --out /tmp/drill_3N --set
+'transient.loads.fe_force_N=[0.0,-3.0]'``); the lumped runs are done here, in the same process.
+Both tiers report the same statistics (app/transient/impacts.py, app/lumped/stats.py); the table
+gives each tier's value and the lumped tier's deviation from the FE tier. The motion is chaotic, so
+the deviations are those of statistics over the window, not of trajectories.
+
+    /work/main/.venv/bin/python bench/bench_tiers.py --fe-dir 0=/tmp/drill_0N --fe-dir 3=/tmp/drill_3N ...
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from app.case.schema import load_case  # noqa: E402
+from app.lumped.driver import compute  # noqa: E402
+from app.transient.impacts import statistics_from_file  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def fe_row(directory: Path, force_N: float) -> dict:
+    summary = json.loads((directory / "summary.json").read_text())
+    tr = summary["results"]["transient"]
+    stats = tr.get("statistics")
+    if not stats:      # runs written before the statistics existed: same numbers from the series
+        case = load_case(ROOT / "cases" / "usdc-fe.toml", [f"transient.loads.fe_force_N=[0.0,{-force_N!r}]"])
+        stats = statistics_from_file(directory / tr["time_series"], case.transient)
+    rock = stats["stem_rock_foundation"]
+    return {"wall_s_per_ms": tr["wall_s_per_simulated_ms"], "simulated_ms": tr["simulated_time_s"] * 1e3,
+            "cutbacks": tr["cutbacks"],
+            "tip_ball_per_s": stats["impact_rate_per_s"]["tip_ball"],
+            "ball_stem_per_s": stats["impact_rate_per_s"]["ball_stem"],
+            "stem_rock_per_s": stats["impact_rate_per_s"]["stem_rock"],
+            "rock_power_W": rock["mean_power_W"], "rock_force_N": rock["mean_force_N"],
+            "rock_impulse_N_s": rock["impulse_per_impact_mean_N_s"],
+            "max_rise_mm": stats["transducer"]["max_rise_m"] * 1e3,
+            "flights_per_s": stats["transducer"]["flight_rate_per_s"]}
+
+
+def lumped_row(force_N: float, duration_s: float) -> dict:
+    case = load_case(ROOT / "cases" / "usdc-lumped-fe-scene.toml",
+                     [f"lumped.downforce_N={force_N!r}", f"lumped.duration_s={duration_s!r}"])
+    results, _ = compute(case.lumped)
+    stats = results["statistics"]
+    rates = stats["impact_rate_per_s"]
+    return {"wall_s_per_ms": results["solver"]["wall_s_per_simulated_ms"], "simulated_ms": duration_s * 1e3,
+            "cutbacks": 0,
+            "tip_ball_per_s": rates["tip_ball"], "ball_stem_per_s": rates["ball_stem"],
+            "stem_rock_per_s": rates["stem_rock"],
+            "rock_power_W": stats["rock"]["mean_power_W"], "rock_force_N": stats["rock"]["mean_force_N"],
+            "rock_impulse_N_s": stats["rock"]["impulse_per_impact_mean_N_s"],
+            "max_rise_mm": (stats["transducer"]["max_flight_height_m"] - case.lumped.initial.transducer_z_m) * 1e3,
+            "flights_per_s": stats["transducer"]["flight_rate_per_s"]}
+
+
+COLUMNS = [("wall_s_per_ms", "wall s / sim. ms", "{:.3g}"), ("tip_ball_per_s", "tip-ball impacts/s", "{:.0f}"),
+           ("ball_stem_per_s", "ball-stem impacts/s", "{:.0f}"), ("stem_rock_per_s", "stem-rock impacts/s", "{:.0f}"),
+           ("rock_power_W", "power into rock [W]", "{:.3f}"), ("rock_force_N", "mean rock force [N]", "{:.2f}"),
+           ("rock_impulse_N_s", "impulse / rock impact [mN s]", "{:.2f}"),
+           ("max_rise_mm", "max transducer rise [mm]", "{:.2f}"), ("flights_per_s", "flights/s", "{:.0f}")]
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--fe-dir", action="append", default=[], help="FORCE=DIR of a finished FE run")
+    parser.add_argument("--duration-s", type=float, default=0.2, help="lumped window (the FE runs' length)")
+    args = parser.parse_args()
+    fe_dirs = {float(k): Path(v) for k, v in (item.split("=", 1) for item in args.fe_dir)}
+    forces = sorted(fe_dirs) or [0.0, 3.0, 6.0, 9.0]
+    print("| downforce | tier | " + " | ".join(c[1] for c in COLUMNS) + " |")
+    print("|---|---|" + "---|" * len(COLUMNS))
+    for force in forces:
+        lumped = lumped_row(force, args.duration_s)
+        rows = [("lumped", lumped)]
+        if force in fe_dirs:
+            fe = fe_row(fe_dirs[force], force)
+            rows.insert(0, (f"FE ({fe['simulated_ms']:.0f} ms, {fe['cutbacks']} cut-backs)", fe))
+        for tier, row in rows:
+            cells = [fmt.format(row[key] * (1e3 if key == "rock_impulse_N_s" else 1)) for key, _, fmt in COLUMNS]
+            print(f"| {force:g} N | {tier} | " + " | ".join(cells) + " |")
+        if force in fe_dirs:
+            cells = []
+            for key, _, _ in COLUMNS:
+                if key == "wall_s_per_ms":
+                    cells.append(f"{fe['wall_s_per_ms'] / lumped['wall_s_per_ms']:.0f}x faster")
+                else:
+                    ref = fe[key]
+                    cells.append(f"{(lumped[key] - ref) / ref:+.0%}" if ref else "n/a")
+            print(f"| {force:g} N | lumped vs FE | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()
