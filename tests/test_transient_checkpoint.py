@@ -86,6 +86,26 @@ def test_resume_from_half_time_equals_one_run(one_go, shared_tmp):
         assert res["contacts"][name] == pytest.approx(ref, rel=rel, abs=1e-300), name
 
 
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="drives serial and 2-rank subprocesses")
+def test_serial_checkpoint_resumes_on_two_ranks(one_go, tmp_path):
+    """The checkpoint is stored per mesh cell, so a run checkpointed on one rank continues on two
+    (another partition): the resumed series equals the one-go run to solver tolerance."""
+    out_ref, _ = one_go
+    reference = read_series(out_ref / "transient.h5")
+    t_half = float(reference["time_s"][reference["time_s"].size // 2])
+    sets = [a for o in TINY for a in ("--set", o)]
+    first = run_cli("run", CASES / CASE, "--out", tmp_path, "--quiet", *sets,
+                    "--set", f"transient.end_time_s={t_half!r}")
+    assert first.returncode == 0, first.stderr[-2000:]
+    second = run_cli("run", CASES / CASE, "--resume", tmp_path, "--quiet", *sets,
+                     "--set", f"transient.end_time_s={END_S!r}", mpi=2)
+    assert second.returncode == 0, second.stderr[-2000:]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["mpi_size"] == 2
+    assert summary["results"]["transient"]["resumed_from_s"] == pytest.approx(t_half, rel=1e-15)
+    assert_same_series(reference, read_series(tmp_path / "transient.h5"), rtol=1e-7)
+
+
 def test_resume_of_a_different_case_is_refused(one_go, tmp_path):
     out_ref, _ = one_go
     result = run_cli("run", CASES / CASE, "--resume", out_ref,

@@ -5,7 +5,9 @@ Layers (each small, each testable alone):
 - ``rigid``     rigid bodies (own DOFs, mass, gravity, applied force, prescribed motion)
 - ``fe``        the linear FE part: M, C, K, loads, Dirichlet drives, factorised K_eff per dt
 - ``contact``   penalty contacts: FE surface vs rigid body (UFL), rigid vs rigid (Kelvin-Voigt)
-- ``coupled``   residual, Jacobian and bordered solve of FE + rigid + contact, driven by PETSc SNES
+- ``coupled``   one step: FE condensed onto the contact DOFs, Newton (PETSc SNES) on contact forces + rigid DOFs
+- ``fullspace`` the same step iterated on all FE + rigid unknowns (reference for tests and bench/)
+- ``impacts``   impact statistics of a run from its time series (the lumped tier's terms)
 - ``control``   dt by contact state (open / closed / changing), growth and cut-back
 - ``stepper``   the time loop (update loads, solve, check reason, export, shift, adapt dt)
 - ``history``   HDF5 time series, progress bar, checkpoints
