@@ -9,6 +9,11 @@ gives each tier's value and the lumped tier's deviation from the FE tier. The mo
 the deviations are those of statistics over the window, not of trajectories.
 
     /work/main/.venv/bin/python bench/bench_tiers.py --fe-dir 0=/tmp/drill_0N --fe-dir 3=/tmp/drill_3N ...
+        [--plot-dir DIR]
+
+``--plot-dir`` also writes the FE runs as the drill paper's figures: ``fig9_displacements.png``
+(tip, free mass and stem displacement, one panel per downforce) and ``fig5_rock_force.png``
+(stem/rock contact force, one panel per downforce).
 """
 
 from __future__ import annotations
@@ -17,6 +22,8 @@ import argparse
 import json
 import sys
 from pathlib import Path
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -69,12 +76,51 @@ COLUMNS = [("wall_s_per_ms", "wall s / sim. ms", "{:.3g}"), ("tip_ball_per_s", "
            ("max_rise_mm", "max transducer rise [mm]", "{:.2f}"), ("flights_per_s", "flights/s", "{:.0f}")]
 
 
+def plot_figures(fe_dirs: dict[float, Path], out: Path) -> list[Path]:
+    import h5py
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    forces = sorted(fe_dirs)
+    fig9, axes9 = plt.subplots(len(forces), 1, figsize=(8, 2.4 * len(forces)), sharex=True, squeeze=False)
+    fig5, axes5 = plt.subplots(len(forces), 1, figsize=(8, 1.8 * len(forces)), sharex=True, squeeze=False)
+    for row, force in enumerate(forces):
+        with h5py.File(fe_dirs[force] / "transient.h5", "r") as f:
+            t_ms = f["time_s"][:] * 1e3
+            ax = axes9[row, 0]
+            ax.plot(t_ms, f["tip_displacement_m"][:] * 1e3, ":", lw=0.8, label="transducer tip")
+            for body, style in (("ball", "-"), ("stem", "--")):
+                z = f[f"{body}_position_m"][:, -1]
+                ax.plot(t_ms, (z - z[0]) * 1e3, style, lw=0.8, label={"ball": "free mass", "stem": "drill stem"}[body])
+            ax.set_ylabel("disp. [mm]")
+            ax.set_title(f"{force:g} N downforce", fontsize=9)
+            axes5[row, 0].plot(t_ms, np.linalg.norm(f["stem_rock_force_N"][:], axis=1), lw=0.6)
+            axes5[row, 0].set_ylabel("force [N]")
+            axes5[row, 0].set_title(f"{force:g} N downforce", fontsize=9)
+    axes9[0, 0].legend(fontsize=8, loc="upper right")
+    axes9[-1, 0].set_xlabel("time [ms]")
+    axes5[-1, 0].set_xlabel("time [ms]")
+    paths = [out / "fig9_displacements.png", out / "fig5_rock_force.png"]
+    for fig, path in zip((fig9, fig5), paths):
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return paths
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--fe-dir", action="append", default=[], help="FORCE=DIR of a finished FE run")
     parser.add_argument("--duration-s", type=float, default=0.2, help="lumped window (the FE runs' length)")
+    parser.add_argument("--plot-dir", type=Path, help="write Fig. 9 / Fig. 5-like plots of the FE runs here")
     args = parser.parse_args()
     fe_dirs = {float(k): Path(v) for k, v in (item.split("=", 1) for item in args.fe_dir)}
+    if args.plot_dir and fe_dirs:
+        for path in plot_figures(fe_dirs, args.plot_dir):
+            print(f"wrote {path}")
     forces = sorted(fe_dirs) or [0.0, 3.0, 6.0, 9.0]
     print("| downforce | tier | " + " | ".join(c[1] for c in COLUMNS) + " |")
     print("|---|---|" + "---|" * len(COLUMNS))
