@@ -45,6 +45,16 @@ def sphere_gap(y, center, radius):
     return ufl.sqrt(ufl.dot(y - center, y - center)) - radius
 
 
+def sphere_gap_from_pole(e, pole, radius):
+    """Gap [m] of the points y = center + radius * pole + e to the sphere, for a unit ``pole``:
+    (|e|^2 + 2 R pole.e) / (|R pole + e| + R), the same value as |y - center| - R without its
+    cancellation (|y - center| ~ R rounds at eps R: 2e-15 m at R = 10 m, which a 1e12 Pa/m penalty
+    turns into residual noise above any Newton tolerance). Well conditioned where |e| << R, i.e.
+    near the pole."""
+    d = radius * pole + e
+    return (ufl.dot(e, e) + 2 * radius * ufl.dot(pole, e)) / (ufl.sqrt(ufl.dot(d, d)) + radius)
+
+
 def sphere_normal(y, center, radius):
     d = y - center
     return d / ufl.sqrt(ufl.dot(d, d))

@@ -40,7 +40,9 @@ class Friction:
 @dataclass(frozen=True)
 class ObstacleShape:
     """Shape of the rigid body seen by an FE surface: ``"plane"`` with outward unit ``normal``
-    through the body position + ``offset_m``, or ``"sphere"`` of ``radius_m`` centred there."""
+    through the body position + ``offset_m``, or ``"sphere"`` of ``radius_m`` centred there; for a
+    sphere an optional unit ``normal`` is the pole, the direction from the centre towards where
+    contact happens, about which the gap is formed without round-off (large radii)."""
 
     kind: str
     normal: tuple[float, ...] = ()
@@ -56,6 +58,8 @@ class ObstacleShape:
                 raise ValueError("a plane obstacle needs a unit normal")
         if self.kind == "sphere" and not self.radius_m > 0:
             raise ValueError("a sphere obstacle needs a positive radius")
+        if self.kind == "sphere" and self.normal and not np.isclose(np.linalg.norm(self.normal), 1.0):
+            raise ValueError("the pole of a sphere obstacle must be a unit vector")
 
 
 class MidpointFields:
@@ -96,6 +100,7 @@ class SurfaceContact:
         # (x - p_ref).n + (u - dz).n. Forming x + u - p directly would round at eps |x| (1e-17 m on
         # a 0.1 m part), which a stiff penalty turns into residual noise that Newton cannot beat.
         self.body_reference = fem.Constant(mesh, np.zeros(gdim))
+        self._pole_point = fem.Constant(mesh, np.zeros(gdim))
         self.body_displacement = fem.Constant(mesh, np.zeros(gdim))
         self.body_velocity = fem.Constant(mesh, np.zeros(gdim))
         self.stiffness = fem.Constant(mesh, float(stiffness_Pa_per_m))
@@ -114,6 +119,13 @@ class SurfaceContact:
         if shape.kind == "plane":
             normal = ufl.as_vector(shape.normal)
             gap = cf.plane_gap(relative, zero, normal)
+        elif shape.normal:
+            normal = cf.sphere_normal(relative, zero, shape.radius_m)
+            # e = y - (centre + R pole) = (x - pole point at the reference) + (u - dz): the pole
+            # point is summed once in floating point (set_body_reference), so e has no |centre|
+            # or R-sized intermediate.
+            local = (x - self._pole_point) + (u - self.body_displacement)
+            gap = cf.sphere_gap_from_pole(local, ufl.as_vector(shape.normal), shape.radius_m)
         else:
             normal = cf.sphere_normal(relative, zero, shape.radius_m)
             gap = cf.sphere_gap(relative, zero, shape.radius_m)
@@ -145,6 +157,10 @@ class SurfaceContact:
         """Fix the reference position of the body (its initial position; any fixed value works,
         a value close to the motion keeps the gap's round-off small)."""
         self.body_reference.value[:] = position_m
+        if self.shape.kind == "sphere" and self.shape.normal:
+            offset = np.asarray(self.shape.offset_m) if self.shape.offset_m else 0.0
+            self._pole_point.value[:] = (np.asarray(position_m, dtype=float) + offset
+                                         + self.shape.radius_m * np.asarray(self.shape.normal))
 
     def set_body_state(self, position_m: np.ndarray, velocity_m_per_s: np.ndarray) -> None:
         self.body_displacement.value[:] = np.asarray(position_m) - self.body_reference.value

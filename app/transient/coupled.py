@@ -56,10 +56,12 @@ from forms.newmark import (
 SNES_PREFIX = "transient_"
 SNES_DEFAULTS = {
     "snes_type": "newtonls",
-    # Semi-smooth Newton: the penalty residual is piecewise smooth with an exact tangent, so full
-    # steps converge in a few iterations once the active set settles; a backtracking search on
-    # this non-smooth residual only costs Jacobian products. Failure -> cut-back (control.py).
-    "snes_linesearch_type": "basic",
+    # Semi-smooth Newton with backtracking: the penalty residual is piecewise smooth with an exact
+    # tangent, so full steps are taken once the active set settles; where they are not a descent
+    # (velocity-weakening friction, mu falling from mu_s to mu_d with slip speed, made full steps
+    # cycle against a curved obstacle) the search shortens them. On the condensed system a trial
+    # step costs a contact evaluation and a small dense product. Failure -> cut-back (control.py).
+    "snes_linesearch_type": "bt",
     "snes_rtol": 1e-10,
     "snes_stol": 1e-14,
     "snes_max_it": 20,

@@ -121,7 +121,7 @@ class TransientModel:
                     raise CaseError(file, f"transient.contacts[{i}].normal", f"needs {gdim} components")
                 try:
                     shape = (ObstacleShape("plane", normal=tuple(c.normal)) if c.shape == "plane"
-                             else ObstacleShape("sphere", radius_m=c.radius_m))
+                             else ObstacleShape("sphere", radius_m=c.radius_m, normal=tuple(c.normal or ())))
                 except ValueError as exc:
                     raise CaseError(file, f"transient.contacts[{i}].normal", str(exc)) from None
                 surface.append(SurfaceContact(c.name, self.fe, model.mesh_data.facet_tags, tag, c.body, shape,

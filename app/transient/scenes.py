@@ -251,6 +251,8 @@ class FrictionBlock:
     decay_s_per_m: float = 100.0                    # DC
     shear_cap_Pa: float = 1e20                      # TAUMAX
     regularisation_speed_m_per_s: float = 1e-4
+    obstacle_radius_m: float | None = None          # None: the plane y = 0; else a sphere touching it at the
+                                                    # block's middle from below (centre (w/2, -R))
 
     @property
     def mass_kg(self) -> float:
@@ -266,7 +268,8 @@ class FrictionBlock:
 
 def build_friction_block(comm, block: FrictionBlock, scheme: TimeScheme, elements: int = 2):
     """-> (CoupledSystem, initial state) of :class:`FrictionBlock`: the block rests on the plane y = 0
-    (the fixed body "ground"), contact "block_ground" on its bottom facets with friction."""
+    or on top of a sphere (the fixed body "ground"), contact "block_ground" on its bottom facets with
+    friction."""
     from app.transient.contact import Friction
 
     msh = mesh.create_rectangle(comm, [np.array([0.0, 0.0]), np.array([block.width_m, block.height_m])],
@@ -288,10 +291,15 @@ def build_friction_block(comm, block: FrictionBlock, scheme: TimeScheme, element
     fdim = msh.topology.dim - 1
     bottom = mesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[1], 0.0))
     tags = mesh.meshtags(msh, fdim, np.sort(bottom), np.full(bottom.size, 1, dtype=np.int32))
-    rigid = RigidSet([fixed_body("ground", [0.0, 0.0])])
+    if block.obstacle_radius_m is None:
+        rigid = RigidSet([fixed_body("ground", [0.0, 0.0])])
+        shape = ObstacleShape("plane", normal=(0.0, 1.0))
+    else:
+        rigid = RigidSet([fixed_body("ground", [0.5 * block.width_m, -block.obstacle_radius_m])])
+        shape = ObstacleShape("sphere", radius_m=block.obstacle_radius_m, normal=(0.0, 1.0))
     friction = Friction(block.mu_dynamic, block.static_ratio, block.decay_s_per_m, block.shear_cap_Pa,
                         block.regularisation_speed_m_per_s)
-    contact = SurfaceContact("block_ground", fe, tags, 1, "ground", ObstacleShape("plane", normal=(0.0, 1.0)),
+    contact = SurfaceContact("block_ground", fe, tags, 1, "ground", shape,
                              block.penalty_Pa_per_m, block.normal_damping_Pa_s_per_m, friction=friction,
                              fields=MidpointFields(fe))
     system = CoupledSystem(comm, scheme, fe, rigid, [contact])

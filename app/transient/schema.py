@@ -88,7 +88,9 @@ class ContactSection:
     node_point: str | None = param(None, doc="named [points] entry; its nearest FE node is the contact node (node)")
     shape: Literal["plane", "sphere"] = param("plane", doc="obstacle shape of the body (surface)")
     normal: list[float] | None = param(
-        None, doc="plane: outward unit normal, towards the FE body; node: unit vector from sphere centre to node")
+        None, doc="plane: outward unit normal, towards the FE body; sphere (optional): unit vector from the centre "
+                  "towards the contact zone, the gap is then formed without round-off (large radii); node: unit "
+                  "vector from sphere centre to node")
     radius_m: float | None = param(None, gt=0, unit="m", doc="sphere radius (surface sphere, node)")
     # point contacts
     lower: str | None = param(None, doc="lower body (point)")
