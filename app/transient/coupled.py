@@ -110,7 +110,7 @@ class CoupledSystem:
         self.last_iterations = 0
         self.total_iterations = 0
         self.linear_steps = 0           # steps solved without SNES (no FE contact force)
-        self._evaluated = None
+        self._evaluated = self._fe_key = None
 
     # ----------------------------------------------------------------- setup
     def _setup_contact_dofs(self) -> None:
@@ -237,7 +237,7 @@ class CoupledSystem:
     def _begin_step(self, state: TransientState, dt: float) -> None:
         s, fe, rigid = self.scheme, self.fe, self.rigid
         self.state0, self.dt = state, dt
-        self._evaluated = None
+        self._evaluated = self._fe_key = None
         self.t1 = state.t + dt
         self.t_mid = midpoint(self.t1, state.t, s.alpha_f)
         self.c_acc = acceleration_per_displacement(dt, s)
@@ -314,16 +314,16 @@ class CoupledSystem:
             # beta dt^2 would drown the accelerations in round-off at small dt.
             X[self.contact_global.size:] = dz
 
-    def _split(self, x: np.ndarray) -> tuple[np.ndarray | None, np.ndarray]:
-        """(du owned entries or None without FE, dz on every rank) of the iterate ``x`` (local
-        array of the unknown (g, dz))."""
+    def _split(self, x: np.ndarray):
+        """(du owned entries or None without FE, dz on every rank, a key equal for equal du or
+        None) of the iterate ``x`` (local array of the unknown (g, dz))."""
         self._unknown = unknown = self._replicated(x)
         s_count = self.contact_global.size
         du = None
+        g = unknown[:s_count]
         if self.fe is not None:
-            g = unknown[:s_count]
             du = self._w.array_r - self.op.columns @ g if g.any() else self._w.array_r
-        return du, unknown[s_count:]
+        return du, unknown[s_count:], g.tobytes()
 
     def _evaluate(self, X: PETSc.Vec) -> None:
         """Set u_{n+1}, z_{n+1} and every derived (mid-point) quantity from the iterate X.
@@ -338,9 +338,13 @@ class CoupledSystem:
         if same:
             return
         self._evaluated = np.array(x)
-        du, dz = self._split(x)
+        du, dz, fe_key = self._split(x)
         s, st, dt = self.scheme, self.state0, self.dt
-        if self.fe is not None:
+        # Iterates that differ only in the rigid increments (the contact-free path) share the FE
+        # fields: keep them (the key is replicated, so every rank decides alike).
+        same_fe = fe_key is not None and fe_key == self._fe_key
+        self._fe_key = fe_key
+        if self.fe is not None and not same_fe:
             self._u1.vector.array_w[:] = self._u_pred.array_r + du
             self._u1.x.scatter_forward()
             u1 = self._u1.x.array
@@ -522,7 +526,7 @@ class CoupledSystem:
     def full_residual_norm(self) -> float:
         """|r0 + A du + E rc| of the FE equations plus the rigid residual at the evaluated iterate:
         the residual of the uncondensed system (one extra mat-vec; for tests and diagnostics)."""
-        self._evaluated = None          # the shared mid-point fields may hold other values by now
+        self._evaluated = self._fe_key = None   # the shared mid-point fields may hold other values by now
         self._evaluate(self.X)
         r = self._r
         self._du.array_w[:] = self._u1.vector.array_r - self._u_pred.array_r

@@ -42,7 +42,7 @@ class FullSpaceSystem(CoupledSystem):
             dz = np.array(x[n:])
         else:
             dz = self.comm.bcast(np.array(x[n:]) if self.comm.rank == 0 else None, root=0)
-        return (np.array(x[:n]) if self.fe is not None else None), dz
+        return (np.array(x[:n]) if self.fe is not None else None), dz, None
 
     def _residual_callback(self, snes, X, R) -> None:
         self._evaluate(X)
@@ -73,7 +73,7 @@ class FullSpaceSystem(CoupledSystem):
 
     def apply_inverse(self, x: np.ndarray, y: np.ndarray) -> None:
         n, s_count = self.n_fe, self.contact_global.size
-        _, r_z = FullSpaceSystem._split(self, x)
+        _, r_z, _ = FullSpaceSystem._split(self, x)
         if self.fe is not None:
             self._tmp.array_w[:] = x[:n]
             self.op.solve(self._tmp, self._tmp2)
@@ -94,7 +94,7 @@ class FullSpaceSystem(CoupledSystem):
 
     def apply_jacobian(self, x: np.ndarray, y: np.ndarray) -> None:
         n, s_count = self.n_fe, self.contact_global.size
-        _, x_z = FullSpaceSystem._split(self, x)
+        _, x_z, _ = FullSpaceSystem._split(self, x)
         if self.fe is not None:
             self._tmp.array_w[:] = x[:n]
             self.op.constrained.mult(self._tmp, self._tmp2)
