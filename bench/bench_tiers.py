@@ -11,7 +11,9 @@ the deviations are those of statistics over the window, not of trajectories.
     /work/main/.venv/bin/python bench/bench_tiers.py --fe-dir 0=/tmp/drill_0N --fe-dir 3=/tmp/drill_3N ...
         [--plot-dir DIR]
 
-``--plot-dir`` also writes the FE runs as the drill paper's figures: ``fig9_displacements.png``
+``--fe-dir`` may repeat a downforce: FE runs that differ only in round-off (e.g. two solver versions)
+show the run-to-run spread of a 200 ms statistic of this chaotic motion, the yardstick for the
+tiers' differences. ``--plot-dir`` also writes the FE runs as the drill paper's figures: ``fig9_displacements.png``
 (tip, free mass and stem displacement, one panel per downforce) and ``fig5_rock_force.png``
 (stem/rock contact force, one panel per downforce).
 """
@@ -117,31 +119,46 @@ def main():
     parser.add_argument("--duration-s", type=float, default=0.2, help="lumped window (the FE runs' length)")
     parser.add_argument("--plot-dir", type=Path, help="write Fig. 9 / Fig. 5-like plots of the FE runs here")
     args = parser.parse_args()
-    fe_dirs = {float(k): Path(v) for k, v in (item.split("=", 1) for item in args.fe_dir)}
+    fe_dirs: dict[float, list[Path]] = {}
+    for item in args.fe_dir:
+        key, value = item.split("=", 1)
+        fe_dirs.setdefault(float(key), []).append(Path(value))
     if args.plot_dir and fe_dirs:
-        for path in plot_figures(fe_dirs, args.plot_dir):
+        for path in plot_figures({k: v[0] for k, v in fe_dirs.items()}, args.plot_dir):
             print(f"wrote {path}")
     forces = sorted(fe_dirs) or [0.0, 3.0, 6.0, 9.0]
     print("| downforce | tier | " + " | ".join(c[1] for c in COLUMNS) + " |")
     print("|---|---|" + "---|" * len(COLUMNS))
+
+    def cells_of(row):
+        return [fmt.format(row[key] * (1e3 if key == "rock_impulse_N_s" else 1)) for key, _, fmt in COLUMNS]
+
     for force in forces:
         lumped = lumped_row(force, args.duration_s)
-        rows = [("lumped", lumped)]
-        if force in fe_dirs:
-            fe = fe_row(fe_dirs[force], force)
-            rows.insert(0, (f"FE ({fe['simulated_ms']:.0f} ms, {fe['cutbacks']} cut-backs)", fe))
-        for tier, row in rows:
-            cells = [fmt.format(row[key] * (1e3 if key == "rock_impulse_N_s" else 1)) for key, _, fmt in COLUMNS]
-            print(f"| {force:g} N | {tier} | " + " | ".join(cells) + " |")
-        if force in fe_dirs:
-            cells = []
-            for key, _, _ in COLUMNS:
-                if key == "wall_s_per_ms":
-                    cells.append(f"{fe['wall_s_per_ms'] / lumped['wall_s_per_ms']:.0f}x faster")
-                else:
-                    ref = fe[key]
-                    cells.append(f"{(lumped[key] - ref) / ref:+.0%}" if ref else "n/a")
-            print(f"| {force:g} N | lumped vs FE | " + " | ".join(cells) + " |")
+        fe_runs = [fe_row(d, force) for d in fe_dirs.get(force, [])]
+        for fe in fe_runs:
+            tier = f"FE ({fe['simulated_ms']:.0f} ms, {fe['cutbacks']} cut-backs)"
+            print(f"| {force:g} N | {tier} | " + " | ".join(cells_of(fe)) + " |")
+        print(f"| {force:g} N | lumped | " + " | ".join(cells_of(lumped)) + " |")
+        if not fe_runs:
+            continue
+        mean = {key: float(np.mean([fe[key] for fe in fe_runs])) for key, _, _ in COLUMNS}
+        cells = []
+        for key, _, _ in COLUMNS:
+            if key == "wall_s_per_ms":
+                cells.append(f"{mean[key] / lumped[key]:.0f}x faster")
+            else:
+                cells.append(f"{(lumped[key] - mean[key]) / mean[key]:+.0%}" if mean[key] else "n/a")
+        label = "lumped vs FE" + (f" (mean of {len(fe_runs)})" if len(fe_runs) > 1 else "")
+        print(f"| {force:g} N | {label} | " + " | ".join(cells) + " |")
+        if len(fe_runs) > 1:
+            # The motion is chaotic: runs that differ only in round-off (solver version) give the
+            # spread of a 200 ms statistic, the yardstick for the tiers' differences.
+            cells = ["-"]
+            for key, _, _ in COLUMNS[1:]:
+                half_range = (max(fe[key] for fe in fe_runs) - min(fe[key] for fe in fe_runs)) / 2
+                cells.append(f"±{half_range / abs(mean[key]):.0%}" if mean[key] else "n/a")
+            print(f"| {force:g} N | FE run-to-run spread | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":
