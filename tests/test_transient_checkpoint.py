@@ -106,6 +106,22 @@ def test_serial_checkpoint_resumes_on_two_ranks(one_go, tmp_path):
     assert_same_series(reference, read_series(tmp_path / "transient.h5"), rtol=1e-7)
 
 
+def test_summary_reports_impact_statistics(one_go):
+    """The drill run's summary carries the tier-comparable statistics (app/transient/impacts.py)."""
+    _, summary = one_go
+    stats = summary["results"]["transient"]["statistics"]
+    assert set(stats["impact_rate_per_s"]) == {"tip_ball", "ball_stem", "stem_rock"}
+    contacts = summary["results"]["transient"]["contacts"]
+    for name, count in stats["impact_count"].items():
+        assert count <= contacts[name]["impacts"]          # closed at the first step is no impact
+    rock = stats["stem_rock_foundation"]
+    assert rock["mean_force_N"] > 0 and rock["peak_force_N"] >= rock["mean_force_N"]
+    assert rock["mean_force_N"] * stats["simulated_time_s"] == pytest.approx(
+        contacts["stem_rock"]["impulse_N_s"], rel=1e-9)
+    assert {"max_rise_m", "flight_count"} <= set(stats["transducer"])
+    assert set(stats["bodies"]) == {"ball", "stem"}
+
+
 def test_resume_of_a_different_case_is_refused(one_go, tmp_path):
     out_ref, _ = one_go
     result = run_cli("run", CASES / CASE, "--resume", out_ref,
