@@ -3,9 +3,9 @@
 M, C and K are assembled once without boundary conditions (residuals need the full rows and
 columns so that time-varying Dirichlet values, e.g. the drive voltage, act on the free DOFs). The
 effective matrix K_eff = w_M M + w_C C + w_K K of the generalized-alpha scheme depends only on dt:
-it is built, constrained (Dirichlet rows and columns -> identity) and LU-factorised with MUMPS once
-per distinct dt, and kept in a small cache so the step controller can switch between its few step
-sizes without refactorising.
+it is built, constrained (Dirichlet rows and columns -> identity) and LU-factorised once per distinct
+dt (PETSc's LU on one rank, MUMPS on several), and kept in a small cache so the step controller
+can switch between its few step sizes without refactorising.
 """
 
 from __future__ import annotations
@@ -131,9 +131,9 @@ class LinearFE:
 
 
 class EffectiveOperator:
-    """K_eff for one dt: the unconstrained matrix (for residuals) and a MUMPS factorisation of the
+    """K_eff for one dt: the unconstrained matrix (for residuals) and an LU factorisation of the
     constrained one, plus K_eff^-1 applied to the unit vectors of the contact DOFs (the columns
-    the bordered solve needs), computed once per dt."""
+    the condensed contact system needs), computed once per dt."""
 
     def __init__(self, fe: LinearFE, dt: float, scheme: TimeScheme, contact_global_dofs: np.ndarray):
         self.dt = dt
