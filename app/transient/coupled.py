@@ -201,9 +201,10 @@ class CoupledSystem:
         result, needs no contact tangent: take one Newton step with zero FE contact blocks (the
         rigid block keeps mass and Kelvin-Voigt links) without SNES and its Python callbacks, check
         the residual with the same absolute/relative test as SNES and return the converged reason;
-        None (X left at a valid guess) hands the step to SNES. Same arithmetic as SNES' first
-        iteration (basic line search), so the result does not depend on the path; if a rigid-rigid
-        link opens or closes within the step, the residual test fails and SNES iterates."""
+        None (X left at a valid guess) hands the step to SNES. Same arithmetic as SNES' first full
+        Newton step (which its line search takes when it reduces the residual), so the result does
+        not depend on the path; if a rigid-rigid link opens or closes within the step, the residual
+        test fails and SNES iterates."""
         X, R = self.X, self.R
         self._residual_callback(None, X, R)
         if self._fe_contact_active:
