@@ -42,7 +42,7 @@ def fe_row(directory: Path, force_N: float) -> dict:
     stats = tr.get("statistics")
     if not stats:      # runs written before the statistics existed: same numbers from the series
         case = load_case(ROOT / "cases" / "usdc-fe.toml", [f"transient.loads.fe_force_N=[0.0,{-force_N!r}]"])
-        stats = statistics_from_file(directory / tr["time_series"], case.transient)
+        _, stats = statistics_from_file(directory / tr["time_series"], case.transient)
     rock = stats["stem_rock_foundation"]
     return {"wall_s_per_ms": tr["wall_s_per_simulated_ms"], "simulated_ms": tr["simulated_time_s"] * 1e3,
             "cutbacks": tr["cutbacks"],

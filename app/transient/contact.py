@@ -52,13 +52,12 @@ class ObstacleShape:
     def __post_init__(self):
         if self.kind not in ("plane", "sphere"):
             raise ValueError(f"unknown obstacle shape {self.kind!r}")
-        if self.kind == "plane":
-            n = np.asarray(self.normal, dtype=float)
-            if n.size == 0 or not np.isclose(np.linalg.norm(n), 1.0):
-                raise ValueError("a plane obstacle needs a unit normal")
+        unit = bool(self.normal) and np.isclose(np.linalg.norm(self.normal), 1.0)
+        if self.kind == "plane" and not unit:
+            raise ValueError("a plane obstacle needs a unit normal")
         if self.kind == "sphere" and not self.radius_m > 0:
             raise ValueError("a sphere obstacle needs a positive radius")
-        if self.kind == "sphere" and self.normal and not np.isclose(np.linalg.norm(self.normal), 1.0):
+        if self.kind == "sphere" and self.normal and not unit:
             raise ValueError("the pole of a sphere obstacle must be a unit vector")
 
 

@@ -253,7 +253,6 @@ class CoupledSystem:
             self._condense()
         z0, zd0, zdd0 = state.z, state.zd, state.zdd
         self.zdd_hat = acceleration(0.0, 0.0, zd0, zdd0, dt, s)
-        self.zd_hat = velocity(self.zdd_hat, zd0, zdd0, dt, s)
         self.rigid_force_ext = rigid.external_force_N(self.t_mid)
         self.rigid_inertia_const = rigid.mass_diagonal * ((1 - s.alpha_m) * self.zdd_hat + s.alpha_m * zdd0)
         rigid_scale_sq = float(np.sum(self.rigid_force_ext**2 + (rigid.mass_diagonal * zdd0) ** 2))
@@ -293,10 +292,9 @@ class CoupledSystem:
         return scale_sq
 
     def _condense(self) -> None:
-        """w = -K_eff^-1 r0 (the FE solution without contact forces) and its contact entries."""
+        """w = -K_eff^-1 r0: the FE solution without contact forces."""
         self.op.solve(self._r0, self._w)
         self._w.scale(-1.0)
-        self._w_S = self._gather_S(self._w.array_r)
 
     def _contact_block(self) -> np.ndarray:
         """G_SS = E^T K_eff^-1 E of the current operator (s x s, every rank), formed once per dt."""

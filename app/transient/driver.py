@@ -277,7 +277,6 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                               resume_rows=resumed.rows if resumed is not None else None)
     system, model = tm.system, tm.model
     contact_names = system.contact_names
-    stats_rows: list = _rows_from_series(h5_path, contact_names, resumed.rows, comm) if resumed else []
 
     fields = None
     if case.output.fields:
@@ -303,8 +302,6 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
             row[f"{name}_force_N"] = rec["contact_force_N"][name]
             row[f"{name}_closed"] = float(rec["contact_closed"][j])
         series.write(row)
-        stats_rows.append((rec["time_s"], rec["dt_s"], [np.linalg.norm(rec["contact_force_N"][n]) for n in
-                                                        contact_names], rec["contact_closed"].copy()))
 
     s = cfg.steps
     sizes = StepSizes(open_s=s.open_s, closed_s=s.closed_s, change_s=s.change_s, min_s=s.min_s)
@@ -331,13 +328,13 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                     "drive_voltage_V": voltage, "drive_frequency_Hz": cfg.drive.frequency_Hz,
                     "initial_state": cfg.initial_state, "time_series": h5_path.name,
                     "checkpoint": f"{checkpoint.dir.name}/{POINTER}", "checkpoints_written": checkpoint.written,
-                    "contacts": _contact_summary(contact_names, stats_rows),
                     "fields": (fields.path.name if fields is not None else None),
                     "field_outputs": (fields.written if fields is not None else 0)})
     log(f"transient: {results['steps']} steps, {results['newton_iterations']} Newton iterations, "
         f"{results['cutbacks']} cut-backs, {results['factorisations']} factorisations, {wall:.1f} s wall")
-    statistics = statistics_from_file(h5_path, case.transient) if comm.rank == 0 else None
-    results["statistics"] = comm.bcast(statistics, root=0)
+    # Contact summary and statistics from the whole time series (a resumed run's too), rank 0.
+    summaries = statistics_from_file(h5_path, case.transient) if comm.rank == 0 else None
+    results["contacts"], results["statistics"] = comm.bcast(summaries, root=0)
     if case.output.plots and comm.rank == 0:
         bodies = [b.name for b in tm.rigid.bodies if b.free_axes_mask.any()]
         force_contact = contact_names[-1] if contact_names else None
@@ -358,37 +355,3 @@ class _SeriesCheckpoint:
 
     def write(self, state, snapshot) -> None:
         self.writer.write(state, snapshot, rows_of=lambda: self.series.rows_written)
-
-
-def _rows_from_series(h5_path: Path, names: list[str], rows: int, comm) -> list:
-    """The per-step rows of the contact summary, read back from the first ``rows`` rows of the time
-    series of a resumed run (rank 0 reads, every rank gets them)."""
-    out = None
-    if comm.rank == 0:
-        out = []
-        if rows:
-            import h5py
-
-            with h5py.File(h5_path, "r") as f:
-                t, dt = f["time_s"][:rows], f["dt_s"][:rows]
-                forces = [np.linalg.norm(f[f"{n}_force_N"][:rows], axis=1) for n in names]
-                closed = [f[f"{n}_closed"][:rows] for n in names]
-            for i in range(rows):
-                out.append((float(t[i]), float(dt[i]), [float(fc[i]) for fc in forces],
-                            np.array([c[i] for c in closed], dtype=np.int8)))
-    return comm.bcast(out, root=0)
-
-
-def _contact_summary(names, rows) -> dict:
-    out = {}
-    if not rows:
-        return out
-    dt = np.array([r[1] for r in rows])
-    forces = np.array([r[2] for r in rows]).reshape(len(rows), len(names))
-    closed = np.array([r[3] for r in rows]).reshape(len(rows), len(names))
-    for j, name in enumerate(names):
-        impacts = int(np.sum(np.diff(np.concatenate([[0], closed[:, j]])) == 1))
-        out[name] = {"impacts": impacts, "max_force_N": float(forces[:, j].max()),
-                     "impulse_N_s": float(np.sum(forces[:, j] * dt)),
-                     "closed_time_s": float(np.sum(dt * (closed[:, j] > 0)))}
-    return out

@@ -41,13 +41,30 @@ def period_average(t_s: np.ndarray, x: np.ndarray, period_s: float, samples_per_
     return centre, mean
 
 
-def statistics_from_file(h5_path: Path, cfg) -> dict:
-    """:func:`run_statistics` of the time series in ``h5_path`` (rank 0 only)."""
+def statistics_from_file(h5_path: Path, cfg) -> tuple[dict, dict]:
+    """(:func:`contact_summary`, :func:`run_statistics`) of the time series in ``h5_path``
+    (rank 0 only)."""
     import h5py
 
     with h5py.File(h5_path, "r") as f:
         data = {name: f[name][:] for name in f}
-    return run_statistics(data, cfg)
+    return contact_summary(data, [c.name for c in cfg.contacts]), run_statistics(data, cfg)
+
+
+def contact_summary(data: dict[str, np.ndarray], names: list[str]) -> dict:
+    """Per contact: closings (a contact closed at the first step counts as one), largest force
+    [N], impulse sum |f| dt [N s] and time closed [s]."""
+    if "time_s" not in data or not data["time_s"].size:
+        return {}
+    dt = data["dt_s"]
+    out = {}
+    for name in names:
+        force = np.linalg.norm(data[f"{name}_force_N"], axis=1)
+        closed = data[f"{name}_closed"]
+        impacts = int(np.sum(np.diff(np.concatenate([[0], closed])) == 1))
+        out[name] = {"impacts": impacts, "max_force_N": float(force.max()), "impulse_N_s": float(np.sum(force * dt)),
+                     "closed_time_s": float(np.sum(dt * (closed > 0)))}
+    return out
 
 
 def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
@@ -56,14 +73,14 @@ def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
     if "time_s" not in data or data["time_s"].shape[0] < 2:
         return {}
     t = data["time_s"]
-    series = data.__getitem__
+    dt = data["dt_s"] if "dt_s" in data else np.diff(t, prepend=t[0])
     duration = float(t[-1] - t[0])
     stats: dict = {"simulated_time_s": duration}
     fixed = {b.name for b in cfg.bodies if b.fixed}
     counts, rates = {}, {}
     fe_closed = np.zeros(t.size, dtype=bool)
     for c in cfg.contacts:
-        closed = series(f"{c.name}_closed")
+        closed = data[f"{c.name}_closed"]
         intervals = closed_intervals(closed)
         impacts = sum(1 for a, _ in intervals if a > 0)     # closed from the first step: no impact
         counts[c.name] = impacts
@@ -71,13 +88,12 @@ def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
         if c.kind in ("surface", "node"):
             fe_closed |= closed > 0
         if c.kind == "point" and c.lower in fixed:
-            force = np.linalg.norm(series(f"{c.name}_force_N"), axis=1)
+            force = np.linalg.norm(data[f"{c.name}_force_N"], axis=1)
             normal = np.asarray(c.direction, dtype=float) / np.linalg.norm(c.direction)
             # The recorded force acts at the step's generalised mid-point; the work it does is
             # f . d(delta) per step (the scheme's own energy pairing), with d(delta) = -n . dz.
-            penetration_step = -np.diff(series(f"{c.upper}_position_m") @ normal, prepend=np.nan)
+            penetration_step = -np.diff(data[f"{c.upper}_position_m"] @ normal, prepend=np.nan)
             penetration_step[0] = 0.0
-            dt = series("dt_s") if "dt_s" in data else np.diff(t, prepend=t[0])
             impulses = [float(np.sum(force[a:b + 1] * dt[a:b + 1])) for a, b in intervals]
             work = float(np.sum(force * penetration_step))
             stats[f"{c.name}_foundation"] = {
@@ -94,7 +110,7 @@ def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
     point = cfg.drive.point if f"{cfg.drive.point}_displacement_m" in data else None
     if point is not None:
         period = 1.0 / cfg.drive.frequency_Hz
-        tip = series(f"{point}_displacement_m")
+        tip = data[f"{point}_displacement_m"]
         t_mean, z_mean = period_average(t, tip, period)
         z_start = z_mean[0]
         flights, apexes = [], []
@@ -122,8 +138,8 @@ def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
     for b in cfg.bodies:
         if b.fixed or f"{b.name}_position_m" not in data:
             continue
-        z = series(f"{b.name}_position_m")[:, -1]
-        v = series(f"{b.name}_velocity_m_per_s")[:, -1]
+        z = data[f"{b.name}_position_m"][:, -1]
+        v = data[f"{b.name}_velocity_m_per_s"][:, -1]
         bodies[b.name] = {"max_rise_m": float(z.max() - z[0]),
                           "rms_velocity_m_per_s": float(np.sqrt(np.trapz(v**2, t) / duration))}
     stats["bodies"] = bodies
