@@ -47,6 +47,19 @@ class Region:
 class Electrode:
     facets: list[TagRef] = param(doc="facet group names or tags")
     kind: Literal["ground", "voltage", "floating"] = param(doc="0 V, driven, or equipotential with zero charge")
+    amplitude_V: float | None = param(
+        None, ge=0, unit="V", doc="drive amplitude of this electrode (kind 'voltage'); default: the analysis' "
+                                  "voltage_V. A target-amplitude solve scales every electrode by one factor")
+    phase_deg: float = param(
+        0.0, unit="deg", doc="drive phase of this electrode (kind 'voltage'): U(t) = A cos(omega t + phase), "
+                             "phasor A exp(i phase)")
+
+    def check(self, file, prefix):
+        if self.kind != "voltage":
+            for key, unset in (("amplitude_V", self.amplitude_V is None), ("phase_deg", self.phase_deg == 0.0)):
+                if not unset:
+                    raise CaseError(file, f"{prefix}.{key}",
+                                    f"only for electrodes of kind 'voltage', not {self.kind!r}")
 
 
 @dataclass(frozen=True)
