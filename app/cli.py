@@ -9,8 +9,17 @@ import sys
 from app import __version__
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a bad command line as one CaseError line (exit 2, rank 0 only)."""
+
+    def error(self, message):
+        from app.errors import CaseError
+
+        raise CaseError("command line", None, f"{message} (see '{self.prog} --help')")
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="piezodyn", description="Piezoelectric actuators with contact and impact.")
+    parser = _Parser(prog="piezodyn", description="Piezoelectric actuators with contact and impact.")
     parser.add_argument("--version", action="version", version=f"piezodyn {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a case file")
@@ -47,18 +56,16 @@ def main(argv: list[str] | None = None) -> int:
             return sweep.main(argv[1:])
         args = _parser().parse_args(argv)
         if args.command == "validate":
-            from app.case.schema import load_case
+            from app.runner import check_case, load_for_run
 
-            case = load_case(args.case, args.set)
-            if case.tier == "fe":
-                from app.fe.model import build_model
-
-                build_model(case, MPI.COMM_WORLD)
+            check_case(load_for_run(args.case, args.set), MPI.COMM_WORLD)
             if rank == 0:
                 print(f"{args.case}: valid")
             return 0
         from app.runner import run_case
 
+        if args.resume and args.out and args.out != args.resume:
+            raise CaseError("--out", args.out, "give the output directory once: --resume DIR continues in DIR")
         out = args.resume or args.out
         run_case(args.case, args.set, out, quiet=args.quiet, resume=bool(args.resume))
         return 0

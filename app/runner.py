@@ -5,6 +5,7 @@ Phases (each timed): mesh, assemble, modal, harmonic, circuit, lumped / transien
 
 from __future__ import annotations
 
+import os
 import platform
 import sys
 from pathlib import Path
@@ -14,6 +15,7 @@ from mpi4py import MPI
 from app import __version__
 from app.case.schema import Case, load_case
 from app.case.validate import to_dict
+from app.errors import CaseError
 from app.exports import write_json_atomic
 from app.mpi_log import PhaseTimer, make_log
 
@@ -27,16 +29,71 @@ def versions() -> dict:
             "slepc4py": slepc4py.__version__, "python": platform.python_version()}
 
 
+def prepare_output_dir(path: str | Path, comm, flag: str = "--out", resume: bool = False) -> Path:
+    """Check (and unless ``resume``, create) an output directory on rank 0 and share the verdict,
+    so every rank raises the same CaseError (no rank waits for one that failed): an existing file,
+    a path under a file, a directory that cannot be created or written."""
+    path = Path(path)
+    why = None
+    if comm is None or comm.rank == 0:
+        why = _output_dir_problem(path, resume)
+    if comm is not None and comm.size > 1:
+        why = comm.bcast(why, root=0)
+    if why:
+        raise CaseError(flag, str(path), why)
+    return path
+
+
+def _output_dir_problem(path: Path, resume: bool) -> str | None:
+    if path.exists() and not path.is_dir():
+        return "is an existing file, not a directory"
+    if resume:
+        return None if path.is_dir() else "no such directory (nothing to resume)"
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except NotADirectoryError:
+        return "cannot be created: a parent is a file, not a directory"
+    except OSError as exc:
+        return f"cannot be created ({exc.strerror or exc})"
+    if not os.access(path, os.W_OK | os.X_OK):
+        return "is not writable"
+    return None
+
+
+def load_for_run(case_path: str | Path, overrides: list[str] | None, resume: bool = False) -> Case:
+    """Load and check a case for ``run`` (and ``validate``): the schema, and the CLI rules."""
+    case = load_case(case_path, overrides)
+    if resume and "transient" not in case.analyses:
+        raise CaseError(str(case_path), "--resume", f"only a transient analysis can be resumed; this case runs "
+                                                    f"{', '.join(case.analyses)}")
+    return case
+
+
+def check_case(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, log=None) -> None:
+    """Every input check that ``run`` makes, including those that need the mesh, without solving:
+    the FE model (groups, electrodes, points) and the transient model (drive point, contacts,
+    loads). Collective."""
+    if case.tier != "fe":
+        return
+    if "transient" in case.analyses:
+        from app.transient.driver import build
+
+        tm = build(case, comm, log or (lambda *a: None))
+        tm.system.destroy()
+    else:
+        from app.fe.model import build_model
+
+        build_model(case, comm)
+
+
 def run_case(case_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,
              comm: MPI.Comm = MPI.COMM_WORLD, quiet: bool = False, resume: bool = False) -> dict:
     log = make_log(comm, quiet)
     timer = PhaseTimer()
     with timer.phase("validate"):
-        case = load_case(case_path, overrides)
+        case = load_for_run(case_path, overrides, resume)
     out = Path(out_dir) if out_dir else Path("results") / Path(case_path).stem
-    if comm.rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
-    comm.barrier()
+    prepare_output_dir(out, comm, "--resume" if resume else "--out", resume)
     log(f"piezodyn {__version__}: {case.title or Path(case_path).name} -> {out}/ ({comm.size} MPI rank(s))")
     summary = {"case": to_dict(case), "versions": versions(), "mpi_size": comm.size, "results": {},
                "outputs": []}
@@ -45,9 +102,13 @@ def run_case(case_path: str | Path, overrides: list[str] | None = None, out_dir:
 
         with timer.phase("lumped"):
             summary["results"]["lumped"] = driver.run(case.lumped, out, comm, log)
+        files = summary["results"]["lumped"].get("files", {})
+        summary["outputs"] += [files["time_series"]] if "time_series" in files else []
+        summary["outputs"] += list(files.get("plots", []))
     else:
         run_fe(case, out, comm, log, timer, summary, resume)
     summary["wall_time_s"] = timer.seconds
+    summary["outputs"].append("summary.json")
     if comm.rank == 0:
         write_json_atomic(out / "summary.json", summary)
     log(f"summary: {out / 'summary.json'}")
@@ -117,6 +178,7 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
 
         with timer.phase("transient"):
             results["transient"] = transient_driver.run(case, out, comm, log, resume=resume)
+        summary["outputs"] += results["transient"].pop("outputs", [])
     print_table(results, log)
 
 
@@ -126,12 +188,10 @@ def write_modes(model, modal, out: Path, summary: dict) -> None:
     for state, modes in (("short", modal.short), ("open", modal.open)):
         if not modes:
             continue
-        name = f"modes_{state}.xdmf"
-        export = ModeShapeExport(out / name, model.mesh)
-        for i, mode in enumerate(modes):
-            export.write(model.displacement(mode.vector), i)
-        export.close()
-        summary["outputs"].append(name)
+        export = ModeShapeExport(out / f"modes_{state}.xdmf", model)
+        for mode in modes:
+            export.write(mode.vector, mode.frequency_Hz)
+        summary["outputs"] += export.close()
 
 
 def print_table(results: dict, log) -> None:

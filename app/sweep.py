@@ -346,7 +346,9 @@ def main(argv: list[str] | None = None) -> int:
         if not args.param:
             raise CaseError("--param", None, "give at least one --param KEY=V1,V2,...")
         params = [parse_param(text) for text in args.param]
-        out_dir = Path(args.out or f"sweep-{Path(args.case).stem}")
+        from app.runner import prepare_output_dir
+
+        out_dir = prepare_output_dir(args.out or f"sweep-{Path(args.case).stem}", comm, "--out")
         rows = run_sweep(args.case, params, out_dir, args.set, comm, progress=not args.no_progress)
     except CaseError as exc:
         if rank == 0:

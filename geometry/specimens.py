@@ -44,7 +44,9 @@ def _structured_rectangle(width: float, height: float, nx: int, ny: int, axisymm
     lines = {}
     for _, line in gmsh.model.getBoundary([(2, surface)], oriented=False):
         x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(1, line)
-        if abs(y1 - y0) < 1e-3 * min(width, height):  # OCC boxes carry a tolerance margin
+        # A horizontal line's box is flatter than it is wide (OCC boxes carry an absolute tolerance
+        # margin, so a threshold tied to one dimension misclassifies thin specimens)
+        if abs(y1 - y0) < abs(x1 - x0):
             lines["bottom" if y0 < 0.5 * height else "top"] = line
             gmsh.model.mesh.setTransfiniteCurve(line, nx + 1)
         else:
@@ -91,8 +93,8 @@ def _structured_box(params: BarParameters):
     faces = {"bottom": [], "top": [], "side": []}
     for _, face in gmsh.model.getBoundary([(3, volume)], oriented=False):
         gmsh.model.mesh.setTransfiniteSurface(face)
-        z0, z1 = gmsh.model.getBoundingBox(2, face)[2::3]
-        if z1 - z0 < 1e-3 * w:
+        x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(2, face)
+        if z1 - z0 < min(x1 - x0, y1 - y0):       # flatter in z than across: an end face (any aspect)
             faces["bottom" if z0 < 0.5 * L else "top"].append(face)
         else:
             faces["side"].append(face)

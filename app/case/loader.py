@@ -14,8 +14,10 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise CaseError(str(path), None, f"case file is not UTF-8 text (byte {exc.start}: {exc.reason})") from None
     except OSError as exc:
-        raise CaseError(str(path), None, f"cannot read case file ({exc.strerror})") from None
+        raise CaseError(str(path), None, f"cannot read case file ({exc.strerror or exc})") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

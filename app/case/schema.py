@@ -85,7 +85,7 @@ class DampingSection:
 @dataclass(frozen=True)
 class ModalSection:
     target_frequency_Hz: float = param(gt=0, unit="Hz", doc="shift of the shift-invert transform")
-    n_modes: int = param(6, ge=1)
+    n_modes: int = param(6, ge=1, le=1000, doc="number of modes (SLEPc nev) per electrical state")
     electrical: Literal["short", "open", "both"] = param("both")
     rigid_cutoff_Hz: float = param(10.0, ge=0, doc="modes below are rigid-body modes and dropped")
     working_mode: Literal["nearest", "coupling"] = param(
@@ -102,7 +102,7 @@ class TargetAmplitude:
 class HarmonicSection:
     f_start_Hz: float | None = param(None, gt=0, doc="default: around the modal f_r, f_a")
     f_stop_Hz: float | None = param(None, gt=0)
-    n_points: int = param(41, ge=2)
+    n_points: int = param(41, ge=2, le=100_000, doc="frequencies of the sweep")
     voltage_V: float = param(1.0, gt=0, doc="drive amplitude on voltage electrodes")
     refine_extrema: bool = param(True, doc="locate |Y| peak and trough by golden-section search")
     target: TargetAmplitude | None = None
@@ -158,6 +158,22 @@ class Case:
                                     f"unknown material {region.material!r}; defined: {', '.join(self.materials)}")
                 if isinstance(region.poling, list) and (len(region.poling) != 3 or not any(region.poling)):
                     raise CaseError(file, f"regions[{i}].poling", "a poling vector needs 3 non-zero-norm entries")
+        runnable = {"fe": ("modal", "harmonic", "circuit", "transient"), "lumped": ("lumped",)}[self.tier]
+        for i, analysis in enumerate(self.analyses or []):
+            if analysis not in runnable:
+                raise CaseError(file, f"analyses[{i}]", f"tier {self.tier!r} cannot run analysis {analysis!r} "
+                                                        f"(it runs: {', '.join(runnable)})")
+        if self.analyses is not None and len(set(self.analyses)) != len(self.analyses):
+            raise CaseError(file, "analyses", "lists an analysis twice")
+        if self.analyses == []:
+            raise CaseError(file, "analyses", "lists no analysis")
+        analyses = set(self.analyses or [])
+        if "circuit" in analyses and "modal" not in analyses:
+            raise CaseError(file, "analyses", "analysis 'circuit' needs the working mode: add 'modal'")
+        if ("harmonic" in analyses and "modal" not in analyses and self.harmonic is not None
+                and self.harmonic.f_start_Hz is None):
+            raise CaseError(file, "harmonic.f_start_Hz", "give f_start_Hz and f_stop_Hz, or add 'modal' to "
+                                                         "analyses (the default range is around the modal f_r, f_a)")
         needs = {"modal": ("modal",), "harmonic": ("harmonic",), "circuit": ("modal", "harmonic", "circuit")}
         for analysis in self.analyses or []:
             for section in needs.get(analysis, ()):

@@ -16,6 +16,7 @@ from typing import Any, Literal, Union
 from app.errors import CaseError
 
 _MISSING = dataclasses.MISSING
+INT_LIMIT = 2**31 - 1
 
 
 def param(
@@ -126,6 +127,8 @@ def convert(tp: Any, value: Any, file: str | None, key: str, meta: dict | None =
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise CaseError(file, key, f"expected an integer, got {type(value).__name__} {value!r}")
+        if abs(value) > INT_LIMIT:       # PETSc, SLEPc and numpy index with 32-bit integers
+            raise CaseError(file, key, f"must be at most {INT_LIMIT} in magnitude, got {value}")
         _check_bounds(value, meta, file, key)
         return value
     if tp is float:

@@ -216,6 +216,8 @@ def load_circuit(path: str | Path, file: str | None = None, key: str | None = "c
         data = json.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
         raise CaseError(file, key, f"cannot read circuit file {str(path)!r} ({exc.strerror})") from None
+    except UnicodeDecodeError:
+        raise CaseError(file, key, f"circuit file {str(path)!r} is not UTF-8 text") from None
     except json.JSONDecodeError as exc:
         raise CaseError(file, key, f"circuit file {str(path)!r} is not JSON: {exc}") from None
     if isinstance(data, dict) and isinstance(data.get("results"), dict) and "circuit" in data["results"]:

@@ -15,6 +15,10 @@ Layout in ``DIR/checkpoint/``: ``state-<seq>.npz`` and ``checkpoint.json``, both
 through a temporary file, fsync and a rename, the JSON last. The JSON names the ``seq`` of a
 complete state file, so a run killed at any moment leaves either the previous or the new
 checkpoint, never a mix. The older state file is removed after the JSON points past it.
+
+A fresh run first writes ``run.json`` (the case digest) and removes any older checkpoint, so a run
+killed before its first checkpoint (e.g. during the harmonic start) is known: ``--resume`` then
+starts it again from t = 0 instead of refusing.
 """
 
 from __future__ import annotations
@@ -27,10 +31,12 @@ from pathlib import Path
 import numpy as np
 
 from app.errors import CaseError
+from app.killpoint import kill_point
 from app.transient.state import TransientState
 
 CHECKPOINT_DIR = "checkpoint"
 POINTER = "checkpoint.json"
+MARKER = "run.json"
 FORMAT = 1
 
 
@@ -70,6 +76,11 @@ class CheckpointWriter:
     def due(self, steps: int) -> bool:
         return self.interval_steps > 0 and steps % self.interval_steps == 0
 
+    def files(self) -> list[str]:
+        """The checkpoint's files, relative to the output directory."""
+        names = [MARKER, POINTER] + ([self._state_file(self.seq).name] if self.seq else [])
+        return [f"{CHECKPOINT_DIR}/{n}" for n in names if (self.dir / n).exists() or n != MARKER]
+
     def _state_file(self, seq: int) -> Path:
         return self.dir / f"state-{seq}.npz"
 
@@ -84,15 +95,52 @@ class CheckpointWriter:
         if self.comm.rank == 0:
             path = self._state_file(seq)
             _atomic_write(path, lambda fh: np.savez(fh, z=state.z, zd=state.zd, zdd=state.zdd, **fields))
+            kill_point("checkpoint_state")
             meta = {"format": FORMAT, "seq": seq, "t_s": state.t, "mpi_size": self.comm.size, "rows": rows,
                     "voltage_V": self.voltage_V, "stepper": stepper, "case": self.case_digest}
-            _atomic_write(self.dir / POINTER, lambda fh: fh.write(json.dumps(meta, indent=1).encode()))
+            _atomic_write(self.dir / POINTER, lambda fh: _write_json(fh, meta))
             old = self._state_file(self.seq)
             if self.seq and old.exists():
                 old.unlink()
         self.comm.barrier()
         self.seq = seq
         self.written += 1
+
+
+def _write_json(fh, meta: dict) -> None:
+    data = json.dumps(meta, indent=1).encode()
+    half = len(data) // 2
+    fh.write(data[:half])
+    fh.flush()
+    kill_point("checkpoint_tmp")                 # killed with half a JSON in the temporary file
+    fh.write(data[half:])
+
+
+def mark_started(out_dir: Path, comm, digest: dict) -> None:
+    """A fresh run into ``out_dir``: drop any older checkpoint and record the case (collective)."""
+    directory = Path(out_dir) / CHECKPOINT_DIR
+    if comm.rank == 0:
+        directory.mkdir(parents=True, exist_ok=True)
+        for old in [directory / POINTER, *directory.glob("state-*.npz*")]:
+            old.unlink(missing_ok=True)
+        meta = {"format": FORMAT, "case": digest}
+        _atomic_write(directory / MARKER, lambda fh: fh.write(json.dumps(meta, indent=1).encode()))
+    comm.barrier()
+
+
+def _read_json(path: Path) -> tuple[dict | None, str | None]:
+    """(content, None) or (None, why it cannot be used)."""
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        return None, "is not UTF-8 text"
+    except json.JSONDecodeError as exc:
+        return None, f"is not valid JSON (truncated or corrupt: {exc.msg} at line {exc.lineno})"
+    except OSError as exc:
+        return None, f"cannot be read ({exc.strerror})"
+    if not isinstance(meta, dict):
+        return None, "is not a JSON object"
+    return meta, None
 
 
 def _atomic_write(path: Path, write) -> None:
@@ -168,25 +216,30 @@ def _differences(a, b, prefix="") -> list[str]:
     return [] if a == b else [prefix]
 
 
-def load_checkpoint(out_dir: Path, layout: CellLayout, case, digest: dict) -> Resumed:
-    """Read the checkpoint of ``out_dir`` on every rank; CaseError (exit 2) when there is none or it
-    belongs to a different case or mesh."""
+def load_checkpoint(out_dir: Path, layout: CellLayout, case, digest: dict) -> Resumed | None:
+    """Read the checkpoint of ``out_dir`` on every rank; None when the run was killed before its
+    first checkpoint (start again from t = 0); CaseError (exit 2) when there is none, it is
+    unreadable, belongs to a different case or mesh, or lies after the case's end time."""
     comm = layout.comm
     file = case.source
     directory = Path(out_dir) / CHECKPOINT_DIR
     pointer = directory / POINTER
-    meta = None
-    if comm.rank == 0 and pointer.exists():
-        meta = json.loads(pointer.read_text())
-    meta = comm.bcast(meta, root=0)
-    if meta is None:
-        raise CaseError(str(out_dir), "--resume", f"no checkpoint in {out_dir} (expected {pointer})")
-    if meta.get("format") != FORMAT:
-        raise CaseError(str(pointer), "format", f"unknown checkpoint format {meta.get('format')!r}")
+    verdict = None
+    if comm.rank == 0:
+        verdict = _check_pointer(directory, case)
+    verdict = comm.bcast(verdict, root=0)
+    if "error" in verdict:
+        raise CaseError(*verdict["error"])
+    meta = verdict["meta"]
     changed = _differences(meta["case"], digest)
     if changed:
         raise CaseError(file, changed[0], "differs from the checkpointed run (only transient.end_time_s, "
                                           "transient.checkpoint_interval_steps and output.* may change on resume)")
+    if verdict["started_only"]:
+        return None
+    if float(meta["t_s"]) > case.transient.end_time_s * (1 + 1e-12):
+        raise CaseError(file, "transient.end_time_s", f"{case.transient.end_time_s:g} s is before the checkpoint's "
+                                                      f"time {float(meta['t_s']):g} s in {pointer}")
     data = None
     if comm.rank == 0:
         with np.load(directory / f"state-{meta['seq']}.npz") as npz:
@@ -198,3 +251,29 @@ def load_checkpoint(out_dir: Path, layout: CellLayout, case, digest: dict) -> Re
         raise CaseError(str(pointer), "mesh", str(exc)) from None
     state = TransientState(float(meta["t_s"]), u, v, a, data["z"], data["zd"], data["zdd"])
     return Resumed(state, meta["stepper"], float(meta["voltage_V"]), int(meta["rows"]), int(meta["seq"]))
+
+
+def _check_pointer(directory: Path, case) -> dict:
+    """Rank 0: {"meta", "started_only"} of the checkpoint in ``directory``, or {"error": CaseError
+    arguments} (the verdict is broadcast, so every rank raises the same error)."""
+    pointer, marker = directory / POINTER, directory / MARKER
+    out_dir = str(directory.parent)
+    if pointer.exists():
+        meta, why = _read_json(pointer)
+        if meta is None:
+            return {"error": (str(pointer), None, f"checkpoint {why}")}
+        if meta.get("format") != FORMAT:
+            return {"error": (str(pointer), "format", f"unknown checkpoint format {meta.get('format')!r}")}
+        missing = [k for k in ("seq", "t_s", "rows", "voltage_V", "stepper", "case") if k not in meta]
+        if missing:
+            return {"error": (str(pointer), missing[0], "missing in the checkpoint")}
+        state = directory / f"state-{meta['seq']}.npz"
+        if not state.is_file():
+            return {"error": (str(pointer), "seq", f"the state file {state.name} it names is missing")}
+        return {"meta": meta, "started_only": False}
+    if marker.exists():
+        meta, why = _read_json(marker)
+        if meta is None or "case" not in meta:
+            return {"error": (str(marker), None, f"run record {why or 'has no case'}")}
+        return {"meta": meta, "started_only": True}
+    return {"error": (out_dir, "--resume", f"no checkpoint in {out_dir} (expected {pointer})")}

@@ -19,7 +19,15 @@ import ufl
 from dolfinx import fem
 
 from app.errors import CaseError
-from app.transient.checkpoint import POINTER, CellLayout, CheckpointWriter, case_digest, load_checkpoint
+from app.killpoint import kill_point
+from app.transient.checkpoint import (
+    POINTER,
+    CellLayout,
+    CheckpointWriter,
+    case_digest,
+    load_checkpoint,
+    mark_started,
+)
 from app.transient.contact import MidpointFields, NodeContact, ObstacleShape, PointContact, SurfaceContact
 from app.transient.control import StepController, StepSizes
 from app.transient.coupled import CoupledSystem
@@ -164,6 +172,7 @@ class TransientModel:
         u0, v0, a0 = np.zeros(n), np.zeros(n), np.zeros(n)
         if cfg.drive.tip_amplitude_m is not None or cfg.initial_state == "harmonic":
             x_re, x_im, amplitude_per_V = self._harmonic_per_volt()
+            kill_point("harmonic_start")
             if cfg.drive.tip_amplitude_m is not None:
                 voltage = cfg.drive.tip_amplitude_m / amplitude_per_V
             if cfg.initial_state == "harmonic":
@@ -252,22 +261,38 @@ def _units(tm: TransientModel, case) -> dict[str, str]:
     return units
 
 
+def build(case, comm, log) -> TransientModel:
+    """The transient model of ``case`` without solving anything: every input check of the transient
+    analysis, including those that need the mesh (``piezodyn validate`` calls this too)."""
+    file, cfg = case.source, case.transient
+    if cfg.drive.tip_amplitude_m is not None and not any(e.kind == "voltage" for e in case.electrodes.values()):
+        raise CaseError(file, "transient.drive.tip_amplitude_m", "needs an electrode of kind 'voltage' to drive")
+    for i, c in enumerate(cfg.contacts):
+        for key in ("direction", "normal"):
+            vector = getattr(c, key, None)
+            if vector is not None and not np.any(np.asarray(vector, dtype=float)):
+                raise CaseError(file, f"transient.contacts[{i}].{key}", "must not be the zero vector")
+    return TransientModel(case, comm, log)
+
+
 def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     """Run the transient analysis of ``case`` into ``out_dir``; with ``resume`` continue from the
     checkpoint in ``out_dir`` (same case except the end time) and append to its time series."""
     cfg = case.transient
     out_dir = Path(out_dir)
-    tm = TransientModel(case, comm, log)
+    tm = build(case, comm, log)
     digest = case_digest(case)
     layout = CellLayout(tm.model.W)
-    resumed = None
-    if resume:
-        resumed = load_checkpoint(out_dir, layout, case, digest)
+    resumed = load_checkpoint(out_dir, layout, case, digest) if resume else None
+    if resumed is not None:
         state, voltage = resumed.state, resumed.voltage_V
         tm.resume_drive(voltage)
         log(f"transient: resuming at t = {state.t * 1e3:.6g} ms from {out_dir / 'checkpoint'} "
             f"({resumed.rows} time-series rows kept)")
     else:
+        if resume:
+            log(f"transient: {out_dir} holds a run killed before its first checkpoint: starting it again")
+        mark_started(out_dir, comm, digest)
         state, voltage = tm.initial_state()
     t_start = state.t
     log(f"transient: {cfg.initial_state} start, drive {voltage:.4g} V at {cfg.drive.frequency_Hz:.2f} Hz, "
@@ -280,17 +305,18 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
 
     fields = None
     if case.output.fields:
+        bodies = [(b.name, tm.rigid.dofs(b.name), b.position_m) for b in tm.rigid.bodies]
         fields = FieldSeriesExport(out_dir / "transient_fields.xdmf", model, lambda: system.solution_vector,
-                                   cfg.output_interval_s, resume_from_s=t_start if resumed else None)
+                                   cfg.output_interval_s, bodies=bodies, resume_from_s=t_start if resumed else None)
         if not resumed:
             system.show_state(state)
-            fields.write(state.t)
+            fields.write(state.t, state.z)
 
     sampler = PointSampler(model)
 
     def on_step(rec):
         if fields is not None:
-            fields.write(rec["time_s"])
+            fields.write(rec["time_s"], rec["position_m"])
         row = {"time_s": rec["time_s"], "dt_s": rec["dt_s"], "drive_voltage_V": tm.drive.voltage_V(rec["time_s"])}
         for name, value in sampler.values(system.solution_array).items():
             row[f"{name}_displacement_m"] = value
@@ -302,6 +328,7 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
             row[f"{name}_force_N"] = rec["contact_force_N"][name]
             row[f"{name}_closed"] = float(rec["contact_closed"][j])
         series.write(row)
+        kill_point("step")
 
     s = cfg.steps
     sizes = StepSizes(open_s=s.open_s, closed_s=s.closed_s, change_s=s.change_s, min_s=s.min_s)
@@ -340,6 +367,8 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
         force_contact = contact_names[-1] if contact_names else None
         results["plots"] = plot_time_series(h5_path, out_dir / "transient_motion.png", out_dir / "transient_force.png",
                                             tm.drive_point, bodies, force_contact)
+    results["outputs"] = [h5_path.name, *checkpoint.files(), *(fields.files() if fields is not None else []),
+                          *results.get("plots", [])]
     system.destroy()
     return results
 

@@ -1,7 +1,18 @@
-"""XDMF time series of the FE fields of a transient run (ParaView), at a chosen output interval.
+"""XDMF time series of the FE fields and rigid bodies of a transient run (ParaView), at a chosen
+output interval.
 
-dolfinx 0.5 samples higher-degree fields at the vertices when writing XDMF, so displacement and
-potential are interpolated to P1 first (the same as :class:`app.exports.ModeShapeExport`).
+Layout: ``<stem>.xdmf`` (the XML, ours) and ``<stem>/mesh.h5`` (vertices, cells, region tags)
+plus one ``<stem>/step_<k>.h5`` per output (displacement [m], potential [V] at the vertices; see
+:class:`app.exports.VertexFields`). Each output time is a spatial collection of the FE grid
+(``fe_body``: displacement, potential, region) and one single-vertex grid per rigid body at its
+start position with its displacement, so one Warp By Vector moves the transducer, ball, stem and
+rock together.
+
+Why a file per output: a process killed while writing HDF5 can leave that file unreadable; here
+it can only hit a step file that the XML does not name yet (step files are written under a
+temporary name and renamed), and the XML is replaced atomically after the step file exists. So
+after a kill at any moment the XML and every file it names are complete. A resumed run drops the
+steps after the checkpoint's time (XML entries and their files) and continues the series.
 """
 
 from __future__ import annotations
@@ -11,89 +22,104 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
-from dolfinx import fem, io
 
-from app.compat import scalar_space, vector_space
+from app.exports import FE_GRID, VertexFields, mesh_grid, point_grid, replace_file, write_h5_atomic, write_mesh_h5
+from app.killpoint import kill_point
 
 
 class FieldSeriesExport:
-    """``write(t)`` appends the current displacement [m] and electric potential [V] of ``model``
-    (from ``solution()``, a full u-phi PETSc vector) when t has reached the next multiple of
-    ``interval_s``. The file is opened for each output and closed after it, so a killed run leaves
-    a readable series. ``resume_from_s``: continue an existing series (steps after that time,
-    written by a killed run, are removed from the XDMF first); if it cannot be opened (killed while
-    writing), the resumed run starts ``<stem>.part<k>.xdmf`` next to it."""
+    """``write(t, body_positions)`` appends the current displacement [m] and electric potential [V]
+    of ``model`` (from ``solution()``, a full u-phi PETSc vector) and the rigid bodies' positions
+    (``body_positions``: the rigid state vector z [m]) when t has reached the next multiple of
+    ``interval_s``. ``bodies``: (name, slice of z, start position [m]) per rigid body.
+    ``resume_from_s``: continue the existing series after that time (later steps are dropped)."""
 
-    def __init__(self, path: Path, model, solution, interval_s: float, resume_from_s: float | None = None):
+    def __init__(self, path: Path, model, solution, interval_s: float, bodies=(), resume_from_s: float | None = None):
         self.path = Path(path)
-        self.model = model
+        self.dir = self.path.with_suffix("")
         self.solution = solution
         self.interval_s = float(interval_s)
-        mesh = model.mesh
-        self.comm = mesh.comm
-        self.u_p1 = fem.Function(vector_space(mesh, "Lagrange", 1), name="displacement")
-        self.phi_p1 = fem.Function(scalar_space(mesh, "Lagrange", 1), name="potential")
-        self._phi_space, self._phi_map = model.W.sub(1).collapse()
-        self._phi = fem.Function(self._phi_space)
-        self.written = 0
+        self.bodies = [(name, sl, np.asarray(start, dtype=float)) for name, sl, start in bodies]
+        self.vertex = VertexFields(model)
+        self.comm = model.mesh.comm
+        self.rank0 = self.comm.rank == 0
+        self.steps: list[ET.Element] = []
         self.next_s = 0.0
         if resume_from_s is not None:
             self.next_s = self._next_after(resume_from_s)
-            if self._can_append(resume_from_s):
-                return
-            k = 2
-            while Path(f"{self.path.with_suffix('')}.part{k}.xdmf").exists():
-                k += 1
-            self.path = Path(f"{self.path.with_suffix('')}.part{k}.xdmf")
-        with io.XDMFFile(self.comm, str(self.path), "w") as file:
-            file.write_mesh(mesh)
-
-    def _can_append(self, t_s: float) -> bool:
-        ok = False
-        if self.comm.rank == 0 and self.path.exists():
-            try:
-                _drop_steps_after(self.path, t_s)
-                import h5py
-
-                with h5py.File(self.path.with_suffix(".h5"), "r") as f:
-                    ok = "Mesh" in f
-            except (OSError, ET.ParseError):
-                ok = False
-        return self.comm.bcast(ok, root=0)
+        if self.rank0:
+            self.dir.mkdir(parents=True, exist_ok=True)
+            if resume_from_s is not None:
+                self.steps = _steps_until(self.path, resume_from_s)
+            for stale in self.dir.glob("step_*.h5*"):       # steps of a killed run past the checkpoint
+                if _step_index(stale) >= len(self.steps):
+                    stale.unlink()
+            write_mesh_h5(self.dir / "mesh.h5", self.vertex)
+            replace_file(self.path, self._document())
+        self.written = self.comm.bcast(len(self.steps), root=0)
 
     def _next_after(self, t: float) -> float:
         return (math.floor(t / self.interval_s * (1 + 1e-9) + 1e-9) + 1) * self.interval_s
 
-    def write(self, t: float) -> None:
+    def files(self) -> list[str]:
+        """Names of the files of the series, relative to the output directory."""
+        return [self.path.name, f"{self.dir.name}/mesh.h5"] + [f"{self.dir.name}/step_{k:06d}.h5"
+                                                               for k in range(self.written)]
+
+    def _document(self) -> bytes:
+        from app.exports import xdmf_document
+
+        return xdmf_document(self.steps, self.path.stem)
+
+    def write(self, t: float, body_positions=None) -> None:
         if t < self.next_s - 1e-9 * self.interval_s:
             return
-        x = self.solution()
-        self.u_p1.interpolate(self.model.displacement(x))
-        n_owned = self._phi_space.dofmap.index_map.size_local * self._phi_space.dofmap.index_map_bs
-        self._phi.x.array[:n_owned] = x.array_r[np.asarray(self._phi_map[:n_owned])]
-        self._phi.x.scatter_forward()
-        self.phi_p1.interpolate(self._phi)
-        with io.XDMFFile(self.comm, str(self.path), "a") as file:
-            file.write_function(self.u_p1, float(t))
-            file.write_function(self.phi_p1, float(t))
+        sampled = self.vertex.sample(self.solution())
+        if self.rank0:
+            u, phi = sampled
+            k = len(self.steps)
+            name = f"step_{k:06d}.h5"
+            write_h5_atomic(self.dir / name, {"displacement": u, "potential": phi},
+                            {"displacement": {"unit": "m", "time_s": t}, "potential": {"unit": "V", "time_s": t}})
+            kill_point("fields_data")                   # the step file exists, the XML does not name it yet
+            step = ET.Element("Grid", Name=f"t = {t:.9g} s", GridType="Collection", CollectionType="Spatial")
+            ET.SubElement(step, "Time", Value=repr(float(t)))
+            step.append(mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:"))
+            z = np.asarray(body_positions, dtype=float) if body_positions is not None else None
+            for body, sl, start in self.bodies:
+                position = z[sl] if z is not None else start
+                step.append(point_grid(body, start, position - start))
+            self.steps.append(step)
+            replace_file(self.path, self._document())
         self.written += 1
         self.next_s = self._next_after(t)
+        kill_point("fields_written")
 
     def close(self) -> None:
         """Nothing stays open between outputs."""
 
 
-def _drop_steps_after(path: Path, t_s: float) -> None:
-    """Remove the time steps later than ``t_s`` from every temporal collection of an XDMF file
-    (their data stays in the .h5, unreferenced)."""
-    tree = ET.parse(path)
-    for collection in tree.iter("Grid"):
-        if collection.get("CollectionType") != "Temporal":
-            continue
-        for grid in list(collection.findall("Grid")):
-            time = grid.find("Time")
-            if time is not None and float(time.get("Value")) > t_s * (1 + 1e-12):
-                collection.remove(grid)
-    tmp = path.with_name(path.name + ".tmp")
-    tree.write(tmp, xml_declaration=True, encoding="utf-8")
-    tmp.replace(path)
+def _step_index(path: Path) -> int:
+    try:
+        return int(path.name.split("_", 1)[1].split(".", 1)[0])
+    except (IndexError, ValueError):
+        return -1
+
+
+def _steps_until(path: Path, t_s: float) -> list[ET.Element]:
+    """The output steps of an existing series at times <= ``t_s`` (none if there is no readable
+    series: it is then started again)."""
+    try:
+        tree = ET.parse(path)
+    except (OSError, ET.ParseError):
+        return []
+    series = tree.find("Domain/Grid")
+    if series is None:
+        return []
+    kept = []
+    for step in series.findall("Grid"):
+        time = step.find("Time")
+        if time is None or float(time.get("Value")) > t_s * (1 + 1e-12):
+            break
+        kept.append(step)
+    return kept

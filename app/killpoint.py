@@ -1,0 +1,37 @@
+"""A test hook that kills the process at a named point of a run, for the kill-and-resume tests.
+
+``PIEZODYN_KILL_AT=<event>:<n>`` makes the n-th (1-based) call of ``kill_point("<event>")`` in
+this process send SIGKILL to itself: no clean-up, no flush, no atexit, like a killed job. Unset (the
+normal case) it costs one dictionary look-up. Events (where they are called):
+
+- ``step``: after an accepted step was recorded (app/transient/driver.py);
+- ``fields_data``: a field output's HDF5 file is written, the XDMF does not name it yet;
+- ``fields_written``: right after a field output (app/transient/fields.py);
+- ``checkpoint_state``: the checkpoint's state file is written, its JSON not yet;
+- ``checkpoint_tmp``: the checkpoint JSON is half written to its temporary file
+  (app/transient/checkpoint.py);
+- ``harmonic_start``: during the harmonic start, after the steady-state solve, before the first
+  output (app/transient/driver.py).
+
+Under MPI every rank reaching the event kills itself (rank 0 alone when the event is rank 0's
+file I/O); mpirun then ends the others.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+
+_counts: dict[str, int] = {}
+
+
+def kill_point(event: str) -> None:
+    spec = os.environ.get("PIEZODYN_KILL_AT")
+    if not spec:
+        return
+    name, _, n = spec.partition(":")
+    if name != event:
+        return
+    _counts[event] = _counts.get(event, 0) + 1
+    if _counts[event] == int(n or 1):
+        os.kill(os.getpid(), signal.SIGKILL)
