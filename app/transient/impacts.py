@@ -52,8 +52,8 @@ def statistics_from_file(h5_path: Path, cfg) -> tuple[dict, dict]:
 
 
 def contact_summary(data: dict[str, np.ndarray], names: list[str]) -> dict:
-    """Per contact: closings (a contact closed at the first step counts as one), largest force
-    [N], impulse sum |f| dt [N s] and time closed [s]."""
+    """Per contact: impacts (open -> closed transitions; closed at the first step is no impact, as
+    in :func:`run_statistics`), largest force [N], impulse sum |f| dt [N s] and time closed [s]."""
     if "time_s" not in data or not data["time_s"].size:
         return {}
     dt = data["dt_s"]
@@ -61,7 +61,7 @@ def contact_summary(data: dict[str, np.ndarray], names: list[str]) -> dict:
     for name in names:
         force = np.linalg.norm(data[f"{name}_force_N"], axis=1)
         closed = data[f"{name}_closed"]
-        impacts = int(np.sum(np.diff(np.concatenate([[0], closed])) == 1))
+        impacts = int(np.sum(np.diff(closed > 0) > 0))
         out[name] = {"impacts": impacts, "max_force_N": float(force.max()), "impulse_N_s": float(np.sum(force * dt)),
                      "closed_time_s": float(np.sum(dt * (closed > 0)))}
     return out
@@ -94,14 +94,15 @@ def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
             # f . d(delta) per step (the scheme's own energy pairing), with d(delta) = -n . dz.
             penetration_step = -np.diff(data[f"{c.upper}_position_m"] @ normal, prepend=np.nan)
             penetration_step[0] = 0.0
-            impulses = [float(np.sum(force[a:b + 1] * dt[a:b + 1])) for a, b in intervals]
+            # per impact: both means divide by the impact count (a closure from the start is none)
+            impulses = [float(np.sum(force[a:b + 1] * dt[a:b + 1])) for a, b in intervals if a > 0]
             work = float(np.sum(force * penetration_step))
             stats[f"{c.name}_foundation"] = {
                 "impulse_per_impact_mean_N_s": float(np.mean(impulses)) if impulses else 0.0,
                 "impulse_per_impact_max_N_s": float(np.max(impulses)) if impulses else 0.0,
                 "mean_force_N": float(np.sum(force * dt)) / duration,
                 "mean_power_W": work / duration,
-                "energy_per_impact_mean_J": work / max(impacts, 1),
+                "energy_per_impact_mean_J": work / impacts if impacts else 0.0,
                 "peak_force_N": float(force.max()),
             }
     stats["impact_count"] = counts
