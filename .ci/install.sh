@@ -10,6 +10,7 @@ PACKAGES=(
   python3-gmsh python3-meshio python3-h5py python3-numpy python3-scipy python3-matplotlib
   python3-numba python3-tqdm python3-pytest python3-pytest-mpi python3-venv python3-pip
   python3-setuptools python3-wheel libopenblas0-pthread
+  paraview python3-paraview xvfb xauth    # test extras: tests/test_paraview.py opens results with pvpython
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -1,0 +1,118 @@
+"""Open a piezodyn field file with ParaView's own XDMF readers and render it (run by pvpython, see
+tests/test_paraview.py): ``xvfb-run -a pvpython tests/paraview_open.py FILE.xdmf OUT.png``.
+
+Prints one JSON object: the time values, for every reader (Xdmf3ReaderT, Xdmf3ReaderS and the
+legacy XDMFReader) its blocks with their point, cell and field arrays, and after Warp By Vector
+on ``displacement`` at the last time: the warped bounds, the potential's range on the warped FE
+grid and the warped rigid-body positions. Renders the warped result coloured by potential to
+OUT.png (rigid bodies as large points). An optional third argument picks the time (for a mode
+file: the frequency [Hz]) shown and rendered instead of the last."""
+
+import json
+import sys
+
+from paraview import servermanager as sm
+from paraview.simple import (
+    ColorBy,
+    GetActiveCamera,
+    GetActiveViewOrCreate,
+    GetColorTransferFunction,
+    Render,
+    SaveScreenshot,
+    Show,
+    Text,
+    WarpByVector,
+    Xdmf3ReaderS,
+    Xdmf3ReaderT,
+    XDMFReader,
+)
+
+
+def arrays(attributes):
+    return [attributes.GetArrayName(i) for i in range(attributes.GetNumberOfArrays())]
+
+
+def leaves(data, name="", out=None):
+    """(name, dataset) of every leaf of a composite dataset."""
+    out = [] if out is None else out
+    if data.IsA("vtkMultiBlockDataSet") or data.IsA("vtkMultiPieceDataSet"):
+        for i in range(data.GetNumberOfBlocks() if data.IsA("vtkMultiBlockDataSet") else data.GetNumberOfPieces()):
+            meta = data.GetMetaData(i) if data.HasMetaData(i) else None
+            child_name = meta.Get(data.NAME()) if meta is not None and meta.Has(data.NAME()) else f"{name}[{i}]"
+            child = data.GetBlock(i) if data.IsA("vtkMultiBlockDataSet") else data.GetPiece(i)
+            if child is not None:
+                leaves(child, child_name, out)
+    else:
+        out.append((name, data))
+    return out
+
+
+def describe(data):
+    return [{"name": name, "points": block.GetNumberOfPoints(), "cells": block.GetNumberOfCells(),
+             "point_arrays": arrays(block.GetPointData()), "cell_arrays": arrays(block.GetCellData()),
+             "field_arrays": arrays(block.GetFieldData())} for name, block in leaves(data)]
+
+
+def main(path, png, at=None):
+    report = {}
+    readers = {"Xdmf3ReaderT": Xdmf3ReaderT(FileName=[path]), "Xdmf3ReaderS": Xdmf3ReaderS(FileName=[path]),
+               "XDMFReader": XDMFReader(FileNames=[path])}
+    for name, reader in readers.items():
+        reader.UpdatePipelineInformation()
+        times = list(reader.TimestepValues) if reader.TimestepValues else [0.0]
+        reader.UpdatePipeline(times[-1])
+        report[name] = {"times": times, "blocks": describe(sm.Fetch(reader))}
+    reader = readers["Xdmf3ReaderT"]
+    times = report["Xdmf3ReaderT"]["times"]
+    show = times[-1] if at is None else min(times, key=lambda t: abs(t - at))
+    reader.UpdatePipeline(show)
+    frequency = None
+    raw = leaves(sm.Fetch(reader))
+    for _, block in raw:
+        f = block.GetFieldData().GetArray("frequency_Hz")
+        if f is not None:
+            frequency = f.GetValue(0)
+    # Warp by the displacement, scaled so the largest displacement shows as 10 % of the model size
+    fe = max(raw, key=lambda item: item[1].GetNumberOfPoints())[1]
+    u_max = max(fe.GetPointData().GetArray("displacement").GetRange(-1)[1], 1e-300)
+    b = fe.GetBounds()
+    size = max(b[1] - b[0], b[3] - b[2], b[5] - b[4])
+    scale = 0.1 * size / u_max
+    warp = WarpByVector(Input=reader)
+    warp.Vectors = ["POINTS", "displacement"]
+    warp.ScaleFactor = scale
+    warp.UpdatePipeline(show)
+    warped = leaves(sm.Fetch(warp))
+    bodies = {}
+    for name, block in warped:
+        if block.GetNumberOfPoints() == 1:
+            bodies[name] = list(block.GetPoint(0))
+    fe_warped = max(warped, key=lambda item: item[1].GetNumberOfPoints())[1]
+    potential = fe_warped.GetPointData().GetArray("potential")
+    report["warped"] = {"scale": scale, "u_max": u_max, "fe_bounds_before": list(b),
+                        "fe_bounds_after": list(fe_warped.GetBounds()),
+                        "potential_range": list(potential.GetRange()) if potential is not None else None,
+                        "region_range": list(fe_warped.GetCellData().GetArray("region").GetRange()),
+                        "bodies": bodies, "frequency_Hz": frequency, "time": show}
+    view = GetActiveViewOrCreate("RenderView")
+    view.ViewSize = [900, 700]
+    view.ViewTime = show
+    view.OrientationAxesVisibility = 0
+    display = Show(warp, view)
+    ColorBy(display, ("POINTS", "potential"))
+    display.RescaleTransferFunctionToDataRange(True, False)
+    display.SetScalarBarVisibility(view, True)
+    display.PointSize = 14
+    display.RenderPointsAsSpheres = 1
+    GetColorTransferFunction("potential").NanColor = [0.85, 0.2, 0.1]     # the rigid bodies (no potential)
+    label = (f"mode at {frequency:.1f} Hz" if frequency is not None else f"t = {show * 1e3:.4g} ms")
+    Show(Text(Text=f"{path.rsplit('/', 1)[-1]}: {label}, displacement x {scale:.3g}, colour: potential [V]"), view)
+    view.ResetCamera()
+    GetActiveCamera().Zoom(0.8)
+    Render(view)
+    SaveScreenshot(png, view, ImageResolution=[900, 700])
+    print("PIEZODYN-REPORT " + json.dumps(report))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2], float(sys.argv[3]) if len(sys.argv) > 3 else None)

@@ -1,0 +1,164 @@
+"""Results open in ParaView: a transient result (serial and on 2 ranks) and a modal result, read by
+ParaView's own XDMF readers through pvpython under Xvfb (tests/paraview_open.py): Warp By Vector
+on the displacement, the potential on the same (warped) grid, the region tags, the rigid bodies as
+their own blocks, the mode frequencies as the time values. Skipped only when pvpython or xvfb-run
+is absent (.ci/install.sh installs them). ``PIEZODYN_UPDATE_FIGURES=1`` copies the rendered PNGs
+to docs/figures/.
+
+The vertex sampling itself (no ParaView needed): a field that P2 represents exactly comes out
+exactly at the vertices, on one rank and on two.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import CASES, ROOT, run_cli
+from mpi4py import MPI
+
+FE_TINY = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic_mesh_size_m=0.0025",
+           "output.plots=false", "transient.end_time_s=2e-4"]
+TRANSDUCER_MODAL = ['analyses=["modal"]', "output.plots=false", "geometry.parameters.mesh_size_m=0.003",
+                    "geometry.parameters.ceramic_mesh_size_m=0.002"]
+FIGURES = ROOT / "docs" / "figures"
+HAVE_PARAVIEW = shutil.which("pvpython") is not None and shutil.which("xvfb-run") is not None
+needs_paraview = pytest.mark.skipif(not HAVE_PARAVIEW or MPI.COMM_WORLD.size > 1,
+                                    reason="needs pvpython and xvfb-run (.ci/install.sh installs them); serial")
+
+
+def open_in_paraview(xdmf: Path, png: Path, at: float | None = None) -> dict:
+    cmd = ["xvfb-run", "-a", "pvpython", str(ROOT / "tests" / "paraview_open.py"), str(xdmf), str(png)]
+    result = subprocess.run(cmd + ([repr(at)] if at is not None else []), capture_output=True, text=True,
+                            timeout=300, cwd=xdmf.parent, env=dict(os.environ, MPLBACKEND="Agg"))
+    lines = [line for line in result.stdout.splitlines() if line.startswith("PIEZODYN-REPORT ")]
+    assert lines, f"pvpython failed ({result.returncode}): {result.stderr[-3000:]}"
+    assert png.is_file() and png.stat().st_size > 10_000
+    if os.environ.get("PIEZODYN_UPDATE_FIGURES"):
+        shutil.copyfile(png, FIGURES / png.name)
+    return json.loads(lines[0].split(" ", 1)[1])
+
+
+def _name(block: dict) -> str:
+    return re.sub(r"\[\d+\]$", "", block["name"])      # readers append the time index
+
+
+def check_transient(report: dict, out: Path) -> None:
+    import h5py
+
+    with h5py.File(out / "transient.h5", "r") as f:
+        ball_z = f["ball_position_m"][-1, -1]
+    summary = json.loads((out / "summary.json").read_text())
+    n_outputs = summary["results"]["transient"]["field_outputs"]
+    for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
+        blocks = report[reader]["blocks"]
+        assert len(report[reader]["times"]) == n_outputs
+        assert len(blocks) == 4, blocks                 # the FE grid and 3 bodies, no extra unwarped mesh
+        fe = [b for b in blocks if b["points"] > 1]
+        assert len(fe) == 1
+        assert set(fe[0]["point_arrays"]) == {"displacement", "potential"}
+        assert fe[0]["cell_arrays"] == ["region"]
+    names = sorted(_name(b) for b in report["Xdmf3ReaderT"]["blocks"])
+    assert names == ["ball", "fe_body", "rock", "stem"]
+    warped = report["warped"]
+    assert warped["time"] == pytest.approx(2e-4, rel=1e-9)
+    # Warp By Vector moved the FE grid: the tip (bottom) moved by scale * u, the potential rides along
+    assert warped["fe_bounds_after"] != pytest.approx(warped["fe_bounds_before"], abs=1e-3 * warped["u_max"])
+    low, high = warped["potential_range"]
+    assert high - low > 1.0                             # volts across the ceramic rings
+    assert warped["region_range"][1] > warped["region_range"][0]
+    # the bodies: the warped ball sits at start + scale * displacement; its true position is in the series
+    bodies = {re.sub(r"\[\d+\]$", "", k): v for k, v in warped["bodies"].items()}
+    assert set(bodies) == {"ball", "stem", "rock"}
+    start_z = -0.00401
+    assert bodies["ball"][1] == pytest.approx(start_z + warped["scale"] * (ball_z - start_z), rel=1e-6)
+    assert bodies["rock"][1] == pytest.approx(-0.10802, rel=1e-12)      # fixed
+
+
+@pytest.fixture(scope="module")
+def transient_result(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pv_transient")
+    result = run_cli("run", CASES / "usdc-fe.toml", "--out", out, "--quiet",
+                     *[a for o in FE_TINY for a in ("--set", o)])
+    assert result.returncode == 0, result.stderr[-2000:]
+    return out
+
+
+@needs_paraview
+def test_transient_result_in_paraview(transient_result):
+    report = open_in_paraview(transient_result / "transient_fields.xdmf", transient_result / "paraview_transient.png")
+    check_transient(report, transient_result)
+
+
+@needs_paraview
+def test_two_rank_transient_result_in_paraview(tmp_path):
+    result = run_cli("run", CASES / "usdc-fe.toml", "--out", tmp_path, "--quiet",
+                     *[a for o in FE_TINY for a in ("--set", o)], mpi=2)
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = open_in_paraview(tmp_path / "transient_fields.xdmf", tmp_path / "paraview_transient_2ranks.png")
+    check_transient(report, tmp_path)
+
+
+@needs_paraview
+def test_modal_result_in_paraview(tmp_path):
+    result = run_cli("run", CASES / "usdc-transducer.toml", "--out", tmp_path, "--quiet",
+                     *[a for o in TRANSDUCER_MODAL for a in ("--set", o)])
+    assert result.returncode == 0, result.stderr[-2000:]
+    modal = json.loads((tmp_path / "summary.json").read_text())["results"]["modal"]
+    frequencies = [m["resonance_Hz"] for m in modal["modes"]]
+    report = open_in_paraview(tmp_path / "modes_short.xdmf", tmp_path / "paraview_modes.png",
+                              at=modal["working_resonance_Hz"])
+    for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
+        np.testing.assert_allclose(report[reader]["times"], frequencies, rtol=1e-12)   # time = frequency [Hz]
+        (block,) = report[reader]["blocks"]             # one grid: no extra unwarped mesh
+        assert set(block["point_arrays"]) == {"displacement", "potential"}
+        assert block["cell_arrays"] == ["region"]
+        assert "frequency_Hz" in block["field_arrays"] or reader == "XDMFReader"
+    import xml.etree.ElementTree as ET
+
+    grids = ET.parse(tmp_path / "modes_short.xdmf").iter("Grid")
+    names = [g.get("Name") for g in grids if g.get("GridType") == "Uniform"]
+    assert names == [f"mode {k + 1}: {f:.2f} Hz" for k, f in enumerate(frequencies)]   # the frequency in the name
+    warped = report["warped"]
+    assert warped["frequency_Hz"] == pytest.approx(modal["working_resonance_Hz"], rel=1e-12)
+    assert warped["fe_bounds_after"] != pytest.approx(warped["fe_bounds_before"], abs=1e-6)
+    assert warped["potential_range"][1] > warped["potential_range"][0]
+    assert warped["region_range"][1] > warped["region_range"][0]
+
+
+@pytest.mark.mpi
+def test_vertex_fields_are_exact_for_fields_p2_represents():
+    """VertexFields: u = (x + 2y, 3y - x), phi = 5x - 7y (exact in P2) come out exactly at the
+    gathered vertices, in the mesh's input order, on any number of ranks."""
+    from dolfinx import fem
+
+    from app.case.schema import load_case
+    from app.exports import VertexFields
+    from app.fe.model import build_model
+
+    case = load_case(CASES / "usdc-fe.toml", FE_TINY)
+    model = build_model(case, MPI.COMM_WORLD)
+    f = fem.Function(model.W)
+    f.sub(0).interpolate(lambda x: np.vstack([x[0] + 2 * x[1], 3 * x[1] - x[0]]))
+    f.sub(1).interpolate(lambda x: 5 * x[0] - 7 * x[1])
+    f.x.scatter_forward()
+    vertex = VertexFields(model)
+    sampled = vertex.sample(f.vector)
+    if MPI.COMM_WORLD.rank != 0:
+        assert sampled is None
+        return
+    u, phi = sampled
+    x = vertex.mesh_arrays["geometry"]
+    np.testing.assert_allclose(u[:, 0], x[:, 0] + 2 * x[:, 1], atol=1e-14)
+    np.testing.assert_allclose(u[:, 1], 3 * x[:, 1] - x[:, 0], atol=1e-14)
+    np.testing.assert_allclose(u[:, 2], 0.0)
+    np.testing.assert_allclose(phi, 5 * x[:, 0] - 7 * x[:, 1], atol=1e-14)
+    cells = vertex.mesh_arrays["topology"]
+    assert cells.min() == 0 and cells.max() == x.shape[0] - 1
+    assert set(np.unique(vertex.mesh_arrays["region"])) == set(model.mesh_data.cell_names.values())
