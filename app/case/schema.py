@@ -174,6 +174,10 @@ class Case:
                 and self.harmonic.f_start_Hz is None):
             raise CaseError(file, "harmonic.f_start_Hz", "give f_start_Hz and f_stop_Hz, or add 'modal' to "
                                                          "analyses (the default range is around the modal f_r, f_a)")
+        driven = any(e.kind == "voltage" for e in self.electrodes.values())
+        for analysis in ("harmonic", "circuit"):
+            if analysis in analyses and not driven:
+                raise CaseError(file, "electrodes", f"analysis {analysis!r} needs an electrode of kind 'voltage'")
         needs = {"modal": ("modal",), "harmonic": ("harmonic",), "circuit": ("modal", "harmonic", "circuit")}
         for analysis in self.analyses or []:
             for section in needs.get(analysis, ()):
