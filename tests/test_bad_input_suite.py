@@ -333,6 +333,8 @@ MPI_INPUTS = {
     "unknown drive point (mesh)": lambda d, f: (["validate", FE, *_sets([*FE_TINY, 'transient.drive.point="x"'])],
                                                 [FE.name, "transient.drive.point"]),
     "resume a file": lambda d, f: (["run", FE, "--resume", f, *_sets(FE_TINY)], ["--resume"]),
+    "sweep out is a file": lambda d, f: (["sweep", LUMPED, "--param", "lumped.downforce_N=0,3", "--out", f],
+                                         ["--out"]),
 }
 
 

@@ -307,3 +307,20 @@ def test_killed_at_every_point_resumes_to_the_one_go_series(one_go_cli, tmp_path
 @pytest.mark.parametrize("point", ["checkpoint_tmp:1", "fields_written:2"])
 def test_killed_on_two_ranks_resumes_to_the_one_go_series(one_go_cli, tmp_path, point):
     kill_and_resume(point, tmp_path, one_go_cli, mpi=2)
+
+
+def _files_under(out: Path) -> set[str]:
+    return {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()}
+
+
+def test_summary_outputs_list_every_file_written(one_go, tmp_path):
+    """summary.json ``outputs``: exactly the files in the output directory, for a transient run and
+    a lumped run (docs/summary.md)."""
+    out, summary = one_go
+    if MPI.COMM_WORLD.rank == 0:
+        assert sorted(summary["outputs"]) == sorted(_files_under(out))
+    lumped = Path(MPI.COMM_WORLD.bcast(str(tmp_path), root=0)) / "lumped"
+    result = run_case_quiet("usdc-lumped.toml", lumped, "lumped.duration_s=0.02")
+    if MPI.COMM_WORLD.rank == 0:
+        assert "time_series.h5" in result["outputs"] and "summary.json" in result["outputs"]
+        assert sorted(result["outputs"]) == sorted(_files_under(lumped))

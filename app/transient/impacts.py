@@ -61,7 +61,7 @@ def contact_summary(data: dict[str, np.ndarray], names: list[str]) -> dict:
     for name in names:
         force = np.linalg.norm(data[f"{name}_force_N"], axis=1)
         closed = data[f"{name}_closed"]
-        impacts = int(np.sum(np.diff(closed > 0) > 0))
+        impacts = int(np.sum(np.diff((closed > 0).astype(np.int8)) == 1))
         out[name] = {"impacts": impacts, "max_force_N": float(force.max()), "impulse_N_s": float(np.sum(force * dt)),
                      "closed_time_s": float(np.sum(dt * (closed > 0)))}
     return out
