@@ -24,12 +24,12 @@ from dolfinx import fem
 
 from app.compat import scalar_space, vector_space
 
-# dolfinx cell name -> (XDMF topology type, vertex permutation dolfinx -> XDMF/VTK order)
+# dolfinx cell name -> (XDMF topology type, vertices, vertex permutation dolfinx -> XDMF/VTK order)
 _XDMF_CELLS = {
-    "triangle": ("Triangle", None),
-    "tetrahedron": ("Tetrahedron", None),
-    "quadrilateral": ("Quadrilateral", [0, 1, 3, 2]),
-    "hexahedron": ("Hexahedron", [0, 1, 3, 2, 4, 5, 7, 6]),
+    "triangle": ("Triangle", 3, None),
+    "tetrahedron": ("Tetrahedron", 4, None),
+    "quadrilateral": ("Quadrilateral", 4, [0, 1, 3, 2]),
+    "hexahedron": ("Hexahedron", 8, [0, 1, 3, 2, 4, 5, 7, 6]),
 }
 
 
@@ -52,11 +52,10 @@ class VertexFields:
         if cell_name not in _XDMF_CELLS or mesh.geometry.cmap.degree != 1:
             raise NotImplementedError(f"field export of {cell_name} meshes of geometry degree "
                                       f"{mesh.geometry.cmap.degree}")
-        self.topology_type, permutation = _XDMF_CELLS[cell_name]
+        self.topology_type, nodes_per_cell, permutation = _XDMF_CELLS[cell_name]
         n_owned = mesh.topology.index_map(tdim).size_local
         geometry = mesh.geometry
-        nodes_per_cell = geometry.dofmap.links(0).size if geometry.dofmap.num_nodes else 0
-        cell_nodes = np.asarray(geometry.dofmap.array, dtype=np.int64).reshape(-1, max(nodes_per_cell, 1))[:n_owned]
+        cell_nodes = np.asarray(geometry.dofmap.array, dtype=np.int64).reshape(-1, nodes_per_cell)[:n_owned]
         self.V1 = vector_space(mesh, "Lagrange", 1)
         self.S1 = scalar_space(mesh, "Lagrange", 1)
         self.u1 = fem.Function(self.V1)

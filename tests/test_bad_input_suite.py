@@ -366,3 +366,17 @@ def test_truncated_checkpoint_on_two_ranks(tmp_path, finished_fe_run):
     pointer.write_bytes(pointer.read_bytes()[:40])
     result = run_two_ranks("run", FE, "--resume", out, *_sets(FE_TINY))
     assert_one_line(result.returncode, result.stderr, "checkpoint.json")
+
+
+# ------------------------------------------------------------------- valid inputs stay valid
+@pytest.mark.parametrize("case, overrides", [
+    (BAR, ["geometry.parameters.width_m=0.0003"]),                         # a thin bar: end faces found
+    (BAR, ["geometry.parameters.width_m=0.0003", "geometry.parameters.lateral_divisions=1"]),
+    (BAR, ["geometry.parameters.width_m=0.05", "geometry.parameters.length_m=0.001",
+           "points.end.coordinates_m=[0.0, 0.001]"]),                         # a flat disc-like bar
+    (FE, FE_TINY),
+    (TRANSDUCER, []),
+])
+def test_valid_inputs_validate(capsys, case, overrides):
+    code, err = cli_main(capsys, "validate", case, *_sets(overrides))
+    assert code == 0, err

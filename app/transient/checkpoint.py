@@ -121,10 +121,11 @@ def mark_started(out_dir: Path, comm, digest: dict) -> None:
     directory = Path(out_dir) / CHECKPOINT_DIR
     if comm.rank == 0:
         directory.mkdir(parents=True, exist_ok=True)
+        meta = {"format": FORMAT, "case": digest}
+        # the record first: killed in between, the directory still holds a consistent older run
+        _atomic_write(directory / MARKER, lambda fh: fh.write(json.dumps(meta, indent=1).encode()))
         for old in [directory / POINTER, *directory.glob("state-*.npz*")]:
             old.unlink(missing_ok=True)
-        meta = {"format": FORMAT, "case": digest}
-        _atomic_write(directory / MARKER, lambda fh: fh.write(json.dumps(meta, indent=1).encode()))
     comm.barrier()
 
 
