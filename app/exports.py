@@ -172,14 +172,19 @@ def _pad3(v) -> np.ndarray:
     return out
 
 
-def xdmf_document(steps: list[ET.Element], name: str) -> bytes:
-    """An XDMF 3 document: one temporal collection ``name`` holding ``steps``."""
-    root = ET.Element("Xdmf", Version="3.0")
-    domain = ET.SubElement(root, "Domain")
-    series = ET.SubElement(domain, "Grid", Name=name, GridType="Collection", CollectionType="Temporal")
-    series.extend(steps)
-    ET.indent(root, space=" ")
-    return b'<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n' + ET.tostring(root, encoding="utf-8")
+def xdmf_document(steps: list[ET.Element | bytes], name: str) -> bytes:
+    """An XDMF 3 document: one temporal collection ``name`` holding ``steps`` (elements, or their
+    bytes from :func:`step_bytes`: a long series serialises each step once, not at every output)."""
+    head = (f'<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n<Xdmf Version="3.0">\n <Domain>\n'
+            f'  <Grid Name="{name}" GridType="Collection" CollectionType="Temporal">\n').encode()
+    body = b"".join(s if isinstance(s, bytes) else step_bytes(s) for s in steps)
+    return head + body + b"  </Grid>\n </Domain>\n</Xdmf>\n"
+
+
+def step_bytes(step: ET.Element) -> bytes:
+    """One time step's element, indented for its place in :func:`xdmf_document`."""
+    ET.indent(step, space=" ", level=3)
+    return ("   " + ET.tostring(step, encoding="unicode") + "\n").encode()
 
 
 def replace_file(path: Path, data: bytes, sync: bool = False) -> None:

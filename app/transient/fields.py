@@ -23,7 +23,17 @@ from pathlib import Path
 
 import numpy as np
 
-from app.exports import FE_GRID, VertexFields, mesh_grid, point_grid, replace_file, write_h5_atomic, write_mesh_h5
+from app.exports import (
+    FE_GRID,
+    VertexFields,
+    mesh_grid,
+    point_grid,
+    replace_file,
+    step_bytes,
+    write_h5_atomic,
+    write_mesh_h5,
+    xdmf_document,
+)
 from app.killpoint import kill_point
 
 
@@ -43,14 +53,14 @@ class FieldSeriesExport:
         self.vertex = VertexFields(model)
         self.comm = model.mesh.comm
         self.rank0 = self.comm.rank == 0
-        self.steps: list[ET.Element] = []
+        self.steps: list[bytes] = []         # each output's XML, serialised once
         self.next_s = 0.0
         if resume_from_s is not None:
             self.next_s = self._next_after(resume_from_s)
         if self.rank0:
             self.dir.mkdir(parents=True, exist_ok=True)
             if resume_from_s is not None:
-                self.steps = _steps_until(self.path, resume_from_s)
+                self.steps = [step_bytes(step) for step in _steps_until(self.path, resume_from_s)]
             for stale in self.dir.glob("step_*.h5*"):       # steps of a killed run past the checkpoint
                 if _step_index(stale) >= len(self.steps):
                     stale.unlink()
@@ -67,8 +77,6 @@ class FieldSeriesExport:
                                                                for k in range(self.written)]
 
     def _document(self) -> bytes:
-        from app.exports import xdmf_document
-
         return xdmf_document(self.steps, self.path.stem)
 
     def write(self, t: float, body_positions=None) -> None:
@@ -89,7 +97,7 @@ class FieldSeriesExport:
             for body, sl, start in self.bodies:
                 position = z[sl] if z is not None else start
                 step.append(point_grid(body, start, position - start))
-            self.steps.append(step)
+            self.steps.append(step_bytes(step))
             replace_file(self.path, self._document())
         self.written += 1
         self.next_s = self._next_after(t)
