@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
             from app.case.schema import load_case
 
             case = load_case(args.case, args.set)
-            if case.tier == "fe":
+            if case.tier in ("fe", "modal"):
                 from app.fe.model import build_model
 
                 build_model(case, MPI.COMM_WORLD)

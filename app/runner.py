@@ -113,7 +113,10 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
     if frequency_domain:
         ops.destroy()
     if "transient" in case.analyses:
-        from app.transient import driver as transient_driver
+        if case.tier == "modal":
+            from app.reduced import driver as transient_driver
+        else:
+            from app.transient import driver as transient_driver
 
         with timer.phase("transient"):
             results["transient"] = transient_driver.run(case, out, comm, log, resume=resume)

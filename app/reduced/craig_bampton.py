@@ -45,6 +45,7 @@ from app.errors import NumericalFailure
 from app.fe.constraints import ConstraintSet
 
 REDUCTION_PREFIX = "reduction_"
+MAX_MODES = 2000
 
 
 @dataclass
@@ -228,15 +229,23 @@ def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int |
 
     constraints = ConstraintSet(W, held_owned_local.astype(np.int32), [])
     ops = Operators(K, M)
-    want = n_modes or 8
+    want = n_modes or 16
+    dim = W.mesh.geometry.dim
     while True:
         # target 0: the clamped K is non-singular, so the modes nearest 0 are the lowest ones
-        modes = solve_modes(ops, constraints, 0.0, want, 0.0, prefix=REDUCTION_PREFIX + "eps_")
-        if cutoff_Hz is None or (modes and modes[-1].frequency_Hz > cutoff_Hz) or want >= 2000:
+        try:
+            modes = solve_modes(ops, constraints, 0.0, want, 0.0, prefix=REDUCTION_PREFIX + "eps_")
+        except PETSc.Error as exc:
+            raise NumericalFailure(f"fixed-interface modes: SLEPc failed for {want} modes ({exc}); "
+                                   f"lower reduction.cutoff_Hz / n_modes") from None
+        top = modes[-1].frequency_Hz if modes else 0.0
+        if cutoff_Hz is None or top > cutoff_Hz or want >= MAX_MODES:
             break
+        # Weyl: the count below f grows like f^dim; ask once more for what the cutoff needs (+20 %)
+        estimate = int(math.ceil(1.2 * len(modes) * (cutoff_Hz / max(top, 1e-30)) ** dim)) + 8
         for m in modes:
             m.vector.destroy()
-        want *= 2
+        want = min(max(estimate, 2 * want), MAX_MODES)
     keep = [m for m in modes if (n_modes is not None and modes.index(m) < n_modes)
             or (cutoff_Hz is not None and m.frequency_Hz <= cutoff_Hz)]
     for m in modes:

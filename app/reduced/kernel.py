@@ -100,54 +100,43 @@ def _point_force(i, z_mid, zd_mid, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, p
 
 
 @njit(cache=True, error_model="numpy")
-def _residual(dq, dz, q0, v0, a0, z0, zd0, zdd0, dt, beta, gamma, alpha_m, alpha_f, K, M, C, fq, free_q,
-              body_mass, body_force, zfree, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c,
-              nc_exp, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, R, J, want_jacobian, forces):
-    """Residual (free q rows, then every body DOF; fixed DOFs get identity rows) and, optionally,
-    its Jacobian w.r.t. the increments (dq[free], dz); contact forces [N] into ``forces``.
+def _contact_system(g, dz, uS0, G_SS, qS0, vS0, aS0, z0, zd0, zdd0, dt, beta, gamma, alpha_m, alpha_f,
+                    body_mass, body_force, zfree, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c,
+                    nc_exp, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, F, J, want_jacobian, forces):
+    """Condensed residual on (g, dz) and, optionally, its Jacobian; contact forces into ``forces``.
 
-    The unknowns are the increments over the step, not the new values: accelerations are formed
-    from them without the z_{n+1} - z_n cancellation, which at dt = 1e-8 s would turn eps |z| into
-    a residual far above the tolerance (the FE tier's rigid unknowns are increments for the same
-    reason)."""
-    r = dq.size
-    nf = free_q.size
+    The structure's equations are linear, so for contact residuals g on the interface coordinates
+    its increments are dq = (predictor + w) - G g (``uS0`` = the interface part of predictor + w,
+    ``G_SS`` = the interface block of K_eff^-1, both formed once per step / per dt). Newton then
+    runs on g and the body increments dz only: F_g = rc_S(dq_S(g), dz) - g, F_z = r_z(dq_S, dz),
+    the FE tier's condensed system (app.transient.coupled) on a dense model."""
+    s = g.size
     m = dz.size
     c_acc = 1.0 / (beta * dt * dt)
     c_vel = gamma / (beta * dt)
-    a1 = (dq - dt * v0) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a0
-    v1 = v0 + dt * ((1.0 - gamma) * a0 + gamma * a1)
-    q_mid = q0 + (1.0 - alpha_f) * dq
-    v_mid = (1.0 - alpha_f) * v1 + alpha_f * v0
-    a_mid = (1.0 - alpha_m) * a1 + alpha_m * a0
+    w_f = 1.0 - alpha_f
+    dqS = uS0 - G_SS @ g
+    aS1 = (dqS - dt * vS0) * c_acc - (1.0 / (2.0 * beta) - 1.0) * aS0
+    vS1 = vS0 + dt * ((1.0 - gamma) * aS0 + gamma * aS1)
+    q_mid = qS0 + w_f * dqS
+    v_mid = w_f * vS1 + alpha_f * vS0
     zdd1 = (dz - dt * zd0) * c_acc - (1.0 / (2.0 * beta) - 1.0) * zdd0
     zd1 = zd0 + dt * ((1.0 - gamma) * zdd0 + gamma * zdd1)
-    z_mid = z0 + (1.0 - alpha_f) * dz
-    zd_mid = (1.0 - alpha_f) * zd1 + alpha_f * zd0
-    full = M @ a_mid + C @ v_mid + K @ q_mid - fq
-    for i in range(nf):
-        R[i] = full[free_q[i]]
+    z_mid = z0 + w_f * dz
+    zd_mid = w_f * zd1 + alpha_f * zd0
+    for k in range(s):
+        F[k] = -g[k]
     for j in range(m):
-        b = j // gdim
-        R[nf + j] = body_mass[b] * ((1.0 - alpha_m) * zdd1[j] + alpha_m * zdd0[j]) - body_force[j]
+        F[s + j] = body_mass[j // gdim] * ((1.0 - alpha_m) * zdd1[j] + alpha_m * zdd0[j]) - body_force[j]
     if want_jacobian:
-        w_m = (1.0 - alpha_m) * c_acc
-        w_c = (1.0 - alpha_f) * c_vel
-        w_k = 1.0 - alpha_f
-        for i in range(nf):
-            for k in range(nf):
-                J[i, k] = w_m * M[free_q[i], free_q[k]] + w_c * C[free_q[i], free_q[k]] + w_k * K[free_q[i], free_q[k]]
-            for j in range(m):
-                J[i, nf + j] = 0.0
+        for a in range(s + m):
+            for b in range(s + m):
+                J[a, b] = 0.0
+        for k in range(s):
+            J[k, k] = -1.0
         for j in range(m):
-            for k in range(nf + m):
-                J[nf + j, k] = 0.0
-            J[nf + j, nf + j] = w_m * body_mass[j // gdim]
-    # position of each reduced coordinate among the free unknowns (-1 if prescribed)
-    slot = np.full(r, -1)
-    for i in range(nf):
-        slot[free_q[i]] = i
-    w_f = 1.0 - alpha_f
+            J[s + j, s + j] = (1.0 - alpha_m) * c_acc * body_mass[j // gdim]
+    Kss = np.zeros((s, s))
     for i in range(nc_k.size):
         f, df, dfr, _ = _node_force(i, q_mid, v_mid, z_mid, zd_mid, nc_coord, nc_normal, nc_offset, nc_ref,
                                     nc_body, nc_k, nc_c, nc_exp, gdim)
@@ -156,54 +145,58 @@ def _residual(dq, dz, q0, v0, a0, z0, zd0, zdd0, dt, beta, gamma, alpha_m, alpha
         for k in range(gdim):
             n = nc_normal[i, k]
             j = nc_coord[i, k]
-            if j >= 0 and slot[j] >= 0:
-                R[slot[j]] -= f * n
-            R[nf + b * gdim + k] += f * n
+            if j >= 0:
+                F[j] -= f * n
+            F[s + b * gdim + k] += f * n
         if want_jacobian and f > 0.0:
-            slope = w_f * (df + dfr * c_vel)          # d F / d (delta at t_{n+1})
+            slope = w_f * (df + dfr * c_vel)          # d F / d (delta increment over the step)
             for k in range(gdim):
                 row_q = nc_coord[i, k]
-                row_q = slot[row_q] if row_q >= 0 else -1
-                row_z = nf + b * gdim + k
+                row_z = s + b * gdim + k
                 for kk in range(gdim):
-                    # d delta / d u_node_kk = -n_kk, d delta / d z_b_kk = +n_kk
                     col_q = nc_coord[i, kk]
-                    col_q = slot[col_q] if col_q >= 0 else -1
-                    col_z = nf + b * gdim + kk
+                    col_z = s + b * gdim + kk
                     coeff = slope * nc_normal[i, k] * nc_normal[i, kk]
+                    # rc_S = -F n, r_z = +F n; d delta / d u = -n, d delta / d z = +n
                     if row_q >= 0:
                         if col_q >= 0:
-                            J[row_q, col_q] += coeff
+                            Kss[row_q, col_q] += coeff
                         J[row_q, col_z] -= coeff
                     if col_q >= 0:
-                        J[row_z, col_q] -= coeff
+                        for kk2 in range(s):
+                            J[row_z, kk2] += coeff * G_SS[col_q, kk2]      # (-coeff) * (-G)
                     J[row_z, col_z] += coeff
+    if want_jacobian:
+        KG = Kss @ G_SS
+        for a in range(s):
+            for b in range(s):
+                J[a, b] -= KG[a, b]
     base = nc_k.size
     for i in range(pc_k.size):
         f, df, dfr, _ = _point_force(i, z_mid, zd_mid, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, gdim)
         forces[base + i] = f
         lo, up = pc_lower[i], pc_upper[i]
         for k in range(gdim):
-            R[nf + up * gdim + k] -= f * pc_dir[i, k]
-            R[nf + lo * gdim + k] += f * pc_dir[i, k]
+            F[s + up * gdim + k] -= f * pc_dir[i, k]
+            F[s + lo * gdim + k] += f * pc_dir[i, k]
         if want_jacobian and f > 0.0:
             slope = w_f * (df + dfr * c_vel)
             for k in range(gdim):
                 for kk in range(gdim):
                     coeff = slope * pc_dir[i, k] * pc_dir[i, kk]
-                    J[nf + up * gdim + k, nf + up * gdim + kk] += coeff
-                    J[nf + lo * gdim + k, nf + lo * gdim + kk] += coeff
-                    J[nf + up * gdim + k, nf + lo * gdim + kk] -= coeff
-                    J[nf + lo * gdim + k, nf + up * gdim + kk] -= coeff
+                    J[s + up * gdim + k, s + up * gdim + kk] += coeff
+                    J[s + lo * gdim + k, s + lo * gdim + kk] += coeff
+                    J[s + up * gdim + k, s + lo * gdim + kk] -= coeff
+                    J[s + lo * gdim + k, s + up * gdim + kk] -= coeff
     for j in range(m):
         if not zfree[j]:
-            R[nf + j] = 0.0
+            F[s + j] = 0.0
             if want_jacobian:
-                for k in range(nf + m):
-                    J[nf + j, k] = 0.0
-                    J[k, nf + j] = 0.0
-                J[nf + j, nf + j] = 1.0
-    return a1, v1, zdd1, zd1
+                for k in range(s + m):
+                    J[s + j, k] = 0.0
+                    J[k, s + j] = 0.0
+                J[s + j, s + j] = 1.0
+    return zdd1, zd1
 
 
 @njit(cache=True, error_model="numpy")
@@ -249,6 +242,19 @@ def _snap(level, dt):
 
 
 @njit(cache=True, error_model="numpy")
+def _effective_inverse(K, M, C, free_q, dt, beta, gamma, alpha_m, alpha_f):
+    c_acc = 1.0 / (beta * dt * dt)
+    c_vel = gamma / (beta * dt)
+    nf = free_q.size
+    A = np.empty((nf, nf))
+    for i in range(nf):
+        for k in range(nf):
+            a, b = free_q[i], free_q[k]
+            A[i, k] = (1.0 - alpha_m) * c_acc * M[a, b] + (1.0 - alpha_f) * c_vel * C[a, b] + (1.0 - alpha_f) * K[a, b]
+    return np.linalg.inv(A)
+
+
+@njit(cache=True, error_model="numpy")
 def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
         K, M, C, fq, free_q, pres_q, drive_amp, drive_phase, omega, cosine, body_mass, body_force, zfree, gdim,
         nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp,
@@ -257,24 +263,37 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
         sample_rows, out_time, out_dt, out_samples, out_drive, out_z, out_zd, out_force, out_closed):
     """Advance the state arrays (in place) to ``t_end`` or until the output buffers are full.
     Returns (code, rows written). One output row per accepted step: time, dt, ``sample_rows @ q``,
-    the prescribed coordinates, body positions and velocities, contact forces [N] and closed flags."""
+    the prescribed coordinates, body positions and velocities, contact forces [N] and closed flags.
+
+    The interface coordinates (those the node contacts act on) must be the first free
+    coordinates, ``free_q[:s] == arange(s)`` (the Craig-Bampton order)."""
     nf = free_q.size
     m = z.size
+    s = 0
+    for i in range(nc_coord.shape[0]):
+        for k in range(gdim):
+            s = max(s, nc_coord[i, k] + 1)
     n_contacts = nc_k.size + pc_k.size
-    R = np.zeros(nf + m)
-    R_try = np.zeros(nf + m)
-    J = np.zeros((nf + m, nf + m))
+    F = np.zeros(s + m)
+    F_try = np.zeros(s + m)
+    J = np.zeros((s + m, s + m))
     forces = np.zeros(max(n_contacts, 1))
     new_closed = np.zeros(max(n_contacts, 1), dtype=np.bool_)
     pq = np.zeros(pres_q.size)
     pv = np.zeros(pres_q.size)
     pa = np.zeros(pres_q.size)
+    # K_eff^-1 of the free coordinates for the few step sizes a run uses
+    slots = 24
+    cache_dt = np.full(slots, -1.0)
+    cache_inv = np.zeros((slots, nf, nf))
+    cache_cols = np.zeros((slots, nf, s))           # K_eff^-1 E: the columns of the interface coordinates
+    cache_block = np.zeros((slots, s, s))           # their interface rows, G_SS
+    cache_next = 0
     rows = 0
     capacity = out_time.size
     t = fstate[F_TIME]
     closure = _status(q, v, z, zd, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp,
                       pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, closed)
-    # force scale of the convergence test: the loads the step must balance
     load_scale = np.sqrt(np.sum(fq * fq) + np.sum(body_force * body_force))
     body_mass_dofs = np.zeros(m)
     for j in range(m):
@@ -301,44 +320,72 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
             dt_try = dt if remainder >= dt * (1.0 - 1e-9) else remainder
             istate[I_ATTEMPTS] += 1
             t1 = t + dt_try
+            slot = -1
+            for c in range(slots):
+                if cache_dt[c] > 0 and abs(cache_dt[c] - dt_try) <= 1e-12 * dt_try:
+                    slot = c
+            if slot < 0:
+                slot = cache_next
+                cache_next = (cache_next + 1) % slots
+                cache_dt[slot] = dt_try
+                cache_inv[slot] = _effective_inverse(K, M, C, free_q, dt_try, beta, gamma, alpha_m, alpha_f)
+                cache_cols[slot] = np.ascontiguousarray(cache_inv[slot][:, :s])
+                cache_block[slot] = np.ascontiguousarray(cache_inv[slot][:s, :s])
+            A_inv = cache_inv[slot]
+            G_cols = cache_cols[slot]
+            G_SS = cache_block[slot]
+            c_acc = 1.0 / (beta * dt_try * dt_try)
             _drive(t1, drive_amp, drive_phase, omega, cosine, pq, pv, pa)
+            # predictor increments; the structure's residual there without contact, and w = -K_eff^-1 r0
             dq = dt_try * v + 0.5 * dt_try * dt_try * a
             for p in range(pres_q.size):
                 dq[pres_q[p]] = pq[p] - q[pres_q[p]]
+            a1 = (dq - dt_try * v) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a
+            v1 = v + dt_try * ((1.0 - gamma) * a + gamma * a1)
+            inertia_term = M @ ((1.0 - alpha_m) * a1 + alpha_m * a)
+            damping_term = C @ ((1.0 - alpha_f) * v1 + alpha_f * v)
+            stiffness_term = K @ (q + (1.0 - alpha_f) * dq)
+            r0 = inertia_term + damping_term + stiffness_term - fq
+            r0F = np.empty(nf)
+            for i in range(nf):
+                r0F[i] = r0[free_q[i]]
+            w = -(A_inv @ r0F)
+            uS0 = dq[:s] + w[:s]
             dz = dt_try * zd + 0.5 * dt_try * dt_try * zdd
             for j in range(m):
                 if not zfree[j]:
                     dz[j] = 0.0
-            # tolerance: rtol times the forces the step balances, never below their round-off
-            # (the inertia terms are formed from increments / (beta dt^2))
-            c_acc = 1.0 / (beta * dt_try * dt_try)
-            inertia = np.sqrt(np.sum((M @ (dq * c_acc)) ** 2) + np.sum((body_mass_dofs * dz * c_acc) ** 2))
-            scale = load_scale + np.sqrt(np.sum((M @ a) ** 2) + np.sum((K @ q) ** 2))
-            atol = NEWTON_RTOL * scale + 10.0 * EPS * (scale + inertia) + 1e-300
+            g = np.zeros(s)
+            # tolerance: rtol times the forces the step balances (the FE tier's scale), never below
+            # their round-off (the rigid inertia is formed from increments / (beta dt^2))
+            scale = load_scale + np.sqrt(np.sum(inertia_term**2) + np.sum(damping_term**2)
+                                         + np.sum(stiffness_term**2))
+            # the body accelerations come from (dz - dt zd) c_acc: its round-off is eps |zd| c_acc dt
+            rigid_inertia = np.sqrt(np.sum((body_mass_dofs * dt_try * zd * c_acc) ** 2)
+                                    + np.sum((body_mass_dofs * zdd) ** 2))
+            atol = NEWTON_RTOL * scale + 10.0 * EPS * (scale + rigid_inertia) + 1e-300
             converged = False
             iterations = 0
-            a1, v1, zdd1, zd1 = _residual(dq, dz, q, v, a, z, zd, zdd, dt_try, beta, gamma, alpha_m, alpha_f, K, M,
-                                          C, fq, free_q, body_mass, body_force, zfree, gdim, nc_coord, nc_normal,
-                                          nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower, pc_upper, pc_dir,
-                                          pc_touch, pc_k, pc_c, R, J, True, forces)
-            norm = np.sqrt(np.sum(R * R))
+            zdd1, zd1 = _contact_system(g, dz, uS0, G_SS, q[:s], v[:s], a[:s], z, zd, zdd, dt_try, beta, gamma,
+                                        alpha_m, alpha_f, body_mass, body_force, zfree, gdim, nc_coord, nc_normal,
+                                        nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower, pc_upper, pc_dir,
+                                        pc_touch, pc_k, pc_c, F, J, True, forces)
+            norm = np.sqrt(np.sum(F * F))
             while iterations < MAX_NEWTON and np.isfinite(norm):
                 if norm <= atol:
                     converged = True
                     break
-                step = np.linalg.solve(J, -R)
+                step = np.linalg.solve(J, -F)
                 lam = 1.0
                 accepted = False
                 for _ in range(12):                     # backtracking: accept a decrease
-                    dq_try = dq.copy()
-                    for i in range(nf):
-                        dq_try[free_q[i]] += lam * step[i]
-                    dz_try = dz + lam * step[nf:]
-                    _residual(dq_try, dz_try, q, v, a, z, zd, zdd, dt_try, beta, gamma, alpha_m, alpha_f, K, M, C,
-                              fq, free_q, body_mass, body_force, zfree, gdim, nc_coord, nc_normal, nc_offset, nc_ref,
-                              nc_body, nc_k, nc_c, nc_exp, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, R_try,
-                              J, False, forces)
-                    norm_try = np.sqrt(np.sum(R_try * R_try))
+                    g_try = g + lam * step[:s]
+                    dz_try = dz + lam * step[s:]
+                    _contact_system(g_try, dz_try, uS0, G_SS, q[:s], v[:s], a[:s], z, zd, zdd, dt_try, beta, gamma,
+                                    alpha_m, alpha_f, body_mass, body_force, zfree, gdim, nc_coord, nc_normal,
+                                    nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower, pc_upper, pc_dir,
+                                    pc_touch, pc_k, pc_c, F_try, J, False, forces)
+                    norm_try = np.sqrt(np.sum(F_try * F_try))
                     if norm_try <= (1.0 - 1e-4 * lam) * norm or norm_try <= atol:
                         accepted = True
                         break
@@ -347,17 +394,17 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
                 if not accepted:
                     break
                 small = lam * np.sqrt(np.sum(step * step)) <= NEWTON_STOL * (
-                    np.sqrt(np.sum(dq * dq)) + np.sqrt(np.sum(dz * dz)) + 1e-300)
-                dq, dz = dq_try, dz_try
-                a1, v1, zdd1, zd1 = _residual(dq, dz, q, v, a, z, zd, zdd, dt_try, beta, gamma, alpha_m, alpha_f,
-                                              K, M, C, fq, free_q, body_mass, body_force, zfree, gdim, nc_coord,
-                                              nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower,
-                                              pc_upper, pc_dir, pc_touch, pc_k, pc_c, R, J, True, forces)
-                norm = np.sqrt(np.sum(R * R))
+                    np.sqrt(np.sum(g * g)) + np.sqrt(np.sum(dz * dz)) + 1e-300)
+                g, dz = g_try, dz_try
+                zdd1, zd1 = _contact_system(g, dz, uS0, G_SS, q[:s], v[:s], a[:s], z, zd, zdd, dt_try, beta, gamma,
+                                            alpha_m, alpha_f, body_mass, body_force, zfree, gdim, nc_coord,
+                                            nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower,
+                                            pc_upper, pc_dir, pc_touch, pc_k, pc_c, F, J, True, forces)
+                norm = np.sqrt(np.sum(F * F))
                 if small and norm <= 1e3 * atol:
                     converged = True
                     break
-            istate[I_NEWTON] += iterations
+            istate[I_NEWTON] += max(iterations, 1)
             if not converged:
                 istate[I_CUTBACKS] += 1
                 dt = 0.5 * dt_try
@@ -366,6 +413,12 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
                     return STEP_FAILED, rows
                 fstate[F_CAP] = dt
                 continue
+            # the structure's increments for the converged contact residuals
+            corr = w - G_cols @ g
+            for i in range(nf):
+                dq[free_q[i]] += corr[i]
+            a1 = (dq - dt_try * v) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a
+            v1 = v + dt_try * ((1.0 - gamma) * a + gamma * a1)
             q1 = q + dq
             z1 = z + dz
             new_closure = _status(q1, v1, z1, zd1, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k,
