@@ -63,6 +63,9 @@ def _output_dir_problem(path: Path, resume: bool) -> str | None:
 def load_for_run(case_path: str | Path, overrides: list[str] | None, resume: bool = False) -> Case:
     """Load and check a case for ``run`` (and ``validate``): the schema, and the CLI rules."""
     case = load_case(case_path, overrides)
+    if resume and case.tier == "modal":
+        raise CaseError(str(case_path), "--resume", "tier 'modal' has no checkpoints yet (its runs are short: run "
+                                                    "again)")
     if resume and "transient" not in case.analyses:
         raise CaseError(str(case_path), "--resume", f"only a transient analysis can be resumed; this case runs "
                                                     f"{', '.join(case.analyses)}")
@@ -73,9 +76,9 @@ def check_case(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, log=None) -> None:
     """Every input check that ``run`` makes, including those that need the mesh, without solving:
     the FE model (groups, electrodes, points) and the transient model (drive point, contacts,
     loads). Collective."""
-    if case.tier != "fe":
+    if case.tier not in ("fe", "modal"):
         return
-    if "transient" in case.analyses:
+    if "transient" in case.analyses:        # the modal tier builds the same model before reducing it
         from app.transient.driver import build
 
         tm = build(case, comm, log or (lambda *a: None))
@@ -174,7 +177,10 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
     if frequency_domain:
         ops.destroy()
     if "transient" in case.analyses:
-        from app.transient import driver as transient_driver
+        if case.tier == "modal":
+            from app.reduced import driver as transient_driver
+        else:
+            from app.transient import driver as transient_driver
 
         with timer.phase("transient"):
             results["transient"] = transient_driver.run(case, out, comm, log, resume=resume)

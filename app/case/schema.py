@@ -120,6 +120,17 @@ class CircuitSection:
 
 
 @dataclass(frozen=True)
+class ReductionSection:
+    """Basis of the modal tier (Craig-Bampton, docs/reduced.md): the interface DOFs are the FE nodes
+    the case's contacts touch and every driven electrode; this chooses the fixed-interface modes."""
+
+    n_modes: int | None = param(None, ge=1, le=2000, doc="number of fixed-interface modes (overrides the cutoff)")
+    cutoff_Hz: float | None = param(None, gt=0, unit="Hz", doc="keep every fixed-interface mode below this frequency")
+    cutoff_factor: float = param(
+        20.0, gt=1, doc="default cutoff = factor x the transient drive frequency (when neither key is given)")
+
+
+@dataclass(frozen=True)
 class OutputSection:
     fields: bool = param(True, doc="write XDMF mode shapes / fields")
     plots: bool = param(True, doc="write PNG plots")
@@ -127,7 +138,8 @@ class OutputSection:
 
 @dataclass(frozen=True)
 class Case:
-    tier: Literal["fe", "lumped"] = param("fe", doc="model tier: full FE or lumped")
+    tier: Literal["fe", "modal", "lumped"] = param(
+        "fe", doc="model tier: full FE, modal-reduced FE (transient) or lumped")
     title: str = param("", doc="free text shown in the log")
     analyses: list[Analysis] | None = param(
         None, doc="analyses to run: modal, harmonic, circuit, transient (tier fe; default modal) or lumped")
@@ -141,24 +153,26 @@ class Case:
     modal: ModalSection | None = param(None, doc="see [modal]")
     harmonic: HarmonicSection | None = param(None, doc="see [harmonic]")
     circuit: CircuitSection | None = param(None, doc="see [circuit]")
+    reduction: ReductionSection = param(default_factory=ReductionSection, doc="see [reduction] (tier modal)")
     output: OutputSection = param(default_factory=OutputSection, doc="see [output]")
     lumped: Any = param(None, doc="see [lumped] (tier lumped)")
     transient: Any = param(None, doc="see [transient]")
     source: str = param("", doc="set by the loader: path of the case file")
 
     def check(self, file, prefix):
-        if self.tier == "fe":
+        if self.tier in ("fe", "modal"):
             if self.geometry is None:
-                raise CaseError(file, "geometry", "required for tier = 'fe'")
+                raise CaseError(file, "geometry", f"required for tier = {self.tier!r}")
             if not self.regions:
-                raise CaseError(file, "regions", "at least one region is required for tier = 'fe'")
+                raise CaseError(file, "regions", f"at least one region is required for tier = {self.tier!r}")
             for i, region in enumerate(self.regions):
                 if region.material not in self.materials:
                     raise CaseError(file, f"regions[{i}].material",
                                     f"unknown material {region.material!r}; defined: {', '.join(self.materials)}")
                 if isinstance(region.poling, list) and (len(region.poling) != 3 or not any(region.poling)):
                     raise CaseError(file, f"regions[{i}].poling", "a poling vector needs 3 non-zero-norm entries")
-        runnable = {"fe": ("modal", "harmonic", "circuit", "transient"), "lumped": ("lumped",)}[self.tier]
+        runnable = {"fe": ("modal", "harmonic", "circuit", "transient"),
+                    "modal": ("modal", "harmonic", "circuit", "transient"), "lumped": ("lumped",)}[self.tier]
         for i, analysis in enumerate(self.analyses or []):
             if analysis not in runnable:
                 raise CaseError(file, f"analyses[{i}]", f"tier {self.tier!r} cannot run analysis {analysis!r} "
@@ -226,6 +240,11 @@ def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
     materials = {name: resolve(m, file, f"materials.{name}") for name, m in case.materials.items()}
     analyses = case.analyses if case.analyses is not None else (["lumped"] if case.tier == "lumped" else ["modal"])
     case = replace(case, materials=materials, analyses=analyses, source=str(path.resolve()), **extra)
+    if case.tier == "modal" and case.transient is not None:
+        for i, contact in enumerate(case.transient.contacts):
+            if contact.kind == "surface":
+                raise CaseError(file, f"transient.contacts[{i}].kind",
+                                "surface contacts are not available in tier 'modal' yet (use tier 'fe')")
     if case.tier == "lumped" and case.lumped is None:
         raise CaseError(file, "lumped", "section required for tier = 'lumped'")
     if "transient" in case.analyses and case.transient is None:

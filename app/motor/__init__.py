@@ -1,0 +1,1 @@
+"""Ultrasonic motor scene: stator-rotor friction drive (see docs/motor-stator.md)."""

@@ -1,0 +1,286 @@
+"""Craig-Bampton reduction of a piezoelectric FE model (the modal-reduced tier's basis).
+
+Why Craig-Bampton: contacts act only on a few "interface" displacement DOFs (the drill tip's axis
+node, a motor stator's contact band). The basis keeps those DOFs as physical coordinates, so a
+contact evaluates its gap and force on them exactly as in the FE tier, and the reduced equations of
+those coordinates are the force balance at the interface. The error of the reduced model is then
+that of the fixed-interface modes left out: with the interface held, the truncation error of a
+response with spectrum below omega is bounded by the first mode not kept, (omega / omega_{k+1})^2
+in the static limit (Craig & Bampton 1968; Bampton & Craig, AIAA J. 6 (1968) 1313; the a-priori
+bound of Elssel & Voss for the eigenvalues). A free-interface basis needs residual flexibility at
+the contact DOFs to reach the same accuracy and loses the physical interface coordinates.
+
+Piezoelectric coupling is kept by treating every electrode as one more boundary coordinate: its
+potential is an input (driven electrode) or a free coordinate with the zero-charge condition
+(floating electrode), and its static "electrode mode" carries the quasi-static deformation the
+voltage causes. Charges are outputs: Q_e = -1_e^T K x, the same functional the FE tier uses.
+
+With x the full u-phi vector (every DOF, Dirichlet ones zero):
+
+    x = T q,   T = [Psi_B | Psi_E | Phi],   q = [u_B ; V_E ; eta]
+
+* Psi_B: one static constraint mode per interface DOF b: x_b = 1, every other interface DOF,
+  every electrode and every Dirichlet DOF 0, interior K_II x_I = -K_Ib (one LU of the clamped K).
+* Psi_E: one static electrode mode per electrode e: potential 1 on e, 0 on the other boundaries.
+* Phi: fixed-interface normal modes K_II phi = omega^2 M_II phi (interface, electrodes and
+  supports held; interior potential DOFs are massless and condensed by the eigensolver), mass
+  normalised, the lowest ``n_modes`` or all below ``cutoff_Hz``.
+
+Reduced operators are Galerkin projections K_r = T^T K T, M_r = T^T M T, C_r = T^T C T: the damping
+is the FE model's own C (Rayleigh + material Q), projected, not a guessed modal ratio. Everything
+is computed with PETSc/SLEPc on the FE model's partition; the reduced matrices (small, dense) are
+replicated on every rank.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from app.errors import NumericalFailure
+from app.fe.constraints import ConstraintSet
+
+REDUCTION_PREFIX = "reduction_"
+MAX_MODES = 2000
+
+
+@dataclass
+class ReducedBasis:
+    """The projected model. Coordinates: ``n_interface`` interface displacements [m] (in the order
+    of ``interface_global_dofs``), one potential [V] per electrode (``electrodes``), then
+    ``n_modes`` modal amplitudes [sqrt(kg) m]."""
+
+    K: np.ndarray
+    M: np.ndarray
+    C: np.ndarray | None
+    interface_global_dofs: np.ndarray
+    electrodes: list[str]
+    mode_frequencies_Hz: np.ndarray
+    charge_rows: dict[str, np.ndarray]      # Q_e [C] = charge_rows[e] @ q
+    columns: list[PETSc.Vec] = field(repr=False)   # T, full u-phi numbering
+    comm: MPI.Comm = field(repr=False, default=None)
+
+    @property
+    def n_interface(self) -> int:
+        return int(self.interface_global_dofs.size)
+
+    @property
+    def size(self) -> int:
+        return self.K.shape[0]
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.mode_frequencies_Hz.size)
+
+    def electrode_index(self, name: str) -> int:
+        return self.n_interface + self.electrodes.index(name)
+
+    def project_vector(self, f: PETSc.Vec) -> np.ndarray:
+        """T^T f for a full-numbering load vector f (owned entries) [N per coordinate]."""
+        local = np.array([c.array_r @ f.array_r for c in self.columns])
+        return self.comm.allreduce(local, op=MPI.SUM)
+
+    def project_functional(self, weights_local: np.ndarray) -> np.ndarray:
+        """Row r with r @ q = sum_i w_i x_i, for weights on the owned DOFs (e.g. a point sampler)."""
+        local = np.array([c.array_r @ weights_local for c in self.columns])
+        return self.comm.allreduce(local, op=MPI.SUM)
+
+    def expand(self, q: np.ndarray, out: PETSc.Vec) -> None:
+        """out <- T q (owned entries)."""
+        out.set(0.0)
+        for value, column in zip(q, self.columns):
+            if value:
+                out.axpy(float(value), column)
+
+    def destroy(self) -> None:
+        for column in self.columns:
+            column.destroy()
+        self.columns = []
+
+
+def _owned_rows(K: PETSc.Mat, global_dofs: np.ndarray) -> np.ndarray:
+    lo, hi = K.getOwnershipRange()
+    return global_dofs[(global_dofs >= lo) & (global_dofs < hi)]
+
+
+def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local: np.ndarray,
+                 interface_global_dofs: np.ndarray, electrode_local: dict[str, np.ndarray],
+                 n_modes: int | None = None, cutoff_Hz: float | None = None,
+                 damping_vectors: bool = True) -> ReducedBasis:
+    """Craig-Bampton basis and projected operators.
+
+    ``K, M, C``: assembled without boundary conditions (full u-phi numbering). ``fixed_local``: local
+    DOF indices (owned or ghost) held at zero (supports, grounded regions, ground electrodes).
+    ``interface_global_dofs``: global indices of the kept displacement DOFs, the same array on every
+    rank. ``electrode_local``: local potential DOFs of each driven or floating electrode.
+    ``n_modes`` and/or ``cutoff_Hz`` choose the fixed-interface modes (both: the larger set)."""
+    if n_modes is None and cutoff_Hz is None:
+        raise ValueError("give n_modes or cutoff_Hz")
+    comm = K.getComm().tompi4py()
+    lo, hi = K.getOwnershipRange()
+    interface = np.asarray(interface_global_dofs, dtype=PETSc.IntType)
+    imap = W.dofmap.index_map
+    local_to_global = imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+
+    def owned_global(local: np.ndarray) -> np.ndarray:
+        g = local_to_global[np.asarray(local, dtype=np.int32)]
+        return g[(g >= lo) & (g < hi)].astype(PETSc.IntType)
+
+    electrodes = list(electrode_local)
+    electrode_owned = {name: owned_global(d) for name, d in electrode_local.items()}
+    held = np.unique(np.concatenate([owned_global(fixed_local), _owned_rows(K, interface)]
+                                    + list(electrode_owned.values()))).astype(PETSc.IntType)
+
+    # One LU of K with every boundary DOF clamped: static constraint and electrode modes.
+    clamped = K.copy()
+    clamped.zeroRowsColumns(held, 1.0)
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOptionsPrefix(REDUCTION_PREFIX)
+    ksp.setOperators(clamped)
+    ksp.setType("preonly")
+    ksp.getPC().setType("lu")
+    ksp.getPC().setFactorSolverType("mumps")
+    ksp.setFromOptions()
+    columns: list[PETSc.Vec] = []
+    boundary_values = K.createVecRight()
+    rhs = K.createVecLeft()
+    unit_sets = [np.array([g], dtype=PETSc.IntType) if lo <= g < hi else np.zeros(0, PETSc.IntType)
+                 for g in interface]
+    unit_sets += [electrode_owned[name] for name in electrodes]
+    for owned in unit_sets:
+        boundary_values.set(0.0)
+        boundary_values.setValues(owned, np.ones(owned.size))
+        boundary_values.assemble()
+        K.mult(boundary_values, rhs)
+        rhs.scale(-1.0)
+        rhs.setValues(held, boundary_values.getValues(held))   # clamped rows: the boundary values
+        rhs.assemble()
+        x = K.createVecRight()
+        ksp.solve(rhs, x)
+        if ksp.getConvergedReason() < 0:
+            raise NumericalFailure(f"Craig-Bampton static mode: LU solve failed "
+                                   f"(KSP reason {ksp.getConvergedReason()})")
+        columns.append(x)
+    frequencies, modes = _fixed_interface_modes(K, M, W, held - lo, n_modes, cutoff_Hz)
+    if C is not None and damping_vectors:
+        modes += _damping_vectors(C, M, ksp, held, columns[interface.size:], modes, comm)
+    ksp.destroy()
+    clamped.destroy()
+    boundary_values.destroy()
+    rhs.destroy()
+    columns += modes
+
+    K_r, KT = _project(K, columns, comm, keep_products=True)
+    M_r = _project(M, columns, comm)
+    C_r = _project(C, columns, comm) if C is not None else None
+    charge_rows = {}
+    for name in electrodes:
+        rows = electrode_owned[name] - lo
+        charge_rows[name] = -comm.allreduce(KT[rows].sum(axis=0) if rows.size else np.zeros(len(columns)),
+                                            op=MPI.SUM)
+    return ReducedBasis(K_r, M_r, C_r, interface.astype(np.int64), electrodes, frequencies, charge_rows,
+                        columns, comm)
+
+
+def _damping_vectors(C, M, ksp, held, electrode_modes, modes, comm) -> list[PETSc.Vec]:
+    """One interior vector per electrode, K_II^-1 (C psi_e)_I, made M-orthogonal to the kept modes.
+
+    A voltage on a damped body also drives the damping force i omega C psi_e, whose quasi-static
+    response is not in span{psi, phi} unless C is proportional to the coupled K (here C acts on the
+    elastic part only: Rayleigh beta and material Q). Without this vector the real part of the
+    admittance off resonance (the loss the electrical power reads) converges only like 1/n."""
+    out = []
+    rhs = C.createVecLeft()
+    M_phi = C.createVecLeft()
+    for psi in electrode_modes:
+        C.mult(psi, rhs)
+        rhs.setValues(held, np.zeros(held.size))
+        rhs.assemble()
+        z = C.createVecRight()
+        ksp.solve(rhs, z)
+        for phi in modes + out:
+            M.mult(phi, M_phi)
+            z.axpy(-z.dot(M_phi) / phi.dot(M_phi), phi)
+        norm = math.sqrt(abs(z.dot(_mult(M, z, M_phi))))
+        if norm > 0:
+            z.scale(1.0 / norm)
+            out.append(z)
+        else:
+            z.destroy()
+    rhs.destroy()
+    M_phi.destroy()
+    return out
+
+
+def _mult(A, x, out):
+    A.mult(x, out)
+    return out
+
+
+def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int | None, cutoff_Hz: float | None):
+    """Lowest fixed-interface modes (mass normalised), by SLEPc shift-invert about 0. With a cutoff,
+    the number asked for grows until the highest mode found lies above it."""
+    from app.fe.operators import Operators
+    from app.modal import solve_modes
+
+    constraints = ConstraintSet(W, held_owned_local.astype(np.int32), [])
+    ops = Operators(K, M)
+    want = n_modes or 16
+    dim = W.mesh.geometry.dim
+    while True:
+        # target 0: the clamped K is non-singular, so the modes nearest 0 are the lowest ones
+        try:
+            modes = solve_modes(ops, constraints, 0.0, want, 0.0, prefix=REDUCTION_PREFIX + "eps_")
+        except PETSc.Error as exc:
+            raise NumericalFailure(f"fixed-interface modes: SLEPc failed for {want} modes ({exc}); "
+                                   f"lower reduction.cutoff_Hz / n_modes") from None
+        top = modes[-1].frequency_Hz if modes else 0.0
+        if cutoff_Hz is None or top > cutoff_Hz or want >= MAX_MODES:
+            break
+        # Weyl: the count below f grows like f^dim; ask once more for what the cutoff needs (+20 %)
+        estimate = int(math.ceil(1.2 * len(modes) * (cutoff_Hz / max(top, 1e-30)) ** dim)) + 8
+        for m in modes:
+            m.vector.destroy()
+        want = min(max(estimate, 2 * want), MAX_MODES)
+    keep = [m for m in modes if (n_modes is not None and modes.index(m) < n_modes)
+            or (cutoff_Hz is not None and m.frequency_Hz <= cutoff_Hz)]
+    for m in modes:
+        if m not in keep:
+            m.vector.destroy()
+    return np.array([m.frequency_Hz for m in keep]), [m.vector for m in keep]
+
+
+def _project(A: PETSc.Mat, columns: list[PETSc.Vec], comm, keep_products: bool = False):
+    """T^T A T (dense, replicated) with one allreduce; optionally also the local rows of A T."""
+    n = len(columns)
+    T = np.column_stack([c.array_r for c in columns]) if n else np.zeros((0, 0))
+    AT = np.empty_like(T)
+    y = A.createVecLeft()
+    for j, c in enumerate(columns):
+        A.mult(c, y)
+        AT[:, j] = y.array_r
+    y.destroy()
+    reduced = comm.allreduce(T.T @ AT, op=MPI.SUM)
+    reduced = 0.5 * (reduced + reduced.T)      # symmetric up to round-off; make it exactly so
+    return (reduced, AT) if keep_products else reduced
+
+
+def harmonic_response(basis: ReducedBasis, frequency_Hz: float, voltages: dict[str, complex],
+                      loads: np.ndarray | None = None) -> np.ndarray:
+    """Complex steady-state coordinates q for driven electrode phasors ``voltages`` [V] (the other
+    electrodes float: zero charge) and optional generalized loads. Driven coordinates are prescribed."""
+    omega = 2 * math.pi * frequency_Hz
+    D = basis.K - omega**2 * basis.M + (1j * omega * basis.C if basis.C is not None else 0.0)
+    prescribed = np.array([basis.electrode_index(n) for n in voltages], dtype=int)
+    free = np.setdiff1d(np.arange(basis.size), prescribed)
+    q = np.zeros(basis.size, dtype=complex)
+    q[prescribed] = [voltages[n] for n in voltages]
+    rhs = -D[np.ix_(free, prescribed)] @ q[prescribed]
+    if loads is not None:
+        rhs = rhs + loads[free]
+    q[free] = np.linalg.solve(D[np.ix_(free, free)], rhs)
+    return q
