@@ -10,6 +10,49 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+# Unit suffixes of piezodyn's names (summary.json keys, case keys) -> (shown unit, factor from SI).
+# Lengths in mm, frequencies in kHz, masses in g, times in ms, as the terminal summaries show them.
+UNIT_SUFFIXES = (
+    ("_m_per_s", "mm/s", 1e3),
+    ("_N_s_per_m", "N s/m", 1.0),
+    ("_N_per_m", "N/mm", 1e-3),
+    ("_N_per_V", "N/V", 1.0),
+    ("_m_per_V", "µm/V", 1e6),
+    ("_m_per_s2", "m/s²", 1.0),
+    ("_per_s", "1/s", 1.0),
+    ("_N_s", "N s", 1.0),
+    ("_Hz", "kHz", 1e-3),
+    ("_kg", "g", 1e3),
+    ("_deg", "deg", 1.0),
+    ("_m", "mm", 1e3),
+    ("_s", "ms", 1e3),
+    ("_W", "W", 1.0),
+    ("_N", "N", 1.0),
+    ("_J", "J", 1.0),
+    ("_V", "V", 1.0),
+    ("_S", "S", 1.0),
+    ("_F", "nF", 1e9),
+)
+# Path segments that only group keys; left out of labels.
+_GROUPS = {"lumped", "transient", "statistics", "geometry", "parameters", "results"}
+
+
+def quantity_label(name: str) -> tuple[str, float]:
+    """A dotted piezodyn name -> (axis label with unit, factor to multiply SI values by):
+    ``transient.statistics.transducer.max_rise_m`` -> ("transducer max rise [mm]", 1e3)."""
+    words, unit, scale = [], None, 1.0
+    for segment in name.split("."):
+        if segment in _GROUPS:
+            continue
+        for suffix, shown, factor in UNIT_SUFFIXES:
+            if segment.endswith(suffix) and len(segment) > len(suffix):
+                segment = segment[: -len(suffix)]
+                unit, scale = shown, factor
+                break
+        words.append(segment.replace("_", " "))
+    text = " ".join(words).replace("k eff", "k_eff").replace("fe force", "FE force") or name
+    return (f"{text} [{unit}]" if unit else text), scale
+
 
 def admittance_plot(path: Path, harmonic: dict, f_r: float | None, f_a: float | None, circuit: dict | None = None):
     f = np.array(harmonic["frequency_Hz"])
