@@ -1,4 +1,4 @@
-"""Command line: ``piezodyn run|validate|sweep``. Input errors exit 2 with one line; unrecoverable
+"""Command line: ``piezodyn run|validate|sweep|cases|plot``. Input errors exit 2 with one line; unrecoverable
 numerical failures exit 1 saying what was tried."""
 
 from __future__ import annotations
@@ -31,7 +31,11 @@ def _parser() -> argparse.ArgumentParser:
     validate = sub.add_parser("validate", help="validate a case file without running it")
     validate.add_argument("case")
     validate.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    sub.add_parser("sweep", help="parameter sweep (see 'piezodyn sweep --help')", add_help=False)
+    sub.add_parser("sweep", help="run a case over a grid of values of any case keys (see 'piezodyn sweep --help')",
+                   add_help=False)
+    sub.add_parser("cases", help="list the case files shipped with piezodyn, with their titles")
+    plot = sub.add_parser("plot", help="write the tables and plots of an existing result directory again")
+    plot.add_argument("dir", help="result directory (holds summary.json)")
     return parser
 
 
@@ -55,6 +59,8 @@ def main(argv: list[str] | None = None) -> int:
 
             return sweep.main(argv[1:])
         args = _parser().parse_args(argv)
+        if args.command in ("cases", "plot"):
+            return _browse(args, rank)
         if args.command == "validate":
             from app.runner import check_case, load_for_run
 
@@ -79,6 +85,22 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+
+
+def _browse(args, rank: int) -> int:
+    """``cases`` and ``plot DIR``: read-only commands, output on rank 0."""
+    if args.command == "cases":
+        from app.catalog import format_cases
+
+        if rank == 0:
+            print(format_cases())
+        return 0
+    from app.plots import replot
+
+    written = replot(args.dir, write=rank == 0)
+    if rank == 0:
+        print(f"{args.dir}: " + (", ".join(written) if written else "nothing to plot (a lumped run plots as it runs)"))
+    return 0
 
 
 def entry() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import matplotlib
@@ -10,31 +11,185 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+# Unit suffixes of piezodyn's names (summary.json keys, case keys) -> (shown unit, factor from SI).
+# Lengths in mm, frequencies in kHz, masses in g, times in ms, as the terminal summaries show them.
+UNIT_SUFFIXES = (
+    ("_m_per_s", "mm/s", 1e3),
+    ("_N_s_per_m", "N s/m", 1.0),
+    ("_N_per_m", "N/mm", 1e-3),
+    ("_N_per_V", "N/V", 1.0),
+    ("_m_per_V", "µm/V", 1e6),
+    ("_m_per_s2", "m/s²", 1.0),
+    ("_per_s", "1/s", 1.0),
+    ("_N_s", "N s", 1.0),
+    ("_Hz", "kHz", 1e-3),
+    ("_kg", "g", 1e3),
+    ("_deg", "deg", 1.0),
+    ("_m", "mm", 1e3),
+    ("_s", "ms", 1e3),
+    ("_W", "W", 1.0),
+    ("_N", "N", 1.0),
+    ("_J", "J", 1.0),
+    ("_V", "V", 1.0),
+    ("_S", "S", 1.0),
+    ("_F", "nF", 1e9),
+)
+# Path segments that only group keys; left out of labels.
+_GROUPS = {"lumped", "transient", "statistics", "geometry", "parameters", "results"}
 
-def admittance_plot(path: Path, harmonic: dict, f_r: float | None, f_a: float | None, circuit: dict | None = None):
-    f = np.array(harmonic["frequency_Hz"])
-    mag = np.array(harmonic["admittance_magnitude_S"])
-    phase = np.array(harmonic["admittance_phase_deg"])
+
+def quantity_label(name: str) -> tuple[str, float]:
+    """A dotted piezodyn name -> (axis label with unit, factor to multiply SI values by):
+    ``transient.statistics.transducer.max_rise_m`` -> ("transducer max rise [mm]", 1e3)."""
+    words, unit, scale = [], None, 1.0
+    for segment in name.split("."):
+        if segment in _GROUPS:
+            continue
+        for suffix, shown, factor in UNIT_SUFFIXES:
+            if segment.endswith(suffix) and len(segment) > len(suffix):
+                segment = segment[: -len(suffix)]
+                unit, scale = shown, factor
+                break
+        words.append(segment.replace("_", " "))
+    text = " ".join(words).replace("k eff", "k_eff").replace("fe force", "FE force") or name
+    return (f"{text} [{unit}]" if unit else text), scale
+
+
+def write_harmonic_table(path: Path, harmonic: dict) -> None:
+    """The harmonic sweep as CSV: frequency, admittance Y and impedance Z = 1/Y (magnitude, phase)."""
+    f = np.asarray(harmonic["frequency_Hz"], dtype=float)
+    mag = np.asarray(harmonic["admittance_magnitude_S"], dtype=float)
+    phase = np.asarray(harmonic["admittance_phase_deg"], dtype=float)
+    with open(path, "w", newline="") as out:
+        writer = csv.writer(out)
+        writer.writerow(["frequency_Hz", "admittance_magnitude_S", "admittance_phase_deg",
+                         "impedance_magnitude_ohm", "impedance_phase_deg"])
+        for row in zip(f, mag, phase, 1.0 / mag, -phase):
+            writer.writerow([repr(float(v)) for v in row])
+
+
+def write_mode_table(path: Path, modal: dict) -> None:
+    """The mode table as CSV: one row per short-circuit mode, its open-circuit partner and k_eff."""
+    modes = modal.get("modes") or []
+    columns = ["mode"] + [k for k in (modes[0] if modes else {}) if not isinstance(modes[0][k], (list, dict))]
+    with open(path, "w", newline="") as out:
+        writer = csv.writer(out)
+        writer.writerow(columns + ["working"])
+        for i, mode in enumerate(modes):
+            values = [i] + [mode.get(k, "") for k in columns[1:]]
+            writer.writerow([repr(v) if isinstance(v, float) else ("" if v is None else v) for v in values]
+                            + [int(i == modal.get("working_mode_index"))])
+
+
+def _mark_fr_fa(ax, f_r: float | None, f_a: float | None, label: bool) -> None:
+    """Dashed lines at the modal f_r and f_a; on the top axes their values in the legend."""
+    for name, value, style in (("f_r", f_r, "--"), ("f_a", f_a, ":")):
+        if value:
+            ax.axvline(value / 1e3, color="dimgray", ls=style, lw=1.0,
+                       label=f"{name} = {value / 1e3:.3f} kHz (modal)" if label else None)
+
+
+def _circuit_curve(circuit: dict | None, f: np.ndarray):
+    if not circuit or "clamped_capacitance_F" not in circuit:
+        return None, None
+    from app.circuit import bvd_admittance
+
+    fine = np.linspace(f[0], f[-1], 2000)
+    return fine, bvd_admittance(circuit, fine)
+
+
+def _frequency_plot(path: Path, f: np.ndarray, magnitude: np.ndarray, phase: np.ndarray, fine, fine_values,
+                    f_r, f_a, what: str, unit: str, title: str) -> None:
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
-    ax1.semilogy(f / 1e3, mag, "o-", ms=3, label="FE")
+    ax1.semilogy(f / 1e3, magnitude, "o-", ms=3, label="FE")
     ax2.plot(f / 1e3, phase, "o-", ms=3, label="FE")
-    if circuit and "clamped_capacitance_F" in circuit:
-        from app.circuit import bvd_admittance
-
-        fine = np.linspace(f[0], f[-1], 2000)
-        y = bvd_admittance(circuit, fine)
-        ax1.semilogy(fine / 1e3, np.abs(y), "-", lw=1, label="1-DOF equivalent circuit")
-        ax2.plot(fine / 1e3, np.degrees(np.angle(y)), "-", lw=1, label="1-DOF equivalent circuit")
+    if fine is not None:
+        ax1.semilogy(fine / 1e3, np.abs(fine_values), "-", lw=1, label="1-DOF equivalent circuit")
+        ax2.plot(fine / 1e3, np.degrees(np.angle(fine_values)), "-", lw=1, label="1-DOF equivalent circuit")
+    _mark_fr_fa(ax1, f_r, f_a, label=True)
+    _mark_fr_fa(ax2, f_r, f_a, label=False)
     for ax in (ax1, ax2):
-        for value in (f_r, f_a):
-            if value:
-                ax.axvline(value / 1e3, color="gray", ls="--", lw=0.8)
         ax.grid(True, which="both", alpha=0.3)
-    ax1.set_ylabel("|Y| [S]")
-    ax2.set_ylabel("phase(Y) [deg]")
+    ax1.set_ylabel(f"|{what}| [{unit}]")
+    ax2.set_ylabel(f"phase({what}) [deg]")
     ax2.set_xlabel("frequency [kHz]")
-    ax1.legend()
-    ax1.set_title("Electrical admittance (dashed: modal f_r, f_a)")
+    ax1.legend(loc="lower left" if what == "Y" else "upper left", fontsize=8, framealpha=0.9)
+    name = {"Y": "Electrical admittance", "Z": "Electrical impedance"}[what]
+    ax1.set_title(f"{title}\n{name}" if title else name, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def admittance_plot(path: Path, harmonic: dict, f_r: float | None, f_a: float | None, circuit: dict | None = None,
+                    title: str = ""):
+    f = np.array(harmonic["frequency_Hz"])
+    fine, y = _circuit_curve(circuit, f)
+    _frequency_plot(path, f, np.array(harmonic["admittance_magnitude_S"]), np.array(harmonic["admittance_phase_deg"]),
+                    fine, y, f_r, f_a, "Y", "S", title)
+
+
+def impedance_plot(path: Path, harmonic: dict, f_r: float | None, f_a: float | None, circuit: dict | None = None,
+                   title: str = ""):
+    """|Z| = 1/|Y| in ohm and phase(Z) = -phase(Y): the curve impedance analysers show."""
+    f = np.array(harmonic["frequency_Hz"])
+    fine, y = _circuit_curve(circuit, f)
+    _frequency_plot(path, f, 1.0 / np.array(harmonic["admittance_magnitude_S"]),
+                    -np.array(harmonic["admittance_phase_deg"]), fine, None if y is None else 1.0 / y,
+                    f_r, f_a, "Z", "Ω", title)
+
+
+def frequency_domain_outputs(out: Path, results: dict, plots: bool = True, title: str = "") -> list[str]:
+    """Tables and plots of the modal and harmonic results (rank 0): modes.csv, harmonic.csv,
+    admittance.png, impedance.png. Used by ``run`` and by ``piezodyn plot DIR``. Returns the file names."""
+    out = Path(out)
+    written = []
+    modal = results.get("modal")
+    f_r = modal.get("working_resonance_Hz") if modal else None
+    f_a = modal.get("working_antiresonance_Hz") if modal else None
+    if modal and modal.get("modes"):
+        write_mode_table(out / "modes.csv", modal)
+        written.append("modes.csv")
+    harmonic = results.get("harmonic")
+    if harmonic and harmonic.get("frequency_Hz"):
+        write_harmonic_table(out / "harmonic.csv", harmonic)
+        written.append("harmonic.csv")
+        if plots:
+            admittance_plot(out / "admittance.png", harmonic, f_r, f_a, results.get("circuit"), title)
+            impedance_plot(out / "impedance.png", harmonic, f_r, f_a, results.get("circuit"), title)
+            written += ["admittance.png", "impedance.png"]
+    return written
+
+
+def replot(result_dir: str | Path, write: bool = True) -> list[str]:
+    """``piezodyn plot DIR``: the tables and plots of an existing result directory, from its summary.json
+    (modal and harmonic) and its time series (transient FE), without solving anything again."""
+    import json
+
+    from app.errors import CaseError
+
+    result_dir = Path(result_dir)
+    path = result_dir / "summary.json"
+    if not path.is_file():
+        raise CaseError(str(result_dir), None, "no summary.json here: not a piezodyn result directory")
+    try:
+        summary = json.loads(path.read_text())
+        results, case = summary["results"], summary.get("case", {})
+    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise CaseError(str(path), None, f"not a piezodyn summary ({exc})") from None
+    if not write:
+        return []
+    written = frequency_domain_outputs(result_dir, results, True, case.get("title", ""))
+    transient = results.get("transient")
+    series = result_dir / transient["time_series"] if transient and transient.get("time_series") else None
+    if series is not None and series.is_file():
+        from app.transient.history import plot_time_series
+
+        section = case.get("transient") or {}
+        bodies = [b["name"] for b in section.get("bodies", [])
+                  if not b.get("fixed") and (b.get("free_axes") is None or any(b["free_axes"]))]
+        contacts = [c["name"] for c in section.get("contacts", [])]
+        written += plot_time_series(series, result_dir / "transient_motion.png", result_dir / "transient_force.png",
+                                    (section.get("drive") or {}).get("point"), bodies,
+                                    contacts[-1] if contacts else None)
+    return written

@@ -18,6 +18,7 @@ from app.case.validate import to_dict
 from app.errors import CaseError
 from app.exports import write_json_atomic
 from app.mpi_log import PhaseTimer, make_log
+from app.progress import silenced
 
 
 def versions() -> dict:
@@ -109,7 +110,8 @@ def run_case(case_path: str | Path, overrides: list[str] | None = None, out_dir:
         summary["outputs"] += [files["time_series"]] if "time_series" in files else []
         summary["outputs"] += list(files.get("plots", []))
     else:
-        run_fe(case, out, comm, log, timer, summary, resume)
+        with silenced(quiet):  # --quiet: no transient progress either
+            run_fe(case, out, comm, log, timer, summary, resume)
     summary["wall_time_s"] = timer.seconds
     summary["outputs"].append("summary.json")
     if comm.rank == 0:
@@ -168,14 +170,13 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
 
             with timer.phase("circuit"):
                 results["circuit"] = equivalent_circuit(model, ops, modal, harmonic, case.circuit.point)
-        if harmonic is not None and case.output.plots and comm.rank == 0:
-            from app.plots import admittance_plot
-
-            with timer.phase("export"):
-                admittance_plot(out / "admittance.png", results["harmonic"], f_r, f_a, results.get("circuit"))
-                summary["outputs"].append("admittance.png")
     if frequency_domain:
         ops.destroy()
+        if comm.rank == 0:  # modes.csv, harmonic.csv, admittance.png, impedance.png
+            from app.plots import frequency_domain_outputs
+
+            with timer.phase("export"):
+                summary["outputs"] += frequency_domain_outputs(out, results, case.output.plots, case.title)
     if "transient" in case.analyses:
         if case.tier == "modal":
             from app.reduced import driver as transient_driver

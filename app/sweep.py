@@ -1,12 +1,13 @@
-"""``piezodyn sweep CASE --param lumped.key=v1,v2 ... [--out DIR]``: a parameter grid of a lumped case.
+"""piezodyn sweep: a grid of runs of one case, any key, any tier, in parallel over MPI ranks.
 
-Every grid point is the case with ``--set`` overrides and one value per ``--param``; all points are
-validated (on every rank) before any runs, so a bad value or unknown name fails at once with a
-CaseError. Points are dealt round-robin to MPI ranks; each rank runs its points serially
-(``COMM_SELF``), writing ``DIR/point_NNNN/summary.json`` (+ time series and plots if the case asks
-for them). Rank 0 shows a progress bar and writes ``DIR/sweep.csv`` (the table: parameters and
-results, deterministic, independent of the number of ranks), ``DIR/sweep.json`` (the same plus wall
-times) and one PNG per swept parameter.
+Every grid point is the case with the ``--set`` overrides and one value per ``--param``: exactly what
+``piezodyn run CASE --set ...`` would run. All points are validated (on every rank) before any runs, so
+a bad value or unknown key fails at once with one line. Points are dealt round-robin to the MPI ranks;
+each rank runs its points on ``COMM_SELF`` into ``DIR/point_NNNN/`` (summary.json and the outputs the
+case asks for, as ``run`` writes them). Rank 0 reports progress, gathers the rows and writes
+``DIR/sweep.csv`` (swept values and every scalar result, named by their path in summary.json's
+``results``; independent of the number of ranks), ``DIR/sweep.json`` (the same plus wall time, rank and
+overrides per point) and one PNG per swept parameter.
 """
 
 from __future__ import annotations
@@ -16,229 +17,219 @@ import csv
 import itertools
 import json
 import math
-import platform
 import sys
 import time
+import traceback
 from pathlib import Path
 
-from app.case.loader import apply_overrides, parse_override, read_toml
-from app.case.validate import from_dict, to_dict
+from app.case.loader import parse_override
 from app.errors import CaseError, NumericalFailure
 
 TAG_PROGRESS = 11
-TAG_ROWS = 12
 
-# (column, path into results["statistics"] or results)
-TABLE_COLUMNS = (
-    ("impact_rate_tip_ball_per_s", ("statistics", "impact_rate_per_s", "tip_ball")),
-    ("impact_rate_ball_stem_per_s", ("statistics", "impact_rate_per_s", "ball_stem")),
-    ("impact_rate_stem_rock_per_s", ("statistics", "impact_rate_per_s", "stem_rock")),
-    ("rock_impulse_per_impact_mean_N_s", ("statistics", "rock", "impulse_per_impact_mean_N_s")),
-    ("rock_energy_per_impact_mean_J", ("statistics", "rock", "energy_per_impact_mean_J")),
-    ("rock_mean_power_W", ("statistics", "rock", "mean_power_W")),
-    ("rock_mean_force_N", ("statistics", "rock", "mean_force_N")),
-    ("transducer_max_flight_height_m", ("statistics", "transducer", "max_flight_height_m")),
-    ("flight_rate_per_s", ("statistics", "transducer", "flight_rate_per_s")),
-    ("flight_duration_mean_s", ("statistics", "transducer", "flight_duration_mean_s")),
-    ("free_mass_impact_rate_per_s", ("statistics", "free_mass", "impact_rate_per_s")),
-    ("free_mass_rms_velocity_m_per_s", ("statistics", "free_mass", "rms_velocity_m_per_s")),
-    ("electrical_input_power_W", None),
-    ("energy_closure_relative", ("energy_ledger", "closure_relative")),
-    ("contact_events", ("solver", "events")),
-)
+# Headline results plotted against a swept parameter (the CSV holds every scalar); the first present are used.
 PLOT_COLUMNS = (
-    "transducer_max_flight_height_m",
-    "flight_rate_per_s",
-    "free_mass_impact_rate_per_s",
-    "rock_mean_power_W",
-    "rock_impulse_per_impact_mean_N_s",
-    "impact_rate_stem_rock_per_s",
+    "modal.working_resonance_Hz",
+    "modal.working_antiresonance_Hz",
+    "modal.working_k_eff",
+    "harmonic.admittance_peak_Hz",
+    "harmonic.voltage_for_target_amplitude_V",
+    "circuit.mechanical_quality_factor",
+    "transient.statistics.transducer.max_rise_m",
+    "transient.statistics.transducer.flight_rate_per_s",
+    "transient.statistics.impact_rate_per_s.stem_rock",
+    "transient.statistics.stem_rock_foundation.mean_force_N",
+    "transient.statistics.stem_rock_foundation.mean_power_W",
+    "transient.statistics.stem_rock_foundation.impulse_per_impact_mean_N_s",
+    "lumped.statistics.transducer.max_flight_height_m",
+    "lumped.statistics.transducer.flight_rate_per_s",
+    "lumped.statistics.free_mass.impact_rate_per_s",
+    "lumped.statistics.rock.mean_power_W",
+    "lumped.statistics.rock.impulse_per_impact_mean_N_s",
+    "lumped.statistics.impact_rate_per_s.stem_rock",
 )
+MAX_PLOTS = 6
+# Results that describe the run, not the physics: kept in the CSV, never plotted.
+_BOOKKEEPING = ("checkpoints_written", "field_outputs")
+
+
+def split_values(raw: str) -> list[str]:
+    """Split ``v1,v2,...`` at top-level commas: ``[0,0],[0,-3]`` -> ``["[0,0]", "[0,-3]"]``."""
+    items, depth, quote, current = [], 0, None, []
+    for ch in raw:
+        if quote:
+            quote = None if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            items.append("".join(current))
+            current = []
+            continue
+        current.append(ch)
+    items.append("".join(current))
+    return items
 
 
 def parse_param(text: str) -> tuple[str, list]:
-    """``lumped.a.b=1,2,3`` -> ("lumped.a.b", [1, 2, 3]); each value is read as a TOML value."""
+    """``a.b.c=v1,v2,...`` -> ("a.b.c", [v1, v2, ...]); each value is read as a TOML value (a list is
+    one value: ``transient.loads.fe_force_N=[0,0],[0,-3]``). The key is checked against the case's
+    schema when the points are built."""
     if "=" not in text:
         raise CaseError("--param", text, "expected dotted.key=value1,value2,...")
     key, raw = text.split("=", 1)
     key = key.strip()
+    if not key or any(not part for part in key.split(".")):
+        raise CaseError("--param", text, "expected dotted.key=value1,value2,...")
     values = []
-    for item in raw.split(","):
+    for item in split_values(raw):
         if not item.strip():
             raise CaseError("--param", key, f"empty value in {raw!r}")
         values.append(parse_override(f"{key}={item}")[1])
-    if not key.startswith("lumped.") or len(key.split(".")) < 2:
-        raise CaseError(
-            "--param",
-            key,
-            "unknown sweep parameter: sweep parameters live under [lumped], "
-            "e.g. lumped.downforce_N or lumped.free_mass.mass_kg",
-        )
     return key, values
 
 
-def build_points(
-    case_path: str | Path, params: list[tuple[str, list]], sets: list[str] | None = None
-) -> list[dict]:
-    """Validate every grid point; returns [{index, values: {key: value}, section}] in grid order."""
-    from app.lumped.schema import LumpedSection
+def toml_value(value) -> str:
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    return repr(value)
 
-    case_path = str(case_path)
-    base = read_toml(case_path)
-    if base.get("tier", "lumped") != "lumped":
-        raise CaseError(
-            case_path, "tier", f"sweep runs lumped cases; this case has tier = {base.get('tier')!r}"
-        )
+
+def build_points(case_path: str | Path, params: list[tuple[str, list]], sets: list[str] | None = None) -> list[dict]:
+    """Validate every grid point (the whole case schema, as ``validate`` does before building a mesh);
+    returns [{index, values: {key: value}, overrides, case}] in grid order."""
+    from app.case.schema import load_case
+
     keys = [k for k, _ in params]
     if len(set(keys)) != len(keys):
         raise CaseError("--param", keys[0], "a parameter is swept twice")
     points = []
     for index, combo in enumerate(itertools.product(*[v for _, v in params])):
         values = dict(zip(keys, combo))
-        overrides = list(sets or []) + [f"{k}={_toml_value(v)}" for k, v in values.items()]
-        raw = apply_overrides(base, overrides)
-        if not isinstance(raw.get("lumped"), dict):
-            raise CaseError(case_path, "lumped", "the case has no [lumped] table")
-        section = from_dict(LumpedSection, raw["lumped"], case_path, "lumped")
-        points.append({"index": index, "values": values, "overrides": overrides, "section": section})
+        overrides = list(sets or []) + [f"{k}={toml_value(v)}" for k, v in values.items()]
+        case = load_case(case_path, overrides)
+        _check_geometry_parameters(case)
+        points.append({"index": index, "values": values, "overrides": overrides, "case": case})
     return points
 
 
-def _toml_value(value) -> str:
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return repr(value)
+def _check_geometry_parameters(case) -> None:
+    """The mesh builder's parameters are checked when the mesh is built; check them here, without meshing,
+    so a misspelt ``geometry.parameters`` key fails before any point runs."""
+    geometry = getattr(case, "geometry", None)
+    if case.tier != "fe" or geometry is None or geometry.builder is None:
+        return
+    from app.case.validate import from_dict
+    from geometry.builders import BUILDERS
+
+    params_cls, _ = BUILDERS[geometry.builder]
+    from_dict(params_cls, geometry.parameters, case.source, "geometry.parameters")
 
 
-def _lookup(results: dict, path):
-    node = results
-    for part in path:
-        node = node[part]
-    return node
-
-
-def table_row(point: dict, results: dict) -> dict:
-    row = {"point": point["index"], **point["values"]}
-    for column, path in TABLE_COLUMNS:
-        if path is None:  # electrical input power
-            ledger = results["energy_ledger"]
-            row[column] = ledger["electrical_input_J"] / results["statistics"]["simulated_time_s"]
-        else:
-            row[column] = _lookup(results, path)
-    return row
-
-
-def _json_default(obj):
-    import numpy as np
-
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
-
-
-def _versions() -> dict:
-    import numpy
-    import scipy
-
-    import app
-
-    out = {
-        "piezodyn": app.__version__,
-        "python": platform.python_version(),
-        "numpy": numpy.__version__,
-        "scipy": scipy.__version__,
-    }
-    try:
-        import numba
-
-        out["numba"] = numba.__version__
-    except ImportError:  # pragma: no cover - numba is a hard dependency of the kernel
-        pass
+def scalar_results(results: dict, prefix: str = "") -> dict:
+    """Every numeric scalar in ``results`` by its dotted path (lists, strings and None left out, and wall
+    times: those are in each point's summary.json, and the table must not depend on the machine)."""
+    out = {}
+    for key, value in results.items():
+        name = f"{prefix}{key}"
+        if "wall" in key:
+            continue
+        if isinstance(value, dict):
+            out.update(scalar_results(value, name + "."))
+        elif isinstance(value, bool):
+            out[name] = int(value)
+        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+            out[name] = value
+        elif type(value).__module__ == "numpy" and getattr(value, "ndim", 1) == 0:
+            out[name] = value.item()
     return out
 
 
 def run_point(case_path: str, point: dict, out_dir: Path) -> dict:
-    """Run one grid point serially; writes point_dir/summary.json; returns the table row."""
-    from app.lumped.driver import run
+    """Run one grid point on COMM_SELF as ``piezodyn run`` would; returns its table row."""
+    from mpi4py import MPI
+
+    from app.progress import silenced
+    from app.runner import run_case
 
     point_dir = out_dir / f"point_{point['index']:04d}"
     wall0 = time.perf_counter()
-    results = run(point["section"], point_dir, comm=None, log=lambda msg: None)
-    wall = time.perf_counter() - wall0
-    summary = {
-        "case": case_path,
-        "overrides": point["overrides"],
-        "resolved_case": {"tier": "lumped", "lumped": to_dict(point["section"])},
-        "versions": _versions(),
-        "mpi_size": 1,
-        "wall_s": {"total": wall},
-        "results": results,
-    }
-    point_dir.mkdir(parents=True, exist_ok=True)
-    (point_dir / "summary.json").write_text(json.dumps(summary, indent=1, default=_json_default))
-    row = table_row(point, results)
-    row["_wall_s"] = wall
+    with silenced():
+        summary = run_case(case_path, point["overrides"], point_dir, comm=MPI.COMM_SELF, quiet=True)
+    row = {"point": point["index"], **point["values"], **scalar_results(summary["results"])}
+    row["_wall_s"] = time.perf_counter() - wall0
     return row
+
+
+def _run_mine(case_path, mine, out_dir, rank, on_done) -> list[dict]:
+    rows = []
+    for point in mine:
+        base = {"point": point["index"], **point["values"], "_rank": rank, "_overrides": point["overrides"]}
+        try:
+            row = {**run_point(case_path, point, out_dir), "_rank": rank, "_overrides": point["overrides"]}
+        except CaseError as exc:
+            row = {**base, "_failed": exc.line(), "_exit": 2}
+        except NumericalFailure as exc:  # keep the sweep going; report the point
+            row = {**base, "_failed": f"numerical failure: {exc}", "_exit": 1}
+        except Exception as exc:  # a bug: say where, keep the other ranks from waiting forever
+            traceback.print_exc(file=sys.stderr)
+            row = {**base, "_failed": f"{type(exc).__name__}: {exc}", "_exit": 1}
+        rows.append(row)
+        on_done()
+    return rows
 
 
 def run_sweep(case_path, params, out_dir, sets=None, comm=None, progress=True) -> list[dict] | None:
     """Run the grid; returns the rows (sorted by point) on rank 0, None elsewhere."""
+    from app.progress import Progress
+
     case_path = str(case_path)
     out_dir = Path(out_dir)
     rank = comm.Get_rank() if comm is not None else 0
     size = comm.Get_size() if comm is not None else 1
     points = build_points(case_path, params, sets)  # every rank validates: errors surface everywhere
     mine = [pt for pt in points if pt["index"] % size == rank]
-    bar = None
-    if rank == 0 and progress:
-        from tqdm import tqdm
+    bar = Progress(len(points), "sweep", "points", enabled=progress, rank=rank, value_format="{:.0f}")
 
-        bar = tqdm(total=len(points), desc="sweep", unit="point", file=sys.stderr)
-    rows = []
-    done_elsewhere = 0
-    failure = None
-    for point in mine:
-        try:
-            rows.append(run_point(case_path, point, out_dir))
-        except NumericalFailure as exc:  # keep the sweep going; report the point
-            failure = failure or exc
-            rows.append({"point": point["index"], **point["values"], "_failed": str(exc)})
+    done = [0]  # points finished on any rank, as rank 0 knows
+
+    def on_done():
         if rank == 0:
-            if bar:
-                bar.update(1)
-            done_elsewhere += _drain_progress(comm, bar)
-        elif comm is not None:
+            finished = 1 + _drain_progress(comm)
+            done[0] += finished
+            bar.update(finished)
+        else:
             comm.send(1, dest=0, tag=TAG_PROGRESS)
-    if rank == 0 and comm is not None:
-        expected = len(points) - len(mine)
-        while done_elsewhere < expected:
-            comm.recv(source=MPI_ANY_SOURCE(), tag=TAG_PROGRESS)
-            done_elsewhere += 1
-            if bar:
-                bar.update(1)
-    if bar:
-        bar.close()
-    if comm is not None and size > 1:
+
+    rows = _run_mine(case_path, mine, out_dir, rank, on_done)
+    if rank == 0 and size > 1:
+        from mpi4py import MPI
+
+        while done[0] < len(points):
+            comm.recv(source=MPI.ANY_SOURCE, tag=TAG_PROGRESS)
+            done[0] += 1
+            bar.update(1)
+    bar.close()
+    if size > 1:
         gathered = comm.gather(rows, root=0)
         if rank != 0:
             return None
         rows = [r for part in gathered for r in part]
     rows.sort(key=lambda r: r["point"])
-    write_table(rows, [k for k, _ in params], out_dir, case_path)
+    title = (points[0]["case"].title if points else "") or Path(case_path).name
+    write_table(rows, [k for k, _ in params], out_dir, case_path, title)
     return rows
 
 
-def MPI_ANY_SOURCE():
-    from mpi4py import MPI
-
-    return MPI.ANY_SOURCE
-
-
-def _drain_progress(comm, bar) -> int:
+def _drain_progress(comm) -> int:
+    """Progress messages from the other ranks that have arrived (never blocks)."""
     if comm is None or comm.Get_size() == 1:
         return 0
     from mpi4py import MPI
@@ -247,121 +238,186 @@ def _drain_progress(comm, bar) -> int:
     while comm.Iprobe(source=MPI.ANY_SOURCE, tag=TAG_PROGRESS):
         comm.recv(source=MPI.ANY_SOURCE, tag=TAG_PROGRESS)
         n += 1
-        if bar:
-            bar.update(1)
     return n
 
 
-def write_table(rows: list[dict], keys: list[str], out_dir: Path, case_path: str) -> None:
+def table_columns(rows: list[dict], keys: list[str]) -> list[str]:
+    columns = ["point", *keys]
+    for row in rows:
+        for name in row:
+            if name not in columns and not name.startswith("_"):
+                columns.append(name)
+    return columns
+
+
+def write_table(rows: list[dict], keys: list[str], out_dir: Path, case_path: str, title: str = "") -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
-    columns = ["point", *keys, *[c for c, _ in TABLE_COLUMNS]]
+    columns = table_columns(rows, keys)
     with open(out_dir / "sweep.csv", "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(columns)
         for row in rows:
             writer.writerow([_csv(row.get(c, "")) for c in columns])
-    (out_dir / "sweep.json").write_text(
-        json.dumps({"case": case_path, "parameters": keys, "rows": rows}, indent=1, default=_json_default)
-    )
+    (out_dir / "sweep.json").write_text(json.dumps(
+        {"case": case_path, "title": title, "parameters": keys, "columns": columns, "rows": rows}, indent=1))
     ok = [r for r in rows if "_failed" not in r]
     if ok:
-        write_sweep_plots(ok, keys, out_dir)
+        write_sweep_plots(ok, keys, out_dir, title)
 
 
 def _csv(value):
     if isinstance(value, float):
         return repr(value)
+    if isinstance(value, (list, tuple)):
+        return json.dumps(value)
     return value
 
 
-def write_sweep_plots(rows: list[dict], keys: list[str], out_dir: Path) -> list[str]:
-    """One figure per swept parameter: metrics against it, one line per combination of the others."""
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _axis(rows: list[dict], key: str):
+    """(x values, x label) for a swept key; a vector value is plotted by the one component that varies."""
+    from app.plots import quantity_label
+
+    values = [r[key] for r in rows]
+    if all(_is_number(v) for v in values):
+        text, scale = quantity_label(key)
+        return [v * scale for v in values], text
+    if all(isinstance(v, list) and v and all(_is_number(c) for c in v) for v in values):
+        varying = [i for i in range(len(values[0])) if len({v[i] for v in values}) > 1]
+        if len(varying) == 1 and all(len(v) == len(values[0]) for v in values):
+            i = varying[0]
+            text, scale = quantity_label(key)
+            name, _, unit = text.partition(" [")
+            return [v[i] * scale for v in values], f"{name}, component {i}" + (f" [{unit}" if unit else "")
+    return None, None
+
+
+def _legend(key: str, value) -> str:
+    """``lumped.free_mass.mass_kg``, 0.002 -> "free mass mass = 2 g" (units as on the axes)."""
+    from app.plots import quantity_label
+
+    text, scale = quantity_label(key)
+    name, _, unit = text.partition(" [")
+    if _is_number(value):
+        return f"{name} = {value * scale:g}" + (f" {unit[:-1]}" if unit else "")
+    return f"{name} = {value}"
+
+
+def plot_columns(rows: list[dict]) -> list[str]:
+    present = [c for c in PLOT_COLUMNS if all(_is_number(r.get(c)) for r in rows)]
+    if not present:  # a tier without headlines: its first scalar results
+        present = [c for c in table_columns(rows, []) if c != "point" and not c.endswith(_BOOKKEEPING)
+                   and all(_is_number(r.get(c)) for r in rows)]
+    return present[:MAX_PLOTS]
+
+
+def write_sweep_plots(rows: list[dict], keys: list[str], out_dir: Path, title: str = "") -> list[str]:
+    """One figure per swept parameter: headline results against it, one line per combination of the
+    others; labels and units as the rest of piezodyn shows them (mm, kHz, g)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from app.plots import quantity_label
+
+    columns = plot_columns(rows)
     files = []
     for key in keys:
-        if not all(isinstance(r[key], (int, float)) and not isinstance(r[key], bool) for r in rows):
+        x_all, x_label = _axis(rows, key)
+        if x_all is None or not columns:
             continue
+        x_of = dict(zip((r["point"] for r in rows), x_all))
         others = [k for k in keys if k != key]
         groups: dict = {}
         for r in rows:
-            groups.setdefault(tuple(r[k] for k in others), []).append(r)
-        ncols = 3
-        nrows = math.ceil(len(PLOT_COLUMNS) / ncols)
-        fig, axes = plt.subplots(nrows, ncols, figsize=(4 * ncols, 3 * nrows), squeeze=False)
-        for ax, column in zip(axes.flat, PLOT_COLUMNS):
+            groups.setdefault(tuple(json.dumps(r[k]) for k in others), []).append(r)
+        ncols = min(3, len(columns))
+        nrows = math.ceil(len(columns) / ncols)
+        fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), squeeze=False)
+        for ax, column in zip(axes.flat, columns):
+            y_label, y_scale = quantity_label(column)
             for label, group in groups.items():
-                group = sorted(group, key=lambda r: r[key])
-                name = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(others, label)) or None
-                ax.plot([r[key] for r in group], [r[column] for r in group], "o-", label=name)
-            ax.set_xlabel(key.removeprefix("lumped."))
-            ax.set_title(column, fontsize=9)
+                group = sorted(group, key=lambda r: x_of[r["point"]])
+                name = ", ".join(_legend(k, json.loads(v)) for k, v in zip(others, label)) or None
+                ax.plot([x_of[r["point"]] for r in group], [r[column] * y_scale for r in group], "o-", label=name)
+            ax.set_xlabel(x_label)
+            ax.set_ylabel(y_label, fontsize=8)
             ax.grid(alpha=0.3)
+        for ax in list(axes.flat)[len(columns):]:
+            ax.set_visible(False)
         if others:
             axes.flat[0].legend(fontsize=7)
+        fig.suptitle(f"{title}: sweep of {x_label}" if title else f"sweep of {x_label}", fontsize=10)
         fig.tight_layout()
-        name = f"sweep_{key.removeprefix('lumped.').replace('.', '_')}.png"
+        name = f"sweep_{key.replace('.', '_')}.png"
         fig.savefig(out_dir / name, dpi=110)
         plt.close(fig)
         files.append(name)
     return files
 
 
+EPILOG = """\
+examples:
+  piezodyn sweep cases/usdc-lumped.toml --param lumped.downforce_N=0,3,6,9
+  piezodyn sweep cases/usdc-fe.toml --param transient.loads.fe_force_N=[0,0],[0,-3],[0,-6],[0,-9]
+  piezodyn sweep cases/usdc-transducer.toml --param geometry.parameters.tip_length_m=0.046,0.048,0.050
+  mpirun -n 4 piezodyn sweep CASE --param KEY=V1,V2 --param KEY2=W1,W2   (a 4-point grid, one per rank)
+
+Each point runs as 'piezodyn run CASE --set ...' would, into OUT/point_NNNN/. OUT/sweep.csv has the
+swept values and every scalar result (named by its path in summary.json), OUT/sweep.json the same with
+wall times, OUT/sweep_<key>.png the headline results against each swept key.
+"""
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="piezodyn sweep", description=__doc__.split("\n\n")[0])
-    parser.add_argument("case", help="lumped case file (tier = 'lumped')")
-    parser.add_argument(
-        "--param",
-        action="append",
-        default=[],
-        metavar="KEY=V1,V2,...",
-        help="swept parameter, e.g. lumped.downforce_N=0,3,6,9 (repeat for a grid)",
-    )
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="fixed override applied to every point",
-    )
-    parser.add_argument("--out", default=None, help="output directory (default: sweep-<case name>)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser = argparse.ArgumentParser(
+        prog="piezodyn sweep", formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EPILOG,
+        description="Run a case over a grid of parameter values (any case key, any tier), in parallel "
+                    "over MPI ranks.")
+    parser.add_argument("case", help="case file (any tier)")
+    parser.add_argument("--param", action="append", default=[], metavar="KEY=V1,V2,...",
+                        help="swept case key and its values (TOML values; repeat for a grid)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a case key at every point (as for 'run')")
+    parser.add_argument("--out", default=None, help="output directory (default results/sweep-<case name>)")
+    parser.add_argument("--quiet", action="store_true", help="no progress and no messages")
+    parser.add_argument("--no-progress", action="store_true", help=argparse.SUPPRESS)  # the old spelling
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    comm = None
-    try:
-        from mpi4py import MPI
+    from mpi4py import MPI
 
-        comm = MPI.COMM_WORLD
-    except ImportError:  # pragma: no cover - mpi4py is installed on the project's machines
-        comm = None
-    rank = comm.Get_rank() if comm is not None else 0
+    comm = MPI.COMM_WORLD
+    rank = comm.Get_rank()
+    out_dir = Path(args.out or Path("results") / f"sweep-{Path(args.case).stem}")
     try:
         if not args.param:
             raise CaseError("--param", None, "give at least one --param KEY=V1,V2,...")
         params = [parse_param(text) for text in args.param]
         from app.runner import prepare_output_dir
 
-        out_dir = prepare_output_dir(args.out or f"sweep-{Path(args.case).stem}", comm, "--out")
-        rows = run_sweep(args.case, params, out_dir, args.set, comm, progress=not args.no_progress)
+        out_dir = prepare_output_dir(out_dir, comm, "--out")
+        rows = run_sweep(args.case, params, out_dir, args.set, comm,
+                         progress=not (args.quiet or args.no_progress))
     except CaseError as exc:
         if rank == 0:
-            print(exc.line(), file=sys.stderr)
+            print(f"piezodyn: error: {exc.line()}", file=sys.stderr, flush=True)
         return 2
+    code = 0
     if rank == 0:
         failed = [r for r in rows if "_failed" in r]
-        print(f"sweep: {len(rows)} points -> {out_dir / 'sweep.csv'}", file=sys.stderr)
-        if failed:
-            for r in failed:
-                print(f"sweep: point {r['point']} failed: {r['_failed']}", file=sys.stderr)
-            return 1
-    return 0
+        if not args.quiet:
+            print(f"sweep: {len(rows)} points -> {out_dir / 'sweep.csv'}", flush=True)
+        for r in failed:
+            print(f"piezodyn: sweep point {r['point']} failed: {r['_failed']}", file=sys.stderr, flush=True)
+        code = max((r["_exit"] for r in failed), default=0)
+    return comm.bcast(code, root=0)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
-"""``piezodyn sweep``: a grid of lumped runs, unknown parameters rejected, the same table on 1 or 2 ranks.
+"""``piezodyn sweep``: any case key, any tier (lumped, FE modal, FE transient), the same table on 1 or 2
+ranks, one-line errors, help without markup, flags as for ``run``.
 
-The ``mpi`` test also runs in the MPI pass (``mpirun -n 2 python3 -m pytest -m mpi``)."""
+The ``mpi`` tests also run in the MPI pass (``mpirun -n 2 python3 -m pytest -m mpi``)."""
 
 from __future__ import annotations
 
@@ -9,12 +10,20 @@ import json
 from pathlib import Path
 
 import pytest
+from conftest import CASES, run_cli
 
 from app.errors import CaseError
-from app.sweep import main, parse_param, run_sweep
+from app.sweep import build_parser, main, parse_param, run_sweep
 
-CASE = Path(__file__).resolve().parents[1] / "cases" / "usdc-lumped.toml"
+LUMPED = CASES / "usdc-lumped.toml"
 FAST = ["lumped.duration_s=0.004", "lumped.output.plots=false", "lumped.output.write_time_series=false"]
+BAR = CASES / "validation" / "pzt4-bar-axisymmetric.toml"
+BAR_MODAL = ["analyses=[\"modal\"]", "output.fields=false"]
+DRILL = CASES / "usdc-fe.toml"
+# the FE drill on a coarse mesh for 20 simulated microseconds (~80 steps): the plumbing, not the physics
+DRILL_TINY = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic_mesh_size_m=0.0025",
+              "transient.end_time_s=2e-5", "transient.output_interval_s=1e-5", "output.fields=false",
+              "output.plots=false"]
 
 
 def _world():
@@ -23,59 +32,130 @@ def _world():
     return MPI.COMM_WORLD
 
 
-def test_sweep_over_two_points_writes_table_and_summaries(tmp_path):
-    rows = run_sweep(CASE, [parse_param("lumped.downforce_N=0,9")], tmp_path, FAST, comm=None, progress=False)
+def _table(path: Path) -> list[dict]:
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def test_lumped_sweep_writes_table_summaries_and_readable_plot(tmp_path):
+    rows = run_sweep(LUMPED, [parse_param("lumped.downforce_N=0,9")], tmp_path, FAST, comm=None, progress=False)
     assert [r["lumped.downforce_N"] for r in rows] == [0, 9]
-    with open(tmp_path / "sweep.csv") as f:
-        table = list(csv.DictReader(f))
+    table = _table(tmp_path / "sweep.csv")
     assert len(table) == 2 and table[1]["lumped.downforce_N"] == "9"
+    assert "lumped.statistics.rock.mean_power_W" in table[0]
+    assert not [c for c in table[0] if "wall" in c]  # the table does not depend on the machine
     for i in range(2):
         summary = json.loads((tmp_path / f"point_{i:04d}" / "summary.json").read_text())
-        assert summary["resolved_case"]["lumped"]["downforce_N"] == [0.0, 9.0][i]
-        assert summary["results"]["energy_ledger"]["closure_relative"] < 1e-10
-    assert (tmp_path / "sweep_downforce_N.png").exists()
+        assert summary["case"]["lumped"]["downforce_N"] == [0.0, 9.0][i]  # as `run --set` writes it
+        assert summary["results"]["lumped"]["energy_ledger"]["closure_relative"] < 1e-10
+        assert float(table[i]["lumped.energy_ledger.closure_relative"]) < 1e-10
+    assert (tmp_path / "sweep_lumped_downforce_N.png").exists()
 
 
-def test_unknown_sweep_parameter_is_a_case_error(tmp_path):
+def test_param_values_may_be_lists_and_keys_are_checked_against_the_schema(tmp_path):
+    assert parse_param("transient.loads.fe_force_N=[0,0],[0,-3.5]") == (
+        "transient.loads.fe_force_N", [[0, 0], [0, -3.5]])
+    assert parse_param("lumped.downforce_N=0,3") == ("lumped.downforce_N", [0, 3])
     with pytest.raises(CaseError) as info:
-        run_sweep(
-            CASE, [parse_param("lumped.free_mass.weight_kg=0.002,0.004")], tmp_path, FAST, progress=False
-        )
+        run_sweep(LUMPED, [parse_param("lumped.free_mass.weight_kg=0.002,0.004")], tmp_path, FAST, progress=False)
     assert info.value.key == "lumped.free_mass.weight_kg"
+    with pytest.raises(CaseError) as info:  # a key of the other tier: the FE schema has no lumped.x
+        run_sweep(BAR, [parse_param("geometry.parameters.lenght_m=0.02,0.04")], tmp_path, BAR_MODAL, progress=False)
+    assert "lenght_m" in info.value.key
     with pytest.raises(CaseError):
-        parse_param("downforce_N=0,3")
+        parse_param("downforce_N")
 
 
-def test_sweep_main_exits_2_on_bad_value(tmp_path, capsys):
-    code = main(
-        [
-            str(CASE),
-            "--param",
-            "lumped.stem.mass_kg=0.04,-1",
-            "--out",
-            str(tmp_path),
-            "--no-progress",
-            *[a for s in FAST for a in ("--set", s)],
-        ]
-    )
+def test_sweep_main_exits_2_on_bad_value_with_one_line(tmp_path, capsys):
+    code = main([str(LUMPED), "--param", "lumped.stem.mass_kg=0.04,-1", "--out", str(tmp_path), "--quiet",
+                 *[a for s in FAST for a in ("--set", s)]])
     assert code == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err
     if _world().rank == 0:  # only rank 0 prints the one-line message
-        assert "lumped.stem.mass_kg" in err
+        assert err.count("\n") == 1 and "lumped.stem.mass_kg" in err and err.startswith("piezodyn: error:")
+
+
+def test_help_is_plain_text_with_the_flags_of_run():
+    text = build_parser().format_help()
+    assert "``" not in text and ":class:" not in text
+    for flag in ("--param", "--set", "--out", "--quiet"):
+        assert flag in text
+    assert "--no-progress" not in text
+    assert "fe_force_N=[0,0],[0,-3]" in text  # an FE example, not only lumped keys
+
+
+def test_fe_modal_sweep_resonance_scales_as_one_over_length(tmp_path):
+    """Length-extensional 33 bar: f_r = v / (2 L), so doubling L halves f_r (slender bar: within 2 %)."""
+    rows = run_sweep(BAR, [parse_param("geometry.parameters.length_m=0.02,0.04")], tmp_path, BAR_MODAL,
+                     comm=None, progress=False)
+    f_short, f_long = (r["modal.working_resonance_Hz"] for r in rows)
+    assert f_short / f_long == pytest.approx(2.0, rel=0.02)
+    table = _table(tmp_path / "sweep.csv")
+    assert float(table[1]["modal.working_resonance_Hz"]) == f_long
+    assert (tmp_path / "sweep_geometry_parameters_length_m.png").exists()
+
+
+def test_fe_transient_downforce_sweep_equals_single_runs(tmp_path):
+    from app.runner import run_case
+
+    param = parse_param("transient.loads.fe_force_N=[0.0,0.0],[0.0,-9.0]")
+    rows = run_sweep(DRILL, [param], tmp_path / "sweep", DRILL_TINY, comm=None, progress=False)
+    assert [r["transient.loads.fe_force_N"] for r in rows] == [[0.0, 0.0], [0.0, -9.0]]
+    single = run_case(DRILL, [*DRILL_TINY, "transient.loads.fe_force_N=[0.0, -9.0]"], tmp_path / "single",
+                      quiet=True)
+    assert single["case"]["transient"]["loads"]["fe_force_N"] == [0.0, -9.0]
+    assert rows[1]["transient.steps"] == single["results"]["transient"]["steps"] > 0
+    stats = single["results"]["transient"]["statistics"]["transducer"]
+    assert rows[1]["transient.statistics.transducer.mean_displacement_m"] == stats["mean_displacement_m"]
+    table = _table(tmp_path / "sweep" / "sweep.csv")
+    assert table[1]["transient.loads.fe_force_N"] == "[0.0, -9.0]"
+    assert (tmp_path / "sweep" / "sweep_transient_loads_fe_force_N.png").exists()
+
+
+def test_cli_sweep_is_a_subcommand_with_quiet(tmp_path):
+    proc = run_cli("sweep", LUMPED, "--param", "lumped.downforce_N=3", "--quiet", "--out", tmp_path,
+                   *[a for s in FAST for a in ("--set", s)])
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == "" and proc.stderr == ""
+    assert len(_table(tmp_path / "sweep.csv")) == 1
 
 
 @pytest.mark.mpi
-def test_sweep_table_is_identical_on_any_number_of_ranks(tmp_path):
+def test_lumped_sweep_table_is_identical_on_any_number_of_ranks(shared_tmp):
     comm = _world()
-    shared = Path(comm.bcast(str(tmp_path), root=0))  # every rank writes into rank 0's directory
     params = [parse_param("lumped.downforce_N=3,9"), parse_param("lumped.free_mass.mass_kg=0.002,0.004")]
-    run_sweep(CASE, params, shared / "parallel", FAST, comm=comm, progress=False)
+    run_sweep(LUMPED, params, shared_tmp / "parallel", FAST, comm=comm, progress=False)
     comm.barrier()
     if comm.rank == 0:
-        run_sweep(CASE, params, shared / "serial", FAST, comm=None, progress=False)
-        parallel = (shared / "parallel" / "sweep.csv").read_text()
-        serial = (shared / "serial" / "sweep.csv").read_text()
+        run_sweep(LUMPED, params, shared_tmp / "serial", FAST, comm=None, progress=False)
+        parallel = (shared_tmp / "parallel" / "sweep.csv").read_text()
+        serial = (shared_tmp / "serial" / "sweep.csv").read_text()
         assert parallel == serial
         assert len(parallel.strip().splitlines()) == 5
+    comm.barrier()
+
+
+@pytest.mark.mpi
+def test_fe_drill_downforce_sweep_over_ranks(shared_tmp):
+    """The FE drill at 0 and 9 N: with 2 ranks each runs one point on COMM_SELF, rank 0 gathers; the
+    point run elsewhere equals the same point run here."""
+    from mpi4py import MPI
+
+    from app.runner import run_case
+
+    comm = _world()
+    param = parse_param("transient.loads.fe_force_N=[0.0,0.0],[0.0,-9.0]")
+    rows = run_sweep(DRILL, [param], shared_tmp / "sweep", DRILL_TINY, comm=comm, progress=False)
+    if comm.rank == 0:
+        assert [r["point"] for r in rows] == [0, 1]
+        assert {r["_rank"] for r in rows} == set(range(min(comm.size, 2)))
+        single = run_case(DRILL, [*DRILL_TINY, "transient.loads.fe_force_N=[0.0, -9.0]"], shared_tmp / "single",
+                          comm=MPI.COMM_SELF, quiet=True)["results"]["transient"]
+        assert rows[1]["transient.steps"] == single["steps"]
+        assert rows[1]["transient.statistics.transducer.max_rise_m"] == pytest.approx(
+            single["statistics"]["transducer"]["max_rise_m"], rel=1e-9)
+        assert len(_table(shared_tmp / "sweep" / "sweep.csv")) == 2
+    else:
+        assert rows is None
     comm.barrier()

@@ -7,10 +7,11 @@ readable file with everything up to the last flush. Units are attributes of ever
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
+
+from app.progress import SimulatedTimeProgress as Progress  # noqa: F401  (moved to app/progress.py)
 
 
 class TimeSeriesExport:
@@ -82,29 +83,6 @@ class TimeSeriesExport:
         if self._file is not None:
             self._file.close()
             self._file = None
-
-
-class Progress:
-    """tqdm bar on rank 0 in simulated milliseconds (with ETA); silent elsewhere."""
-
-    def __init__(self, comm, t_start_s: float, t_end_s: float, enabled: bool = True):
-        self.bar = None
-        self.t_last = t_start_s
-        if enabled and comm.rank == 0:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=round((t_end_s - t_start_s) * 1e3, 6), unit="ms", desc="transient",
-                            file=sys.stderr, mininterval=1.0, bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} "
-                            "simulated ms [{elapsed}<{remaining}]")
-
-    def update(self, t_s: float) -> None:
-        if self.bar is not None:     # never past the total (tqdm warns on round-off overshoot)
-            self.bar.update(max(min((t_s - self.t_last) * 1e3, self.bar.total - self.bar.n), 0.0))
-        self.t_last = t_s
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
 
 
 def plot_time_series(h5_path: Path, png_motion: Path, png_force: Path, point: str | None, bodies: list[str],
