@@ -11,6 +11,7 @@ stem, stem on rock foundation): force = < k delta + c d(delta)/dt > while delta 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from app.transient.fe import LinearFE, displacement_of
+from app.transient.interactions import ForceColumns, friction_force, pad3, velocity_map
 from forms import contact as cf
 
 
@@ -73,7 +75,7 @@ class MidpointFields:
         self.one_minus_alpha_f = fem.Constant(mesh, 1.0)
 
 
-class SurfaceContact:
+class SurfaceContact(ForceColumns):
     """Penalty contact between FE facets (``tag`` in ``facet_tags``) and rigid body ``body``.
 
     ``stiffness_Pa_per_m`` is the penalty per unit area (pressure per metre of penetration),
@@ -221,6 +223,62 @@ class SurfaceContact:
         return dist - self.shape.radius_m, np.einsum("ij,ij->i", d / dist[:, None], rel_v)
 
 
+    # ------------------------------------------------------------ interaction protocol
+    kind = "surface"
+    fe_coupled = True
+
+    def bind(self, system) -> None:
+        rigid = system.rigid
+        if self.body not in rigid.index:
+            raise ValueError(f"contact {self.name!r} names unknown rigid body {self.body!r}")
+        if rigid.body(self.body).rotation_axes:
+            raise ValueError(f"contact {self.name!r}: a surface contact on a rotating body is not supported "
+                             f"(body {self.body!r} declares rotations)")
+        self.set_body_reference(rigid.body(self.body).position_m)
+
+    def move_to_iterate(self, system) -> None:
+        sl = system.rigid.dofs(self.body)
+        self.set_body_state(system.z_mid[sl], system.zd_mid[sl])
+
+    def add_residual(self, system, rc_S, r_z, r):
+        rc = self.assemble_residual()
+        if r is not None:
+            r.axpy(1.0, rc)
+        rc_S += system._gather_S(rc.array_r)
+        force = np.array([rc.dot(tk) for tk in system.translations])
+        r_z[system.rigid.dofs(self.body)] -= force
+        return force
+
+    def add_tangent(self, system, Kss, B, L, Kzz) -> None:
+        s_count = system.contact_global.size
+        owned_rows = (system.contact_local + system.fe.first_global).astype(PETSc.IntType)
+        A = self.assemble_tangent()
+        block = system._gather_rows(A.getValues(owned_rows, system.contact_global).reshape(owned_rows.size, s_count))
+        T = system.translation_S
+        Kss += block
+        sl = system.rigid.dofs(self.body)
+        B[:, sl] -= block @ T
+        L[sl, :] -= T.T @ block
+        Kzz[sl, sl] += T.T @ block @ T
+
+    def status(self, system, state) -> tuple[bool, float]:
+        sl = system.rigid.dofs(self.body)
+        self.set_body_state(state.z[sl], state.zd[sl])
+        # Closed = penetration at a quadrature point (what the force sees); the closure time is
+        # predicted from the nodes (a curved obstacle can dip between them: a warning sign of a
+        # too coarse contact mesh, not an error).
+        closed = self.area_in_contact_m2() > 0.0
+        gap, rate = self.nodal_gaps(state.u, state.v, state.z[sl], state.zd[sl])
+        approaching = (gap > 0) & (rate < 0)
+        local = float(np.min(gap[approaching] / -rate[approaching])) if approaching.any() else math.inf
+        return closed, self.fe.comm.allreduce(local, op=MPI.MIN)
+
+    def stored_energy_J(self, system, state) -> float:
+        sl = system.rigid.dofs(self.body)
+        self.set_body_state(state.z[sl], state.zd[sl])
+        return self.elastic_energy_J()
+
+
 def displacement_of_test(test, fe: LinearFE):
     element = fe.space.ufl_element()
     if isinstance(element, ufl.MixedElement) and not isinstance(element, ufl.VectorElement):
@@ -228,13 +286,25 @@ def displacement_of_test(test, fe: LinearFE):
     return test
 
 
-class PointContact:
+class PointContact(ForceColumns):
     """Kelvin-Voigt contact between rigid bodies ``lower`` and ``upper`` along unit ``normal``
     (pointing from lower to upper). Penetration delta = touch_distance - normal . (z_upper - z_lower);
-    force f = < k delta + c d(delta)/dt > for delta > 0 (no pull), pushing the bodies apart."""
+    normal force f = < k delta + c d(delta)/dt > for delta > 0 (no pull), pushing the bodies apart.
+
+    With ``friction``, the contact point sits ``contact_offset_m`` from the upper body's reference
+    point against the normal (a disc or ball of that radius on the lower body); the slip is the
+    tangential part of the relative velocity there, v_up + omega_up x r_up - (v_lo + omega_lo x r_lo),
+    and the regularised Coulomb force (:func:`app.transient.interactions.friction_force`, the cap
+    a force) acts on the upper body with its torque about each body's rotation axes. The lever arm
+    of the lower body follows the current positions; its change within a step is left out of the
+    tangent (Newton then converges linearly in that term, the residual is exact)."""
+
+    kind = "point"
+    fe_coupled = False
 
     def __init__(self, name: str, lower: str, upper: str, normal, touch_distance_m: float,
-                 stiffness_N_per_m: float, damping_N_s_per_m: float = 0.0):
+                 stiffness_N_per_m: float, damping_N_s_per_m: float = 0.0, friction: Friction | None = None,
+                 contact_offset_m: float = 0.0):
         if not stiffness_N_per_m > 0:
             raise ValueError(f"contact {name!r}: stiffness must be > 0")
         if damping_N_s_per_m < 0:
@@ -245,6 +315,8 @@ class PointContact:
         self.touch_distance_m = float(touch_distance_m)
         self.stiffness_N_per_m = float(stiffness_N_per_m)
         self.damping_N_s_per_m = float(damping_N_s_per_m)
+        self.friction = friction
+        self.contact_offset_m = float(contact_offset_m)
 
     def penetration(self, z_lower, z_upper, v_lower, v_upper):
         """(delta [m], d(delta)/dt [m/s])."""
@@ -264,9 +336,87 @@ class PointContact:
     def elastic_energy_J(self, delta: float) -> float:
         return 0.5 * self.stiffness_N_per_m * max(delta, 0.0) ** 2
 
+    # ------------------------------------------------------------ interaction protocol
+    def bind(self, system) -> None:
+        rigid = system.rigid
+        for name in (self.lower, self.upper):
+            if name not in rigid.index:
+                raise ValueError(f"contact {self.name!r} names unknown rigid body {name!r}")
+        # Generalised path (lever arms, torques) only where it can act: friction, or a rotating body.
+        self._general = self.friction is not None or bool(
+            rigid.body(self.lower).rotation_axes or rigid.body(self.upper).rotation_axes)
+        self._pair = np.r_[np.arange(rigid.size)[rigid.all_dofs(self.lower)],
+                           np.arange(rigid.size)[rigid.all_dofs(self.upper)]]
+        n_lo = rigid.body(self.lower).n_dofs
+        self._D = np.zeros(self._pair.size)        # d delta / d (lower, upper) coordinates
+        self._D[:rigid.gdim] = self.normal
+        self._D[n_lo:n_lo + rigid.gdim] = -self.normal
+
+    def move_to_iterate(self, system) -> None:
+        pass
+
+    def _state(self, rigid, z, zd):
+        lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
+        return self.penetration(z[lo], z[up], zd[lo], zd[up])
+
+    def _general_terms(self, system, tangent: bool):
+        """(generalised force on (lower, upper) [N, N m], force on upper [N], tangent or None)."""
+        rigid = system.rigid
+        z, zd = system.z_mid, system.zd_mid
+        f, k_f, c_f = self.force(*self._state(rigid, z, zd))
+        n3 = pad3(self.normal)
+        r_up = -self.contact_offset_m * n3
+        r_lo = pad3(z[rigid.dofs(self.upper)] - z[rigid.dofs(self.lower)]) + r_up
+        P = np.hstack([-velocity_map(rigid, self.lower, r_lo), velocity_map(rigid, self.upper, r_up)])
+        F = f * n3
+        dF_ds, dF_dN = np.zeros((3, 3)), np.zeros(3)
+        if self.friction is not None and f > 0.0:
+            tangential = np.eye(3) - np.outer(n3, n3)
+            F_t, dF_ds, dF_dN = friction_force(tangential @ (P @ zd[self._pair]), f, self.friction)
+            F = F + F_t
+            dF_ds = dF_ds @ tangential
+        generalised = P.T @ F
+        if not tangent:
+            return generalised, F[: rigid.gdim], None
+        # d F / d (end-of-step coordinates): positions through delta, rates through delta and slip
+        one_minus_af = 1 - system.scheme.alpha_f
+        dF_dq = np.outer(n3 + dF_dN, (k_f + c_f * system.c_vel) * self._D) + system.c_vel * dF_ds @ P
+        return generalised, F[: rigid.gdim], -one_minus_af * P.T @ dF_dq
+
+    def add_residual(self, system, rc_S, r_z, r):
+        rigid = system.rigid
+        if self._general:
+            generalised, force, _ = self._general_terms(system, tangent=False)
+            r_z[self._pair] -= generalised
+            return force
+        f, _, _ = self.force(*self._state(rigid, system.z_mid, system.zd_mid))
+        r_z[rigid.dofs(self.upper)] -= f * self.normal
+        r_z[rigid.dofs(self.lower)] += f * self.normal
+        return f * self.normal
+
+    def add_tangent(self, system, Kss, B, L, Kzz) -> None:
+        rigid = system.rigid
+        if self._general:
+            _, _, block = self._general_terms(system, tangent=True)
+            Kzz[np.ix_(self._pair, self._pair)] += block
+            return
+        _, k_f, c_f = self.force(*self._state(rigid, system.z_mid, system.zd_mid))
+        stiffness = (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * np.outer(self.normal, self.normal)
+        lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
+        Kzz[up, up] += stiffness
+        Kzz[lo, lo] += stiffness
+        Kzz[up, lo] -= stiffness
+        Kzz[lo, up] -= stiffness
+
+    def status(self, system, state) -> tuple[bool, float]:
+        delta, rate = self._state(system.rigid, state.z, state.zd)
+        return delta > 0, (-delta / rate if delta <= 0 and rate > 0 else math.inf)
+
+    def stored_energy_J(self, system, state) -> float:
+        return self.elastic_energy_J(self._state(system.rigid, state.z, state.zd)[0])
 
 
-class NodeContact:
+class NodeContact(ForceColumns):
     """One FE node against a sphere of a rigid body, with a Hertz force law (node-to-body contact).
 
     For the axisymmetric drill, a ball touching the tip face loads a disc of radius
@@ -353,3 +503,55 @@ class NodeContact:
 
     def elastic_energy_J(self, delta: float) -> float:
         return 0.4 * self.stiffness * max(delta, 0.0) ** 2.5
+
+    # ------------------------------------------------------------ interaction protocol
+    kind = "node"
+    fe_coupled = True
+
+    def bind(self, system) -> None:
+        rigid = system.rigid
+        if self.body not in rigid.index:
+            raise ValueError(f"contact {self.name!r} names unknown rigid body {self.body!r}")
+        self.set_body_reference(rigid.body(self.body).position_m)
+        first = self.fe.first_global
+        mine = [(int(d + first), int(k)) for d, k in zip(self.local_dofs, self.dof_axes)]
+        pairs = self.comm.bcast(mine, root=self.owner)
+        self._S = np.array([system.contact_position[g] for g, _ in pairs], dtype=int)
+        self._S_axes = np.array([k for _, k in pairs], dtype=int)
+
+    def move_to_iterate(self, system) -> None:
+        pass
+
+    def _force_at_iterate(self, system):
+        sl = system.rigid.dofs(self.body)
+        return self.force(*self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl]))
+
+    def add_residual(self, system, rc_S, r_z, r):
+        f, _, _ = self._force_at_iterate(system)
+        if r is not None and self.local_dofs.size:
+            r.array_w[self.local_dofs] -= f * self.normal[self.dof_axes]
+        rc_S[self._S] -= f * self.normal[self._S_axes]
+        r_z[system.rigid.dofs(self.body)] += f * self.normal
+        return -f * self.normal
+
+    def add_tangent(self, system, Kss, B, L, Kzz) -> None:
+        _, k_f, c_f = self._force_at_iterate(system)
+        s_count = system.contact_global.size
+        block = np.zeros((s_count, s_count))
+        n_S = self.normal[self._S_axes]
+        block[np.ix_(self._S, self._S)] = (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * np.outer(n_S, n_S)
+        T = system.translation_S
+        Kss += block
+        sl = system.rigid.dofs(self.body)
+        B[:, sl] -= block @ T
+        L[sl, :] -= T.T @ block
+        Kzz[sl, sl] += T.T @ block @ T
+
+    def status(self, system, state) -> tuple[bool, float]:
+        sl = system.rigid.dofs(self.body)
+        delta, rate = self.penetration(state.u, state.v, state.z[sl], state.zd[sl])
+        return delta > 0, (-delta / rate if delta <= 0 and rate > 0 else math.inf)
+
+    def stored_energy_J(self, system, state) -> float:
+        sl = system.rigid.dofs(self.body)
+        return self.elastic_energy_J(self.penetration(state.u, state.v, state.z[sl], state.zd[sl])[0])
