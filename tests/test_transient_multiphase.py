@@ -111,3 +111,69 @@ def test_target_amplitude_scales_all_phases_together(tmp_path):
     np.testing.assert_allclose(target["b_voltage_V"], factor * nominal["b_voltage_V"], rtol=1e-12, atol=1e-15)
     scale = np.abs(target["end_displacement_m"]).max()
     assert np.abs(target["end_displacement_m"] - factor * nominal["end_displacement_m"]).max() < 1e-9 * scale
+
+
+BELT_CASE = CASE.replace('''[electrodes.a]
+facets = ["top"]
+kind = "voltage"
+amplitude_V = {a}
+phase_deg = 0.0
+
+[electrodes.b]
+facets = ["bottom"]
+kind = "voltage"
+amplitude_V = {b}
+phase_deg = 90.0
+''', '''[electrodes.ground]
+facets = ["bottom"]
+kind = "ground"
+''').replace('''[[supports]]
+facets = ["bottom"]
+components = ["z"]
+''', "") + '''
+[transient.loads]
+fe_force_N = [0.0, -1000.0]
+
+[[transient.bodies]]
+name = "belt"                 # a rigid plane under the strip, running along x
+position_m = [0.0, 0.0]
+mass_kg = 1.0
+free_axes = [false, false]
+velocity_m_per_s = [1.0, 0.0]
+
+[[transient.contacts]]
+name = "strip_belt"
+kind = "surface"
+facets = "bottom"
+body = "belt"
+shape = "plane"
+normal = [0.0, 1.0]
+stiffness = 1e13
+damping = 1e6
+
+[transient.contacts.friction]
+mu_dynamic = 0.25
+static_ratio = 1.5
+decay_s_per_m = 100.0
+'''
+
+
+def test_surface_friction_from_the_case_file(tmp_path):
+    """The strip pressed on a belt running at 1 m/s: every contact point slips at ~1 m/s, so the
+    friction force is mu(1 m/s) = mu_d (FACT, DC: mu_s at rest, 1e-43 above mu_d at 1 m/s) times
+    the normal force, along the belt's motion, at every step with contact."""
+    comm = MPI.COMM_WORLD
+    folder = comm.bcast(tmp_path / "belt" if comm.rank == 0 else None, root=0)
+    if comm.rank == 0:
+        folder.mkdir()
+        (folder / "case.toml").write_text(BELT_CASE.format(a=0, b=0, start="rest"))
+    comm.barrier()
+    case = load_case(folder / "case.toml", ["transient.end_time_s=2e-5", "transient.output_interval_s=2e-5"])
+    run(case, folder / "out", comm, lambda *args: None)
+    with h5py.File(folder / "out" / "transient.h5", "r") as f:
+        force = f["strip_belt_force_N"][()]
+        closed = f["strip_belt_closed"][()] > 0
+    assert closed.sum() > 50
+    normal = -force[closed, 1]                  # force on the belt: pressed down (-y), dragged back (-x)
+    assert normal.min() > 0
+    np.testing.assert_allclose(-force[closed, 0] / normal, 0.25, rtol=1e-6)
