@@ -80,11 +80,19 @@ class SurfaceContact(ForceColumns):
 
     ``stiffness_Pa_per_m`` is the penalty per unit area (pressure per metre of penetration),
     ``damping_Pa_s_per_m`` the normal viscous term; ``weight`` is the volume weight of the model
-    (2 pi r for axisymmetric), so forces are those of the whole body of revolution."""
+    (2 pi r for axisymmetric), so forces are those of the whole body of revolution.
+
+    ``rotation_axes`` ((n_rot, 3) unit vectors, the body's rotation axes through its reference
+    point) makes the obstacle rotate with the body: the relative velocity of a surface point is
+    v - v_body - omega x r, r = y - p_body, so friction sees the spin and its torque acts on the
+    body. The obstacle must be a body of revolution about every such axis (a sphere centred on the
+    reference point, a plane normal to the axis in 3D): its gap does not change with the angle, and
+    omega x r has no normal component, so the rotation enters through friction only."""
 
     def __init__(self, name: str, fe: LinearFE, facet_tags, tag: int, body: str, shape: ObstacleShape,
                  stiffness_Pa_per_m: float, damping_Pa_s_per_m: float = 0.0, friction: Friction | None = None,
-                 weight=1.0, fields: MidpointFields | None = None, quadrature_degree: int = 4):
+                 weight=1.0, fields: MidpointFields | None = None, quadrature_degree: int = 4,
+                 rotation_axes=None):
         if not stiffness_Pa_per_m > 0:
             raise ValueError(f"contact {name!r}: stiffness must be > 0")
         fields = fields if fields is not None else MidpointFields(fe)
@@ -131,6 +139,17 @@ class SurfaceContact(ForceColumns):
             normal = cf.sphere_normal(relative, zero, shape.radius_m)
             gap = cf.sphere_gap(relative, zero, shape.radius_m)
         relative_velocity = v - self.body_velocity
+        self.rotation_axes = np.zeros((0, 3)) if rotation_axes is None else np.asarray(rotation_axes, float)
+        self._check_revolution(self.rotation_axes)
+        omega = None
+        if self.rotation_axes.size:
+            # lever arm from the body's reference point, formed from small differences (see above)
+            lever = (x - self.body_reference) + (u - self.body_displacement)
+            self.body_angular_velocity = fem.Constant(mesh, np.zeros(3 if gdim == 3 else 1))
+            omega = ufl.variable(self.body_angular_velocity)
+            spin = (ufl.cross(omega, lever) if gdim == 3
+                    else omega[0] * ufl.as_vector((-lever[1], lever[0])))
+            relative_velocity = relative_velocity - spin
         gap_rate = ufl.dot(relative_velocity, normal)
         pressure = cf.normal_pressure(gap, gap_rate, self.stiffness, self.damping)
         traction = pressure * normal
@@ -146,6 +165,8 @@ class SurfaceContact(ForceColumns):
             + self.velocity_per_displacement * ufl.derivative(residual, self.v_mid, trial))
         self.residual_form = fem.form(residual)
         self.tangent_form = fem.form(tangent)
+        if omega is not None:
+            self._rotation_forms(traction, omega, lever, test, ds, weight, fe)
         penetration = cf.macaulay(-gap)
         self.energy_form = fem.form(0.5 * self.stiffness * penetration**2 * weight * ds)
         self.area_in_contact_form = fem.form(cf.heaviside(-gap) * weight * ds)
@@ -153,6 +174,52 @@ class SurfaceContact(ForceColumns):
         self.tangent_matrix = create_matrix(self.tangent_form)
         self._coordinates = fe.dof_coordinates()
         self._node_dofs = self._group_dofs_by_node()
+
+    def _check_revolution(self, axes: np.ndarray) -> None:
+        shape = self.shape
+        for a in axes:
+            if shape.kind == "plane":
+                normal = np.zeros(3)
+                normal[: len(shape.normal)] = shape.normal
+                ok = len(shape.normal) == 3 and np.linalg.norm(np.cross(a, normal)) < 1e-12
+            else:
+                offset = np.zeros(3)
+                offset[: len(shape.offset_m)] = shape.offset_m or ()
+                ok = np.linalg.norm(np.cross(a, offset)) < 1e-15
+            if not ok:
+                raise ValueError(f"contact {self.name!r}: the {shape.kind} obstacle is not a body of revolution "
+                                 f"about the rotation axis {a.tolist()} of body {self.body!r}")
+
+    def _rotation_forms(self, traction, omega, lever, test, ds, weight, fe) -> None:
+        """Forms of the rotation coupling, per rotation axis a_k: d(residual)/d(omega_k) (vector),
+        the torque of the contact on the body about a_k (scalar: int (r x -t) . a_k) with its
+        derivatives d/du_mid, d/dv_mid (vectors) and d/d(omega_j) (scalars)."""
+        gdim = fe.gdim
+        force = -traction                       # on the body, per area
+
+        def about(k):
+            if gdim == 3:
+                return ufl.dot(ufl.cross(lever, force), ufl.as_vector(self.rotation_axes[k].tolist()))
+            return lever[0] * force[1] - lever[1] * force[0]
+
+        def d_omega(expr, k):
+            derivative = ufl.diff(expr, omega)
+            if gdim == 3:
+                return ufl.dot(derivative, ufl.as_vector(self.rotation_axes[k].tolist()))
+            return derivative[0] if len(expr.ufl_shape) == 0 else ufl.as_vector(
+                [derivative[i, 0] for i in range(gdim)])
+
+        n_rot = self.rotation_axes.shape[0]
+        self.torque_forms = [fem.form(about(k) * weight * ds) for k in range(n_rot)]
+        self.residual_per_spin_forms = [
+            fem.form(cf.contact_residual(d_omega(traction, k), displacement_of_test(test, fe), ds, weight))
+            for k in range(n_rot)]
+        self.torque_per_u_forms = [fem.form(ufl.derivative(about(k) * weight * ds, self.u_mid, test)
+                                            + self.velocity_per_displacement
+                                            * ufl.derivative(about(k) * weight * ds, self.v_mid, test))
+                                   for k in range(n_rot)]
+        self.torque_per_spin_forms = [[fem.form(d_omega(about(k), j) * weight * ds) for j in range(n_rot)]
+                                      for k in range(n_rot)]
 
     def set_body_reference(self, position_m: np.ndarray) -> None:
         """Fix the reference position of the body (its initial position; any fixed value works,
@@ -231,14 +298,37 @@ class SurfaceContact(ForceColumns):
         rigid = system.rigid
         if self.body not in rigid.index:
             raise ValueError(f"contact {self.name!r} names unknown rigid body {self.body!r}")
-        if rigid.body(self.body).rotation_axes:
-            raise ValueError(f"contact {self.name!r}: a surface contact on a rotating body is not supported "
-                             f"(body {self.body!r} declares rotations)")
-        self.set_body_reference(rigid.body(self.body).position_m)
+        body = rigid.body(self.body)
+        if body.axis_vectors.shape != self.rotation_axes.shape or not np.allclose(body.axis_vectors,
+                                                                                 self.rotation_axes):
+            raise ValueError(f"contact {self.name!r}: built for rotation axes {self.rotation_axes.tolist()}, "
+                             f"body {self.body!r} has {body.axis_vectors.tolist()}")
+        self.set_body_reference(body.position_m)
 
     def move_to_iterate(self, system) -> None:
         sl = system.rigid.dofs(self.body)
         self.set_body_state(system.z_mid[sl], system.zd_mid[sl])
+        if self.rotation_axes.size:
+            self._set_spin(system.rigid.angular_velocity(self.body, system.zd_mid))
+
+    def _set_spin(self, omega: np.ndarray) -> None:
+        self.body_angular_velocity.value[:] = omega if self.fe.gdim == 3 else omega[2:]
+
+    def _scalar(self, form) -> float:
+        return self.fe.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
+
+    def _vector_at_S(self, system, form) -> np.ndarray:
+        vec = create_vector(form)
+        assemble_vector(vec, form)
+        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self.fe.zero_constrained(vec)
+        out = system._gather_S(vec.array_r)
+        vec.destroy()
+        return out
+
+    def torque_N_m(self) -> np.ndarray:
+        """Torque of the contact on the body about its rotation axes [N m] (current fields)."""
+        return np.array([self._scalar(f) for f in self.torque_forms])
 
     def add_residual(self, system, rc_S, r_z, r):
         rc = self.assemble_residual()
@@ -247,7 +337,24 @@ class SurfaceContact(ForceColumns):
         rc_S += system._gather_S(rc.array_r)
         force = np.array([rc.dot(tk) for tk in system.translations])
         r_z[system.rigid.dofs(self.body)] -= force
+        if self.rotation_axes.size:
+            torque = self.torque_N_m()
+            r_z[system.rigid.rotation_dofs(self.body)] -= torque
+            return np.concatenate([force, torque])
         return force
+
+    def columns(self) -> dict[str, str]:
+        out = super().columns()
+        if self.rotation_axes.size:
+            out[f"{self.name}_torque_N_m"] = "N m (on the rigid body, about its rotation axes)"
+        return out
+
+    def row(self, force_N, closed: bool) -> dict:
+        gdim = self.fe.gdim
+        out = super().row(force_N[:gdim], closed)
+        if self.rotation_axes.size:
+            out[f"{self.name}_torque_N_m"] = force_N[gdim:]
+        return out
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:
         s_count = system.contact_global.size
@@ -260,6 +367,28 @@ class SurfaceContact(ForceColumns):
         B[:, sl] -= block @ T
         L[sl, :] -= T.T @ block
         Kzz[sl, sl] += T.T @ block @ T
+        if self.rotation_axes.size:
+            self._add_rotation_tangent(system, B, L, Kzz, sl)
+
+    def _add_rotation_tangent(self, system, B, L, Kzz, sl) -> None:
+        """Blocks of the body's angles (see _rotation_forms): the residual and the torque depend on
+        omega_mid ((1 - alpha_f) c_vel per end-of-step angle), and on u, v and the body position
+        through differences, so d/dz = -(d/du) . translation."""
+        scale = (1 - system.scheme.alpha_f)
+        c_vel = system.c_vel
+        rot = np.arange(system.rigid.size)[system.rigid.rotation_dofs(self.body)]
+        T = system.translation_S
+        n_rot = rot.size
+        for j in range(n_rot):
+            column = scale * c_vel * self._vector_at_S(system, self.residual_per_spin_forms[j])
+            B[:, rot[j]] += column
+            Kzz[sl, rot[j]] -= T.T @ column
+        for k in range(n_rot):
+            row = -scale * self._vector_at_S(system, self.torque_per_u_forms[k])
+            L[rot[k], :] += row
+            Kzz[rot[k], sl] -= row @ T
+            for j in range(n_rot):
+                Kzz[rot[k], rot[j]] -= scale * c_vel * self._scalar(self.torque_per_spin_forms[k][j])
 
     def status(self, system, state) -> tuple[bool, float]:
         sl = system.rigid.dofs(self.body)

@@ -139,7 +139,7 @@ class TransientModel:
         self.fe = LinearFE(W, W.sub(0), model.mass, model.stiffness, model.damping(self.damping_frequency_Hz),
                            bcs=[bc], loads=loads, update_dirichlet=self.drive)
         self.rigid = RigidSet([self._body(b, gravity) for b in cfg.bodies])
-        context = BuildContext(case, model, self.fe, MidpointFields(self.fe), weight, gdim, file)
+        context = BuildContext(case, model, self.fe, MidpointFields(self.fe), weight, gdim, file, self.rigid)
         interactions = build_interactions(cfg.contacts, context)
         try:
             self.system = CoupledSystem(comm, cfg.scheme.scheme(), self.fe, self.rigid, interactions)

@@ -82,6 +82,7 @@ class BuildContext:
     weight: object              # volume weight of the model (2 pi r axisymmetric)
     gdim: int
     file: str
+    rigid: object = None        # app.transient.rigid.RigidSet (rotation axes of the bodies)
 
 
 def _vector(section, key: str, value, ctx: BuildContext, prefix: str):
@@ -106,9 +107,13 @@ def build_surface(section, prefix: str, ctx: BuildContext):
     except ValueError as exc:
         raise CaseError(ctx.file, f"{prefix}.normal", str(exc)) from None
     friction = section.friction.friction() if section.friction is not None else None
-    return SurfaceContact(section.name, ctx.fe, ctx.model.mesh_data.facet_tags, tag, section.body, shape,
-                          section.stiffness, section.damping, friction=friction, weight=ctx.weight,
-                          fields=ctx.fields)
+    axes = ctx.rigid.body(section.body).axis_vectors if ctx.rigid is not None else None
+    try:
+        return SurfaceContact(section.name, ctx.fe, ctx.model.mesh_data.facet_tags, tag, section.body, shape,
+                              section.stiffness, section.damping, friction=friction, weight=ctx.weight,
+                              fields=ctx.fields, rotation_axes=axes)
+    except ValueError as exc:
+        raise CaseError(ctx.file, f"{prefix}.shape", str(exc)) from None
 
 
 def build_node(section, prefix: str, ctx: BuildContext):
