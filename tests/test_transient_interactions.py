@@ -75,6 +75,7 @@ def test_spinning_disc_with_held_axle_spins_down_linearly():
     np.testing.assert_allclose(force[:, 1], NORMAL_N, rtol=1e-9)
 
 
+@pytest.mark.mpi
 def test_spinning_disc_free_to_roll_conserves_contact_angular_momentum():
     friction = Friction(MU_D, regularisation_speed_m_per_s=1e-5)
     system, state = _disc_on_plane(False, friction)
@@ -148,6 +149,7 @@ def test_block_on_belt_sticks_below_static_friction(share):
     assert np.max(np.abs(v[-100:] - BELT_M_PER_S)) < 1e-4
 
 
+@pytest.mark.mpi
 def test_block_on_belt_breaks_away_above_static_friction():
     friction = Friction(MU_D, FACT, DECAY_S_PER_M, regularisation_speed_m_per_s=1e-5)
     push = -1.1 * FACT * MU_D * NORMAL_N

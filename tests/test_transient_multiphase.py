@@ -86,6 +86,7 @@ def _run(tmp_path, name, a, b, start, overrides=()):
     return series, results
 
 
+@pytest.mark.mpi
 @pytest.mark.parametrize("start", ["rest", "harmonic"])
 def test_two_phases_superpose(tmp_path, start):
     both, _ = _run(tmp_path, "both", 10.0, 5.0, start)
@@ -102,6 +103,7 @@ def test_two_phases_superpose(tmp_path, start):
     assert np.abs(both["end_displacement_m"] - total).max() < 1e-9 * scale
 
 
+@pytest.mark.mpi
 def test_target_amplitude_scales_all_phases_together(tmp_path):
     nominal, _ = _run(tmp_path, "nominal", 10.0, 5.0, "harmonic")
     target, results = _run(tmp_path, "target", 10.0, 5.0, "harmonic",
@@ -158,6 +160,7 @@ decay_s_per_m = 100.0
 '''
 
 
+@pytest.mark.mpi
 def test_surface_friction_from_the_case_file(tmp_path):
     """The strip pressed on a belt running at 1 m/s: every contact point slips at ~1 m/s, so the
     friction force is mu(1 m/s) = mu_d (FACT, DC: mu_s at rest, 1e-43 above mu_d at 1 m/s) times

@@ -106,6 +106,7 @@ def assert_kinetic_torque(force, torque):
     np.testing.assert_allclose(-torque / RADIUS_M, MU_D * pressure, rtol=1e-3)
 
 
+@pytest.mark.mpi
 def test_spinning_disc_drags_the_strip_at_kinetic_friction(tmp_path):
     omega = 100.0                                  # surface speed 1 m/s at the top: along -x
     data, results = _run(tmp_path, "spin", f'motion = "constant_rate"\nrate_rad_per_s = {omega}')
@@ -125,6 +126,7 @@ def test_spinning_disc_drags_the_strip_at_kinetic_friction(tmp_path):
     np.testing.assert_allclose(data["disc_angular_velocity_rad_per_s"][:, 0], omega, rtol=1e-10)   # prescribed
 
 
+@pytest.mark.mpi
 def test_free_disc_spins_down_by_its_friction_torque(tmp_path):
     omega0 = 100.0
     data, results = _run(tmp_path, "free", f"inertia_kg_m2 = {INERTIA_KG_M2}\nrate_rad_per_s = {omega0}",
@@ -148,6 +150,7 @@ def test_free_disc_spins_down_by_its_friction_torque(tmp_path):
     assert_kinetic_torque(data["strip_disc_force_N"][closed], torque[closed])
 
 
+@pytest.mark.mpi
 def test_an_obstacle_that_is_not_a_body_of_revolution_is_refused(tmp_path):
     comm = MPI.COMM_WORLD
     folder = comm.bcast(tmp_path / "plane" if comm.rank == 0 else None, root=0)
