@@ -164,3 +164,42 @@ def test_an_obstacle_that_is_not_a_body_of_revolution_is_refused(tmp_path):
     with pytest.raises(CaseError) as err:
         run(case, folder / "out", comm, lambda *args: None)
     assert err.value.key == "transient.contacts[0].shape"
+
+
+@pytest.mark.mpi
+def test_node_contact_friction_on_a_spinning_disc(tmp_path):
+    """The strip's bottom-centre node on the spinning disc (node kind, Hertz law): the node's
+    force is f n + F_t with n fixed, so F_x / F_y is mu(slip) = mu_d exactly while it slips."""
+    comm = MPI.COMM_WORLD
+    folder = comm.bcast(tmp_path / "node" if comm.rank == 0 else None, root=0)
+    if comm.rank == 0:
+        folder.mkdir()
+        text = CASE.format(radius=RADIUS_M, mu=MU_D, rotation='motion = "constant_rate"\nrate_rad_per_s = 100.0')
+        text = text.replace('''kind = "surface"
+facets = "bottom"
+body = "disc"
+shape = "sphere"
+radius_m = {r}
+normal = [0.0, 1.0]
+stiffness = 1e13
+damping = 1e6'''.format(r=RADIUS_M), '''kind = "node"
+node_point = "bottom"
+body = "disc"
+radius_m = {r}
+normal = [0.0, 1.0]
+stiffness = 1e10
+damping = 10.0'''.format(r=RADIUS_M)) + '''
+[points.bottom]
+coordinates_m = [0.001, 0.0]
+component = "x"
+'''
+        assert 'kind = "node"' in text
+        (folder / "case.toml").write_text(text)
+    comm.barrier()
+    results = run(load_case(folder / "case.toml"), folder / "out", comm, lambda *args: None)
+    with h5py.File(folder / "out" / "transient.h5", "r") as f:
+        force, closed = f["strip_disc_force_N"][()], f["strip_disc_closed"][()] > 0
+        drift = f["bottom_displacement_m"][()]
+    assert closed.sum() > 50 and results["cutbacks"] == 0
+    np.testing.assert_allclose(force[closed, 0] / -force[closed, 1], MU_D, rtol=1e-8)
+    assert drift[-1] < 0                         # the node is dragged along the disc's surface (-x)

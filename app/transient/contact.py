@@ -559,10 +559,17 @@ class NodeContact(ForceColumns):
     Gap along the unit ``normal`` (from the body centre towards the FE node):
     g = normal . (y - c) - R, y = x_node + u (the node stays on the line of centres; the
     axisymmetric axis). ``local_dofs``/``dof_axes`` are the node's owned displacement DOFs with a
-    non-zero normal component (empty on the other ranks); the residual on them is -F n_k."""
+    non-zero normal component (empty on the other ranks); the residual on them is -F n_k.
+
+    With ``friction`` (the cap a force) the node also carries the regularised Coulomb force of its
+    slip against the sphere's surface point R n, v_node - (v_body + omega x R n) projected on the
+    tangent plane; it then owns all its free displacement DOFs, and the force's torque acts on
+    the body's rotations (the sphere is a body of revolution about any axis: its spin enters
+    through friction only)."""
 
     def __init__(self, name: str, fe: LinearFE, point_m, body: str, radius_m: float, normal,
-                 stiffness_N_per_m1_5: float, damping_N_s_per_m: float = 0.0, fields: MidpointFields | None = None):
+                 stiffness_N_per_m1_5: float, damping_N_s_per_m: float = 0.0, fields: MidpointFields | None = None,
+                 friction: Friction | None = None):
         if not stiffness_N_per_m1_5 > 0:
             raise ValueError(f"contact {name!r}: stiffness must be > 0")
         if not radius_m > 0:
@@ -573,6 +580,7 @@ class NodeContact(ForceColumns):
         self.name, self.body, self.fe = name, body, fe
         self.fields = fields if fields is not None else MidpointFields(fe)
         self.normal = n
+        self.friction = friction
         self.radius_m = float(radius_m)
         self.stiffness = float(stiffness_N_per_m1_5)
         self.damping = float(damping_N_s_per_m)
@@ -587,7 +595,7 @@ class NodeContact(ForceColumns):
             dist = np.linalg.norm(coords[sub] - point, axis=1) if sub.size else np.zeros(0)
             best = float(dist.min()) if sub.size else np.inf
             owner_best = self.comm.allreduce((best, self.comm.rank), op=MPI.MINLOC)
-            if owner_best[1] == self.comm.rank and n[k] != 0.0:
+            if owner_best[1] == self.comm.rank and (n[k] != 0.0 or friction is not None):
                 dofs.append(int(sub[np.argmin(dist)]))
                 axes.append(k)
             self.node_distance_m = owner_best[0]
@@ -655,7 +663,40 @@ class NodeContact(ForceColumns):
         sl = system.rigid.dofs(self.body)
         return self.force(*self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl]))
 
+    def _friction_terms(self, system, tangent: bool):
+        """With friction, in the unknowns xi = (node displacement (gdim), body coordinates): the
+        force F on the node [N], the generalised forces P^T F and, with ``tangent``, the block
+        d(-P^T F)/d xi_{n+1}; P maps xi rates to the slip velocity v_node - (v_body + omega x R n)."""
+        rigid, gdim = system.rigid, self.fe.gdim
+        body = rigid.all_dofs(self.body)
+        f, k_f, c_f = self._force_at_iterate(system)
+        n3 = pad3(self.normal)
+        P = np.hstack([np.eye(3)[:, :gdim], -velocity_map(rigid, self.body, self.radius_m * n3)])
+        F = f * n3
+        dF_ds, dF_dN = np.zeros((3, 3)), np.zeros(3)
+        if f > 0.0:
+            tangential = np.eye(3) - np.outer(n3, n3)
+            rates = np.concatenate([self._node_values(system.v_mid), system.zd_mid[body]])
+            F_t, dF_ds, dF_dN = friction_force(tangential @ (P @ rates), f, self.friction)
+            F = F + F_t
+            dF_ds = dF_ds @ tangential
+        if not tangent:
+            return F, P.T @ F, None
+        D = np.zeros(P.shape[1])                   # d delta / d xi
+        D[:gdim] = -self.normal
+        D[gdim:2 * gdim] = self.normal
+        dF = np.outer(n3 + dF_dN, (k_f + c_f * system.c_vel) * D) + system.c_vel * dF_ds @ P
+        return F, P.T @ F, -(1 - system.scheme.alpha_f) * P.T @ dF
+
     def add_residual(self, system, rc_S, r_z, r):
+        if self.friction is not None:
+            gdim = self.fe.gdim
+            F, generalised, _ = self._friction_terms(system, tangent=False)
+            if r is not None and self.local_dofs.size:
+                r.array_w[self.local_dofs] -= F[self.dof_axes]
+            rc_S[self._S] -= F[self._S_axes]
+            r_z[system.rigid.all_dofs(self.body)] -= generalised[gdim:]
+            return -F[:gdim]
         f, _, _ = self._force_at_iterate(system)
         if r is not None and self.local_dofs.size:
             r.array_w[self.local_dofs] -= f * self.normal[self.dof_axes]
@@ -664,6 +705,16 @@ class NodeContact(ForceColumns):
         return -f * self.normal
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:
+        if self.friction is not None:
+            gdim = self.fe.gdim
+            _, _, J = self._friction_terms(system, tangent=True)
+            node, S = self._S_axes, self._S                 # node components held as contact DOFs
+            body = np.arange(system.rigid.size)[system.rigid.all_dofs(self.body)]
+            Kss[np.ix_(S, S)] += J[np.ix_(node, node)]
+            B[np.ix_(S, body)] += J[np.ix_(node, gdim + np.arange(body.size))]
+            L[np.ix_(body, S)] += J[np.ix_(gdim + np.arange(body.size), node)]
+            Kzz[np.ix_(body, body)] += J[gdim:, gdim:]
+            return
         _, k_f, c_f = self._force_at_iterate(system)
         s_count = system.contact_global.size
         block = np.zeros((s_count, s_count))

@@ -122,8 +122,10 @@ def build_node(section, prefix: str, ctx: BuildContext):
     if section.node_point not in ctx.case.points:
         raise CaseError(ctx.file, f"{prefix}.node_point", f"unknown point {section.node_point!r} (see [points])")
     try:
+        friction = section.friction.friction() if section.friction is not None else None
         return NodeContact(section.name, ctx.fe, ctx.case.points[section.node_point].coordinates_m, section.body,
-                           section.radius_m, section.normal, section.stiffness, section.damping, fields=ctx.fields)
+                           section.radius_m, section.normal, section.stiffness, section.damping, fields=ctx.fields,
+                           friction=friction)
     except ValueError as exc:
         raise CaseError(ctx.file, f"{prefix}.normal", str(exc)) from None
 

@@ -128,7 +128,8 @@ class SurfaceFrictionSection:
 
 @dataclass(frozen=True)
 class LinkFrictionSection:
-    """Regularised Coulomb friction of a rigid-rigid point contact: as the surface law, the cap is a force."""
+    """Regularised Coulomb friction of a point (rigid-rigid) or node contact: as the surface law, the cap is a
+    force."""
 
     mu_dynamic: float = param(ge=0, doc="kinetic coefficient mu_d [MU]")
     static_ratio: float = param(1.0, gt=0, doc="mu_s / mu_d [FACT]")
@@ -182,6 +183,7 @@ class NodeContactSection:
     node_point: str = param(doc="named [points] entry; its nearest FE node is the contact node")
     radius_m: float = param(gt=0, unit="m", doc="sphere radius")
     normal: list[float] = param(doc="unit vector from the sphere centre to the node")
+    friction: LinkFrictionSection | None = param(None, doc="Coulomb friction of the node (none: frictionless)")
 
     def bodies(self) -> list[tuple[str, str]]:
         return [("body", self.body)]
