@@ -35,15 +35,19 @@ OMEGA0_RAD_PER_S = 100.0
 SIZES = StepSizes(open_s=1e-3, closed_s=1e-3, change_s=1e-3, min_s=1e-9)
 
 
-def _disc_on_plane(axle_held: bool, friction: Friction):
-    """A disc (2D, plane) resting on a fixed plane at static equilibrium under NORMAL_N, spinning."""
-    ground = fixed_body("ground", [0.0, 0.0])
-    disc = RigidBody("disc", MASS_KG, [0.0, RADIUS_M - NORMAL_N / STIFFNESS_N_PER_M], [0.0, 0.0], [0.0, 0.0],
-                     applied_force_N=lambda t: np.array([0.0, -NORMAL_N]),
-                     prescribed_axes=(axle_held, False, False), rotation_axes=("plane",),
-                     inertia_kg_m2=(INERTIA_KG_M2,), angular_velocity_rad_per_s=(OMEGA0_RAD_PER_S,))
+def _disc_on_plane(axle_held: bool, friction: Friction, gdim: int = 2):
+    """A disc resting on a fixed plane at static equilibrium under NORMAL_N, spinning: in 2D about
+    the out-of-plane axis (slip along +x at the contact), in 3D a wheel spinning about x on the
+    plane z = 0 (slip along +y)."""
+    up = np.eye(gdim)[-1]
+    ground = fixed_body("ground", np.zeros(gdim))
+    held = (axle_held,) * (gdim - 1) + (False, False)
+    disc = RigidBody("disc", MASS_KG, (RADIUS_M - NORMAL_N / STIFFNESS_N_PER_M) * up, np.zeros(gdim),
+                     np.zeros(gdim), applied_force_N=lambda t: -NORMAL_N * up, prescribed_axes=held,
+                     rotation_axes=("plane",) if gdim == 2 else ("x",), inertia_kg_m2=(INERTIA_KG_M2,),
+                     angular_velocity_rad_per_s=(OMEGA0_RAD_PER_S,))
     rigid = RigidSet([ground, disc])
-    link = PointContact("disc_ground", "ground", "disc", [0.0, 1.0], RADIUS_M, STIFFNESS_N_PER_M,
+    link = PointContact("disc_ground", "ground", "disc", up, RADIUS_M, STIFFNESS_N_PER_M,
                         DAMPING_N_S_PER_M, friction=friction, contact_offset_m=RADIUS_M)
     system = CoupledSystem(MPI.COMM_WORLD, TimeScheme.generalized_alpha(0.5), None, rigid, [link])
     z, zd, zdd = rigid.initial_state()
@@ -58,9 +62,10 @@ def _omega(records, system):
             np.array([r["velocity_m_per_s"][rot][0] for r in records]))
 
 
-def test_spinning_disc_with_held_axle_spins_down_linearly():
+@pytest.mark.parametrize("gdim", [2, 3])
+def test_spinning_disc_with_held_axle_spins_down_linearly(gdim):
     friction = Friction(MU_D, regularisation_speed_m_per_s=1e-5)
-    system, state = _disc_on_plane(True, friction)
+    system, state = _disc_on_plane(True, friction, gdim)
     records, _, _ = run_scene(system, state, SIZES, 0.8)
     t, omega = _omega(records, system)
     deceleration = MU_D * NORMAL_N * RADIUS_M / INERTIA_KG_M2            # 120 rad/s^2
@@ -69,10 +74,12 @@ def test_spinning_disc_with_held_axle_spins_down_linearly():
     exact = OMEGA0_RAD_PER_S - deceleration * t[slipping]
     assert slipping.sum() > 700
     assert np.max(np.abs(omega[slipping] - exact) / exact) < 1e-6
-    # the friction force is mu_d N against the slip (the contact point moves along +x)
+    # the friction force is mu_d N against the slip (the contact point moves along +x, 3D: +y)
     force = np.array([r["contact_force_N"]["disc_ground"] for r in records])[slipping]
-    np.testing.assert_allclose(force[:, 0], -MU_D * NORMAL_N, rtol=1e-6)
-    np.testing.assert_allclose(force[:, 1], NORMAL_N, rtol=1e-9)
+    np.testing.assert_allclose(force[:, gdim - 2], -MU_D * NORMAL_N, rtol=1e-6)
+    np.testing.assert_allclose(force[:, -1], NORMAL_N, rtol=1e-9)
+    if gdim == 3:
+        np.testing.assert_allclose(force[:, 0], 0.0, atol=1e-12)
 
 
 @pytest.mark.mpi
