@@ -12,6 +12,7 @@ import pytest
 from mpi4py import MPI
 
 from app.case.schema import load_case
+from app.errors import CaseError
 from app.transient.driver import run
 
 CASE = """
@@ -180,3 +181,15 @@ def test_surface_friction_from_the_case_file(tmp_path):
     normal = -force[closed, 1]                  # force on the belt: pressed down (-y), dragged back (-x)
     assert normal.min() > 0
     np.testing.assert_allclose(-force[closed, 0] / normal, 0.25, rtol=1e-6)
+
+
+def test_harmonic_start_needs_a_driven_electrode(tmp_path):
+    comm = MPI.COMM_WORLD
+    folder = comm.bcast(tmp_path / "undriven" if comm.rank == 0 else None, root=0)
+    if comm.rank == 0:
+        folder.mkdir()
+        (folder / "case.toml").write_text(BELT_CASE.format(a=0, b=0, start="harmonic"))
+    comm.barrier()
+    with pytest.raises(CaseError) as err:
+        run(load_case(folder / "case.toml"), folder / "out", comm, lambda *args: None)
+    assert err.value.key == "transient.initial_state"

@@ -175,20 +175,20 @@ def test_node_contact_friction_on_a_spinning_disc(tmp_path):
     if comm.rank == 0:
         folder.mkdir()
         text = CASE.format(radius=RADIUS_M, mu=MU_D, rotation='motion = "constant_rate"\nrate_rad_per_s = 100.0')
-        text = text.replace('''kind = "surface"
+        text = text.replace(f'''kind = "surface"
 facets = "bottom"
 body = "disc"
 shape = "sphere"
-radius_m = {r}
+radius_m = {RADIUS_M}
 normal = [0.0, 1.0]
 stiffness = 1e13
-damping = 1e6'''.format(r=RADIUS_M), '''kind = "node"
+damping = 1e6''', f'''kind = "node"
 node_point = "bottom"
 body = "disc"
-radius_m = {r}
+radius_m = {RADIUS_M}
 normal = [0.0, 1.0]
 stiffness = 1e10
-damping = 10.0'''.format(r=RADIUS_M)) + '''
+damping = 10.0''') + '''
 [points.bottom]
 coordinates_m = [0.001, 0.0]
 component = "x"

@@ -183,6 +183,10 @@ class TransientModel:
         n = fem.Function(model.W).x.array.size
         u0, v0, a0 = np.zeros(n), np.zeros(n), np.zeros(n)
         if cfg.drive.tip_amplitude_m is not None or cfg.initial_state == "harmonic":
+            if not self.drive.electrodes:
+                key = "drive.tip_amplitude_m" if cfg.drive.tip_amplitude_m is not None else "initial_state"
+                raise CaseError(self.case.source, f"transient.{key}",
+                                "needs an electrode of kind 'voltage' (a harmonic solve)")
             x_re, x_im, amplitude_per_V = self._harmonic_per_volt()
             if cfg.drive.tip_amplitude_m is not None:
                 voltage = cfg.drive.tip_amplitude_m / amplitude_per_V
