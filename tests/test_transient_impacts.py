@@ -15,7 +15,7 @@ from mpi4py import MPI
 from app.transient.control import StepSizes
 from app.transient.impacts import closed_intervals, period_average, run_statistics
 from app.transient.scenes import BallDrop, build_ball_drop, run_scene
-from app.transient.schema import BodySection, ContactSection, TransientSection
+from app.transient.schema import BodySection, PointContactSection, TransientSection
 from forms.newmark import TimeScheme
 
 
@@ -53,7 +53,7 @@ def test_foundation_statistics_close_momentum_and_energy():
         end_time_s=end_s, output_interval_s=end_s,
         bodies=[BodySection(name="ground", position_m=[0.0], fixed=True),
                 BodySection(name="ball", position_m=[ball.height_m + ball.diameter_m / 2], mass_kg=ball.mass_kg)],
-        contacts=[ContactSection(name="ball_ground", kind="point", stiffness=ball.stiffness_N_per_m,
+        contacts=[PointContactSection(name="ball_ground", kind="point", stiffness=ball.stiffness_N_per_m,
                                  damping=ball.damping_N_s_per_m, lower="ground", upper="ball", direction=[1.0],
                                  touch_distance_m=ball.diameter_m / 2)])
     stats = run_statistics(data, cfg)

@@ -53,7 +53,7 @@ def block_with_node_contact(comm, young_Pa):
                      prescribed_axes=(True, False))
     rigid = RigidSet([ball])
     contact = NodeContact("top_ball", fe, [width / 2, height], "ball", radius, [0.0, -1.0], HERTZ_N_PER_M1_5)
-    system = CoupledSystem(comm, TimeScheme.newmark(), fe, rigid, node_contacts=[contact])
+    system = CoupledSystem(comm, TimeScheme.newmark(), fe, rigid, [contact])
     z, zd, zdd = rigid.initial_state()
     n = fem.Function(V).x.array.size
     return system, TransientState(0.0, np.zeros(n), np.zeros(n), np.zeros(n), z, zd, zdd)

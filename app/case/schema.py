@@ -221,6 +221,26 @@ def _section_types():
     return types
 
 
+def _check_modal_tier(transient, file: str) -> None:
+    """What the modal tier's compiled loop does not model yet (app/reduced/kernel.py): refused
+    when the case is read, naming the key, instead of silently ignored."""
+    for i, contact in enumerate(transient.contacts):
+        if contact.kind == "surface":
+            raise CaseError(file, f"transient.contacts[{i}].kind",
+                            "surface contacts are not available in tier 'modal' yet (use tier 'fe')")
+        if getattr(contact, "friction", None) is not None:
+            raise CaseError(file, f"transient.contacts[{i}].friction", "friction is not available in tier 'modal' yet")
+    for i, body in enumerate(transient.bodies):
+        if body.rotations:
+            raise CaseError(file, f"transient.bodies[{i}].rotations",
+                            "rotating bodies are not available in tier 'modal' yet")
+        held = [not f for f in (body.free_axes or [True] * len(body.position_m))]
+        moving = body.velocity_m_per_s and any(v and (h or body.fixed) for v, h in zip(body.velocity_m_per_s, held))
+        if moving:
+            raise CaseError(file, f"transient.bodies[{i}].velocity_m_per_s",
+                            "held axes moving at a set velocity are not available in tier 'modal' yet")
+
+
 def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
     """Read, override and validate a case file into a :class:`Case`."""
     path = Path(path)
@@ -241,10 +261,7 @@ def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
     analyses = case.analyses if case.analyses is not None else (["lumped"] if case.tier == "lumped" else ["modal"])
     case = replace(case, materials=materials, analyses=analyses, source=str(path.resolve()), **extra)
     if case.tier == "modal" and case.transient is not None:
-        for i, contact in enumerate(case.transient.contacts):
-            if contact.kind == "surface":
-                raise CaseError(file, f"transient.contacts[{i}].kind",
-                                "surface contacts are not available in tier 'modal' yet (use tier 'fe')")
+        _check_modal_tier(case.transient, file)
     if case.tier == "lumped" and case.lumped is None:
         raise CaseError(file, "lumped", "section required for tier = 'lumped'")
     if "transient" in case.analyses and case.transient is None:

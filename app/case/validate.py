@@ -87,6 +87,9 @@ def convert(tp: Any, value: Any, file: str | None, key: str, meta: dict | None =
         args = typing.get_args(tp)
         if value is None and type(None) in args:
             return None
+        kinds = _tagged_members(args)
+        if kinds:
+            return _convert_tagged(kinds, value, file, key)
         errors = []
         for arg in args:
             if arg is type(None):
@@ -142,6 +145,40 @@ def convert(tp: Any, value: Any, file: str | None, key: str, meta: dict | None =
             raise CaseError(file, key, f"expected a string, got {type(value).__name__} {value!r}")
         return value
     raise TypeError(f"unsupported annotation {tp!r} at {key}")
+
+
+def _tagged_members(args) -> dict | None:
+    """{kind: dataclass} if ``args`` are dataclasses each with a one-value Literal ``kind`` field (a
+    tagged union), else None."""
+    kinds = {}
+    for arg in args:
+        if arg is type(None) or not dataclasses.is_dataclass(arg):
+            return None
+        tag = typing.get_type_hints(arg).get("kind")
+        values = typing.get_args(tag) if typing.get_origin(tag) is Literal else ()
+        if len(values) != 1:
+            return None
+        kinds[values[0]] = arg
+    return kinds or None
+
+
+def _convert_tagged(kinds: dict, value: Any, file: str | None, key: str) -> Any:
+    """A table of a tagged union: its ``kind`` picks the dataclass; a key of another kind is named."""
+    if isinstance(value, tuple(kinds.values())):
+        return value
+    if not isinstance(value, dict):
+        raise CaseError(file, key, f"expected a table, got {type(value).__name__} {value!r}")
+    if "kind" not in value:
+        raise CaseError(file, f"{key}.kind", f"required key is missing (one of {', '.join(map(repr, kinds))})")
+    kind = value["kind"]
+    if kind not in kinds:
+        raise CaseError(file, f"{key}.kind", f"must be one of {', '.join(map(repr, kinds))}, got {kind!r}")
+    own = {f.name for f in dataclasses.fields(kinds[kind])}
+    others = {f.name for cls in kinds.values() for f in dataclasses.fields(cls)}
+    for name in value:
+        if name not in own and name in others:
+            raise CaseError(file, f"{key}.{name}", f"not a key of kind {kind!r}")
+    return from_dict(kinds[kind], value, file, key)
 
 
 def from_dict(cls: type, data: dict, file: str | None = None, prefix: str = "") -> Any:

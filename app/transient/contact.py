@@ -11,6 +11,7 @@ stem, stem on rock foundation): force = < k delta + c d(delta)/dt > while delta 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from app.transient.fe import LinearFE, displacement_of
+from app.transient.interactions import ForceColumns, friction_force, pad3, velocity_map
 from forms import contact as cf
 
 
@@ -73,16 +75,24 @@ class MidpointFields:
         self.one_minus_alpha_f = fem.Constant(mesh, 1.0)
 
 
-class SurfaceContact:
+class SurfaceContact(ForceColumns):
     """Penalty contact between FE facets (``tag`` in ``facet_tags``) and rigid body ``body``.
 
     ``stiffness_Pa_per_m`` is the penalty per unit area (pressure per metre of penetration),
     ``damping_Pa_s_per_m`` the normal viscous term; ``weight`` is the volume weight of the model
-    (2 pi r for axisymmetric), so forces are those of the whole body of revolution."""
+    (2 pi r for axisymmetric), so forces are those of the whole body of revolution.
+
+    ``rotation_axes`` ((n_rot, 3) unit vectors, the body's rotation axes through its reference
+    point) makes the obstacle rotate with the body: the relative velocity of a surface point is
+    v - v_body - omega x r, r = y - p_body, so friction sees the spin and its torque acts on the
+    body. The obstacle must be a body of revolution about every such axis (a sphere centred on the
+    reference point, a plane normal to the axis in 3D): its gap does not change with the angle, and
+    omega x r has no normal component, so the rotation enters through friction only."""
 
     def __init__(self, name: str, fe: LinearFE, facet_tags, tag: int, body: str, shape: ObstacleShape,
                  stiffness_Pa_per_m: float, damping_Pa_s_per_m: float = 0.0, friction: Friction | None = None,
-                 weight=1.0, fields: MidpointFields | None = None, quadrature_degree: int = 4):
+                 weight=1.0, fields: MidpointFields | None = None, quadrature_degree: int = 4,
+                 rotation_axes=None):
         if not stiffness_Pa_per_m > 0:
             raise ValueError(f"contact {name!r}: stiffness must be > 0")
         fields = fields if fields is not None else MidpointFields(fe)
@@ -129,6 +139,17 @@ class SurfaceContact:
             normal = cf.sphere_normal(relative, zero, shape.radius_m)
             gap = cf.sphere_gap(relative, zero, shape.radius_m)
         relative_velocity = v - self.body_velocity
+        self.rotation_axes = np.zeros((0, 3)) if rotation_axes is None else np.asarray(rotation_axes, float)
+        self._check_revolution(self.rotation_axes)
+        omega = None
+        if self.rotation_axes.size:
+            # lever arm from the body's reference point, formed from small differences (see above)
+            lever = (x - self.body_reference) + (u - self.body_displacement)
+            self.body_angular_velocity = fem.Constant(mesh, np.zeros(3 if gdim == 3 else 1))
+            omega = ufl.variable(self.body_angular_velocity)
+            spin = (ufl.cross(omega, lever) if gdim == 3
+                    else omega[0] * ufl.as_vector((-lever[1], lever[0])))
+            relative_velocity = relative_velocity - spin
         gap_rate = ufl.dot(relative_velocity, normal)
         pressure = cf.normal_pressure(gap, gap_rate, self.stiffness, self.damping)
         traction = pressure * normal
@@ -144,6 +165,8 @@ class SurfaceContact:
             + self.velocity_per_displacement * ufl.derivative(residual, self.v_mid, trial))
         self.residual_form = fem.form(residual)
         self.tangent_form = fem.form(tangent)
+        if omega is not None:
+            self._rotation_forms(traction, omega, lever, test, ds, weight, fe)
         penetration = cf.macaulay(-gap)
         self.energy_form = fem.form(0.5 * self.stiffness * penetration**2 * weight * ds)
         self.area_in_contact_form = fem.form(cf.heaviside(-gap) * weight * ds)
@@ -151,6 +174,52 @@ class SurfaceContact:
         self.tangent_matrix = create_matrix(self.tangent_form)
         self._coordinates = fe.dof_coordinates()
         self._node_dofs = self._group_dofs_by_node()
+
+    def _check_revolution(self, axes: np.ndarray) -> None:
+        shape = self.shape
+        for a in axes:
+            if shape.kind == "plane":
+                normal = np.zeros(3)
+                normal[: len(shape.normal)] = shape.normal
+                ok = len(shape.normal) == 3 and np.linalg.norm(np.cross(a, normal)) < 1e-12
+            else:
+                offset = np.zeros(3)
+                offset[: len(shape.offset_m)] = shape.offset_m or ()
+                ok = np.linalg.norm(np.cross(a, offset)) < 1e-15
+            if not ok:
+                raise ValueError(f"contact {self.name!r}: the {shape.kind} obstacle is not a body of revolution "
+                                 f"about the rotation axis {a.tolist()} of body {self.body!r}")
+
+    def _rotation_forms(self, traction, omega, lever, test, ds, weight, fe) -> None:
+        """Forms of the rotation coupling, per rotation axis a_k: d(residual)/d(omega_k) (vector),
+        the torque of the contact on the body about a_k (scalar: int (r x -t) . a_k) with its
+        derivatives d/du_mid, d/dv_mid (vectors) and d/d(omega_j) (scalars)."""
+        gdim = fe.gdim
+        force = -traction                       # on the body, per area
+
+        def about(k):
+            if gdim == 3:
+                return ufl.dot(ufl.cross(lever, force), ufl.as_vector(self.rotation_axes[k].tolist()))
+            return lever[0] * force[1] - lever[1] * force[0]
+
+        def d_omega(expr, k):
+            derivative = ufl.diff(expr, omega)
+            if gdim == 3:
+                return ufl.dot(derivative, ufl.as_vector(self.rotation_axes[k].tolist()))
+            return derivative[0] if len(expr.ufl_shape) == 0 else ufl.as_vector(
+                [derivative[i, 0] for i in range(gdim)])
+
+        n_rot = self.rotation_axes.shape[0]
+        self.torque_forms = [fem.form(about(k) * weight * ds) for k in range(n_rot)]
+        self.residual_per_spin_forms = [
+            fem.form(cf.contact_residual(d_omega(traction, k), displacement_of_test(test, fe), ds, weight))
+            for k in range(n_rot)]
+        self.torque_per_u_forms = [fem.form(ufl.derivative(about(k) * weight * ds, self.u_mid, test)
+                                            + self.velocity_per_displacement
+                                            * ufl.derivative(about(k) * weight * ds, self.v_mid, test))
+                                   for k in range(n_rot)]
+        self.torque_per_spin_forms = [[fem.form(d_omega(about(k), j) * weight * ds) for j in range(n_rot)]
+                                      for k in range(n_rot)]
 
     def set_body_reference(self, position_m: np.ndarray) -> None:
         """Fix the reference position of the body (its initial position; any fixed value works,
@@ -221,6 +290,124 @@ class SurfaceContact:
         return dist - self.shape.radius_m, np.einsum("ij,ij->i", d / dist[:, None], rel_v)
 
 
+    # ------------------------------------------------------------ interaction protocol
+    kind = "surface"
+    fe_coupled = True
+
+    def bind(self, system) -> None:
+        rigid = system.rigid
+        if self.body not in rigid.index:
+            raise ValueError(f"contact {self.name!r} names unknown rigid body {self.body!r}")
+        body = rigid.body(self.body)
+        if body.axis_vectors.shape != self.rotation_axes.shape or not np.allclose(body.axis_vectors,
+                                                                                 self.rotation_axes):
+            raise ValueError(f"contact {self.name!r}: built for rotation axes {self.rotation_axes.tolist()}, "
+                             f"body {self.body!r} has {body.axis_vectors.tolist()}")
+        self.set_body_reference(body.position_m)
+
+    def move_to_iterate(self, system) -> None:
+        sl = system.rigid.dofs(self.body)
+        self.set_body_state(system.z_mid[sl], system.zd_mid[sl])
+        if self.rotation_axes.size:
+            self._set_spin(system.rigid.angular_velocity(self.body, system.zd_mid))
+
+    def _set_spin(self, omega: np.ndarray) -> None:
+        self.body_angular_velocity.value[:] = omega if self.fe.gdim == 3 else omega[2:]
+
+    def _scalar(self, form) -> float:
+        return self.fe.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
+
+    def _vector_at_S(self, system, form) -> np.ndarray:
+        vec = create_vector(form)
+        assemble_vector(vec, form)
+        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self.fe.zero_constrained(vec)
+        out = system._gather_S(vec.array_r)
+        vec.destroy()
+        return out
+
+    def torque_N_m(self) -> np.ndarray:
+        """Torque of the contact on the body about its rotation axes [N m] (current fields)."""
+        return np.array([self._scalar(f) for f in self.torque_forms])
+
+    def add_residual(self, system, rc_S, r_z, r):
+        rc = self.assemble_residual()
+        if r is not None:
+            r.axpy(1.0, rc)
+        rc_S += system._gather_S(rc.array_r)
+        force = np.array([rc.dot(tk) for tk in system.translations])
+        r_z[system.rigid.dofs(self.body)] -= force
+        if self.rotation_axes.size:
+            torque = self.torque_N_m()
+            r_z[system.rigid.rotation_dofs(self.body)] -= torque
+            return np.concatenate([force, torque])
+        return force
+
+    def columns(self) -> dict[str, str]:
+        out = super().columns()
+        if self.rotation_axes.size:
+            out[f"{self.name}_torque_N_m"] = "N m (on the rigid body, about its rotation axes)"
+        return out
+
+    def row(self, force_N, closed: bool) -> dict:
+        gdim = self.fe.gdim
+        out = super().row(force_N[:gdim], closed)
+        if self.rotation_axes.size:
+            out[f"{self.name}_torque_N_m"] = force_N[gdim:]
+        return out
+
+    def add_tangent(self, system, Kss, B, L, Kzz) -> None:
+        s_count = system.contact_global.size
+        owned_rows = (system.contact_local + system.fe.first_global).astype(PETSc.IntType)
+        A = self.assemble_tangent()
+        block = system._gather_rows(A.getValues(owned_rows, system.contact_global).reshape(owned_rows.size, s_count))
+        T = system.translation_S
+        Kss += block
+        sl = system.rigid.dofs(self.body)
+        B[:, sl] -= block @ T
+        L[sl, :] -= T.T @ block
+        Kzz[sl, sl] += T.T @ block @ T
+        if self.rotation_axes.size:
+            self._add_rotation_tangent(system, B, L, Kzz, sl)
+
+    def _add_rotation_tangent(self, system, B, L, Kzz, sl) -> None:
+        """Blocks of the body's angles (see _rotation_forms): the residual and the torque depend on
+        omega_mid ((1 - alpha_f) c_vel per end-of-step angle), and on u, v and the body position
+        through differences, so d/dz = -(d/du) . translation."""
+        scale = (1 - system.scheme.alpha_f)
+        c_vel = system.c_vel
+        rot = np.arange(system.rigid.size)[system.rigid.rotation_dofs(self.body)]
+        T = system.translation_S
+        n_rot = rot.size
+        for j in range(n_rot):
+            column = scale * c_vel * self._vector_at_S(system, self.residual_per_spin_forms[j])
+            B[:, rot[j]] += column
+            Kzz[sl, rot[j]] -= T.T @ column
+        for k in range(n_rot):
+            row = -scale * self._vector_at_S(system, self.torque_per_u_forms[k])
+            L[rot[k], :] += row
+            Kzz[rot[k], sl] -= row @ T
+            for j in range(n_rot):
+                Kzz[rot[k], rot[j]] -= scale * c_vel * self._scalar(self.torque_per_spin_forms[k][j])
+
+    def status(self, system, state) -> tuple[bool, float]:
+        sl = system.rigid.dofs(self.body)
+        self.set_body_state(state.z[sl], state.zd[sl])
+        # Closed = penetration at a quadrature point (what the force sees); the closure time is
+        # predicted from the nodes (a curved obstacle can dip between them: a warning sign of a
+        # too coarse contact mesh, not an error).
+        closed = self.area_in_contact_m2() > 0.0
+        gap, rate = self.nodal_gaps(state.u, state.v, state.z[sl], state.zd[sl])
+        approaching = (gap > 0) & (rate < 0)
+        local = float(np.min(gap[approaching] / -rate[approaching])) if approaching.any() else math.inf
+        return closed, self.fe.comm.allreduce(local, op=MPI.MIN)
+
+    def stored_energy_J(self, system, state) -> float:
+        sl = system.rigid.dofs(self.body)
+        self.set_body_state(state.z[sl], state.zd[sl])
+        return self.elastic_energy_J()
+
+
 def displacement_of_test(test, fe: LinearFE):
     element = fe.space.ufl_element()
     if isinstance(element, ufl.MixedElement) and not isinstance(element, ufl.VectorElement):
@@ -228,13 +415,25 @@ def displacement_of_test(test, fe: LinearFE):
     return test
 
 
-class PointContact:
+class PointContact(ForceColumns):
     """Kelvin-Voigt contact between rigid bodies ``lower`` and ``upper`` along unit ``normal``
     (pointing from lower to upper). Penetration delta = touch_distance - normal . (z_upper - z_lower);
-    force f = < k delta + c d(delta)/dt > for delta > 0 (no pull), pushing the bodies apart."""
+    normal force f = < k delta + c d(delta)/dt > for delta > 0 (no pull), pushing the bodies apart.
+
+    With ``friction``, the contact point sits ``contact_offset_m`` from the upper body's reference
+    point against the normal (a disc or ball of that radius on the lower body); the slip is the
+    tangential part of the relative velocity there, v_up + omega_up x r_up - (v_lo + omega_lo x r_lo),
+    and the regularised Coulomb force (:func:`app.transient.interactions.friction_force`, the cap
+    a force) acts on the upper body with its torque about each body's rotation axes. The lever arm
+    of the lower body follows the current positions; its change within a step is left out of the
+    tangent (Newton then converges linearly in that term, the residual is exact)."""
+
+    kind = "point"
+    fe_coupled = False
 
     def __init__(self, name: str, lower: str, upper: str, normal, touch_distance_m: float,
-                 stiffness_N_per_m: float, damping_N_s_per_m: float = 0.0):
+                 stiffness_N_per_m: float, damping_N_s_per_m: float = 0.0, friction: Friction | None = None,
+                 contact_offset_m: float = 0.0):
         if not stiffness_N_per_m > 0:
             raise ValueError(f"contact {name!r}: stiffness must be > 0")
         if damping_N_s_per_m < 0:
@@ -245,6 +444,8 @@ class PointContact:
         self.touch_distance_m = float(touch_distance_m)
         self.stiffness_N_per_m = float(stiffness_N_per_m)
         self.damping_N_s_per_m = float(damping_N_s_per_m)
+        self.friction = friction
+        self.contact_offset_m = float(contact_offset_m)
 
     def penetration(self, z_lower, z_upper, v_lower, v_upper):
         """(delta [m], d(delta)/dt [m/s])."""
@@ -264,9 +465,87 @@ class PointContact:
     def elastic_energy_J(self, delta: float) -> float:
         return 0.5 * self.stiffness_N_per_m * max(delta, 0.0) ** 2
 
+    # ------------------------------------------------------------ interaction protocol
+    def bind(self, system) -> None:
+        rigid = system.rigid
+        for name in (self.lower, self.upper):
+            if name not in rigid.index:
+                raise ValueError(f"contact {self.name!r} names unknown rigid body {name!r}")
+        # Generalised path (lever arms, torques) only where it can act: friction, or a rotating body.
+        self._general = self.friction is not None or bool(
+            rigid.body(self.lower).rotation_axes or rigid.body(self.upper).rotation_axes)
+        self._pair = np.r_[np.arange(rigid.size)[rigid.all_dofs(self.lower)],
+                           np.arange(rigid.size)[rigid.all_dofs(self.upper)]]
+        n_lo = rigid.body(self.lower).n_dofs
+        self._D = np.zeros(self._pair.size)        # d delta / d (lower, upper) coordinates
+        self._D[:rigid.gdim] = self.normal
+        self._D[n_lo:n_lo + rigid.gdim] = -self.normal
+
+    def move_to_iterate(self, system) -> None:
+        pass
+
+    def _state(self, rigid, z, zd):
+        lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
+        return self.penetration(z[lo], z[up], zd[lo], zd[up])
+
+    def _general_terms(self, system, tangent: bool):
+        """(generalised force on (lower, upper) [N, N m], force on upper [N], tangent or None)."""
+        rigid = system.rigid
+        z, zd = system.z_mid, system.zd_mid
+        f, k_f, c_f = self.force(*self._state(rigid, z, zd))
+        n3 = pad3(self.normal)
+        r_up = -self.contact_offset_m * n3
+        r_lo = pad3(z[rigid.dofs(self.upper)] - z[rigid.dofs(self.lower)]) + r_up
+        P = np.hstack([-velocity_map(rigid, self.lower, r_lo), velocity_map(rigid, self.upper, r_up)])
+        F = f * n3
+        dF_ds, dF_dN = np.zeros((3, 3)), np.zeros(3)
+        if self.friction is not None and f > 0.0:
+            tangential = np.eye(3) - np.outer(n3, n3)
+            F_t, dF_ds, dF_dN = friction_force(tangential @ (P @ zd[self._pair]), f, self.friction)
+            F = F + F_t
+            dF_ds = dF_ds @ tangential
+        generalised = P.T @ F
+        if not tangent:
+            return generalised, F[: rigid.gdim], None
+        # d F / d (end-of-step coordinates): positions through delta, rates through delta and slip
+        one_minus_af = 1 - system.scheme.alpha_f
+        dF_dq = np.outer(n3 + dF_dN, (k_f + c_f * system.c_vel) * self._D) + system.c_vel * dF_ds @ P
+        return generalised, F[: rigid.gdim], -one_minus_af * P.T @ dF_dq
+
+    def add_residual(self, system, rc_S, r_z, r):
+        rigid = system.rigid
+        if self._general:
+            generalised, force, _ = self._general_terms(system, tangent=False)
+            r_z[self._pair] -= generalised
+            return force
+        f, _, _ = self.force(*self._state(rigid, system.z_mid, system.zd_mid))
+        r_z[rigid.dofs(self.upper)] -= f * self.normal
+        r_z[rigid.dofs(self.lower)] += f * self.normal
+        return f * self.normal
+
+    def add_tangent(self, system, Kss, B, L, Kzz) -> None:
+        rigid = system.rigid
+        if self._general:
+            _, _, block = self._general_terms(system, tangent=True)
+            Kzz[np.ix_(self._pair, self._pair)] += block
+            return
+        _, k_f, c_f = self.force(*self._state(rigid, system.z_mid, system.zd_mid))
+        stiffness = (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * np.outer(self.normal, self.normal)
+        lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
+        Kzz[up, up] += stiffness
+        Kzz[lo, lo] += stiffness
+        Kzz[up, lo] -= stiffness
+        Kzz[lo, up] -= stiffness
+
+    def status(self, system, state) -> tuple[bool, float]:
+        delta, rate = self._state(system.rigid, state.z, state.zd)
+        return delta > 0, (-delta / rate if delta <= 0 and rate > 0 else math.inf)
+
+    def stored_energy_J(self, system, state) -> float:
+        return self.elastic_energy_J(self._state(system.rigid, state.z, state.zd)[0])
 
 
-class NodeContact:
+class NodeContact(ForceColumns):
     """One FE node against a sphere of a rigid body, with a Hertz force law (node-to-body contact).
 
     For the axisymmetric drill, a ball touching the tip face loads a disc of radius
@@ -280,10 +559,17 @@ class NodeContact:
     Gap along the unit ``normal`` (from the body centre towards the FE node):
     g = normal . (y - c) - R, y = x_node + u (the node stays on the line of centres; the
     axisymmetric axis). ``local_dofs``/``dof_axes`` are the node's owned displacement DOFs with a
-    non-zero normal component (empty on the other ranks); the residual on them is -F n_k."""
+    non-zero normal component (empty on the other ranks); the residual on them is -F n_k.
+
+    With ``friction`` (the cap a force) the node also carries the regularised Coulomb force of its
+    slip against the sphere's surface point R n, v_node - (v_body + omega x R n) projected on the
+    tangent plane; it then owns all its free displacement DOFs, and the force's torque acts on
+    the body's rotations (the sphere is a body of revolution about any axis: its spin enters
+    through friction only)."""
 
     def __init__(self, name: str, fe: LinearFE, point_m, body: str, radius_m: float, normal,
-                 stiffness_N_per_m1_5: float, damping_N_s_per_m: float = 0.0, fields: MidpointFields | None = None):
+                 stiffness_N_per_m1_5: float, damping_N_s_per_m: float = 0.0, fields: MidpointFields | None = None,
+                 friction: Friction | None = None):
         if not stiffness_N_per_m1_5 > 0:
             raise ValueError(f"contact {name!r}: stiffness must be > 0")
         if not radius_m > 0:
@@ -294,6 +580,7 @@ class NodeContact:
         self.name, self.body, self.fe = name, body, fe
         self.fields = fields if fields is not None else MidpointFields(fe)
         self.normal = n
+        self.friction = friction
         self.radius_m = float(radius_m)
         self.stiffness = float(stiffness_N_per_m1_5)
         self.damping = float(damping_N_s_per_m)
@@ -308,7 +595,7 @@ class NodeContact:
             dist = np.linalg.norm(coords[sub] - point, axis=1) if sub.size else np.zeros(0)
             best = float(dist.min()) if sub.size else np.inf
             owner_best = self.comm.allreduce((best, self.comm.rank), op=MPI.MINLOC)
-            if owner_best[1] == self.comm.rank and n[k] != 0.0:
+            if owner_best[1] == self.comm.rank and (n[k] != 0.0 or friction is not None):
                 dofs.append(int(sub[np.argmin(dist)]))
                 axes.append(k)
             self.node_distance_m = owner_best[0]
@@ -353,3 +640,98 @@ class NodeContact:
 
     def elastic_energy_J(self, delta: float) -> float:
         return 0.4 * self.stiffness * max(delta, 0.0) ** 2.5
+
+    # ------------------------------------------------------------ interaction protocol
+    kind = "node"
+    fe_coupled = True
+
+    def bind(self, system) -> None:
+        rigid = system.rigid
+        if self.body not in rigid.index:
+            raise ValueError(f"contact {self.name!r} names unknown rigid body {self.body!r}")
+        self.set_body_reference(rigid.body(self.body).position_m)
+        first = self.fe.first_global
+        mine = [(int(d + first), int(k)) for d, k in zip(self.local_dofs, self.dof_axes)]
+        pairs = self.comm.bcast(mine, root=self.owner)
+        self._S = np.array([system.contact_position[g] for g, _ in pairs], dtype=int)
+        self._S_axes = np.array([k for _, k in pairs], dtype=int)
+
+    def move_to_iterate(self, system) -> None:
+        pass
+
+    def _force_at_iterate(self, system):
+        sl = system.rigid.dofs(self.body)
+        return self.force(*self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl]))
+
+    def _friction_terms(self, system, tangent: bool):
+        """With friction, in the unknowns xi = (node displacement (gdim), body coordinates): the
+        force F on the node [N], the generalised forces P^T F and, with ``tangent``, the block
+        d(-P^T F)/d xi_{n+1}; P maps xi rates to the slip velocity v_node - (v_body + omega x R n)."""
+        rigid, gdim = system.rigid, self.fe.gdim
+        body = rigid.all_dofs(self.body)
+        f, k_f, c_f = self._force_at_iterate(system)
+        n3 = pad3(self.normal)
+        P = np.hstack([np.eye(3)[:, :gdim], -velocity_map(rigid, self.body, self.radius_m * n3)])
+        F = f * n3
+        dF_ds, dF_dN = np.zeros((3, 3)), np.zeros(3)
+        if f > 0.0:
+            tangential = np.eye(3) - np.outer(n3, n3)
+            rates = np.concatenate([self._node_values(system.v_mid), system.zd_mid[body]])
+            F_t, dF_ds, dF_dN = friction_force(tangential @ (P @ rates), f, self.friction)
+            F = F + F_t
+            dF_ds = dF_ds @ tangential
+        if not tangent:
+            return F, P.T @ F, None
+        D = np.zeros(P.shape[1])                   # d delta / d xi
+        D[:gdim] = -self.normal
+        D[gdim:2 * gdim] = self.normal
+        dF = np.outer(n3 + dF_dN, (k_f + c_f * system.c_vel) * D) + system.c_vel * dF_ds @ P
+        return F, P.T @ F, -(1 - system.scheme.alpha_f) * P.T @ dF
+
+    def add_residual(self, system, rc_S, r_z, r):
+        if self.friction is not None:
+            gdim = self.fe.gdim
+            F, generalised, _ = self._friction_terms(system, tangent=False)
+            if r is not None and self.local_dofs.size:
+                r.array_w[self.local_dofs] -= F[self.dof_axes]
+            rc_S[self._S] -= F[self._S_axes]
+            r_z[system.rigid.all_dofs(self.body)] -= generalised[gdim:]
+            return -F[:gdim]
+        f, _, _ = self._force_at_iterate(system)
+        if r is not None and self.local_dofs.size:
+            r.array_w[self.local_dofs] -= f * self.normal[self.dof_axes]
+        rc_S[self._S] -= f * self.normal[self._S_axes]
+        r_z[system.rigid.dofs(self.body)] += f * self.normal
+        return -f * self.normal
+
+    def add_tangent(self, system, Kss, B, L, Kzz) -> None:
+        if self.friction is not None:
+            gdim = self.fe.gdim
+            _, _, J = self._friction_terms(system, tangent=True)
+            node, S = self._S_axes, self._S                 # node components held as contact DOFs
+            body = np.arange(system.rigid.size)[system.rigid.all_dofs(self.body)]
+            Kss[np.ix_(S, S)] += J[np.ix_(node, node)]
+            B[np.ix_(S, body)] += J[np.ix_(node, gdim + np.arange(body.size))]
+            L[np.ix_(body, S)] += J[np.ix_(gdim + np.arange(body.size), node)]
+            Kzz[np.ix_(body, body)] += J[gdim:, gdim:]
+            return
+        _, k_f, c_f = self._force_at_iterate(system)
+        s_count = system.contact_global.size
+        block = np.zeros((s_count, s_count))
+        n_S = self.normal[self._S_axes]
+        block[np.ix_(self._S, self._S)] = (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * np.outer(n_S, n_S)
+        T = system.translation_S
+        Kss += block
+        sl = system.rigid.dofs(self.body)
+        B[:, sl] -= block @ T
+        L[sl, :] -= T.T @ block
+        Kzz[sl, sl] += T.T @ block @ T
+
+    def status(self, system, state) -> tuple[bool, float]:
+        sl = system.rigid.dofs(self.body)
+        delta, rate = self.penetration(state.u, state.v, state.z[sl], state.zd[sl])
+        return delta > 0, (-delta / rate if delta <= 0 and rate > 0 else math.inf)
+
+    def stored_energy_J(self, system, state) -> float:
+        sl = system.rigid.dofs(self.body)
+        return self.elastic_energy_J(self.penetration(state.u, state.v, state.z[sl], state.zd[sl])[0])

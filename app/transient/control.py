@@ -16,9 +16,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-from mpi4py import MPI
-
 from app.errors import NumericalFailure
 
 
@@ -51,41 +48,22 @@ class ContactStatus:
 
 
 class ContactMonitor:
-    """Evaluates :class:`ContactStatus` of a state from nodal gaps (surface contacts) and
-    penetrations (point contacts)."""
+    """Evaluates :class:`ContactStatus` of a state from the interactions' own status (closed, time
+    to closure), in the order of ``system.interactions``."""
 
     def __init__(self, system):
         self.system = system
 
     def status(self, state) -> ContactStatus:
-        sysm, rigid = self.system, self.system.rigid
+        sysm = self.system
         closed, closure = [], math.inf
         for f in sysm.fields:
             f.u_mid.x.array[:] = state.u
             f.v_mid.x.array[:] = state.v
-        for c in sysm.surface_contacts:
-            sl = rigid.dofs(c.body)
-            c.set_body_state(state.z[sl], state.zd[sl])
-            # Closed = penetration at a quadrature point (what the force sees); the closure time
-            # is predicted from the nodes (a curved obstacle can dip between them: a warning sign
-            # of a too coarse contact mesh, not an error).
-            closed.append(c.area_in_contact_m2() > 0.0)
-            gap, rate = c.nodal_gaps(state.u, state.v, state.z[sl], state.zd[sl])
-            approaching = (gap > 0) & (rate < 0)
-            local_closure = float(np.min(gap[approaching] / -rate[approaching])) if approaching.any() else math.inf
-            closure = min(closure, sysm.comm.allreduce(local_closure, op=MPI.MIN))
-        for c in sysm.node_contacts:
-            sl = rigid.dofs(c.body)
-            delta, rate = c.penetration(state.u, state.v, state.z[sl], state.zd[sl])
-            closed.append(delta > 0)
-            if delta <= 0 and rate > 0:
-                closure = min(closure, -delta / rate)
-        for c in sysm.point_contacts:
-            lo, up = rigid.dofs(c.lower), rigid.dofs(c.upper)
-            delta, rate = c.penetration(state.z[lo], state.z[up], state.zd[lo], state.zd[up])
-            closed.append(delta > 0)
-            if delta <= 0 and rate > 0:
-                closure = min(closure, -delta / rate)
+        for c in sysm.interactions:
+            is_closed, time_to_closure = c.status(sysm, state)
+            closed.append(bool(is_closed))
+            closure = min(closure, time_to_closure)
         return ContactStatus(tuple(closed), closure)
 
 

@@ -39,7 +39,6 @@ import scipy.linalg
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from app.transient.contact import NodeContact, PointContact, SurfaceContact
 from app.transient.fe import EffectiveOperatorCache, LinearFE
 from app.transient.rigid import RigidSet
 from app.transient.state import TransientState
@@ -71,29 +70,24 @@ SNES_DEFAULTS = {
 class CoupledSystem:
     """Residual, Jacobian and condensed solve of one generalized-alpha step."""
 
-    def __init__(self, comm, scheme: TimeScheme, fe: LinearFE | None, rigid: RigidSet,
-                 surface_contacts: list[SurfaceContact] = (), point_contacts: list[PointContact] = (),
-                 relative_force_tolerance: float = 1e-10, node_contacts: list[NodeContact] = ()):
+    def __init__(self, comm, scheme: TimeScheme, fe: LinearFE | None, rigid: RigidSet, interactions=(),
+                 relative_force_tolerance: float = 1e-10):
+        """``interactions``: objects of the :class:`app.transient.interactions.Interaction` protocol."""
         limit_blas_threads()    # MPI ranks are the parallelism (see app.transient.threads)
         self.comm, self.scheme, self.fe, self.rigid = comm, scheme, fe, rigid
-        self.surface_contacts = list(surface_contacts)
-        self.point_contacts = list(point_contacts)
-        self.node_contacts = list(node_contacts)
+        self.interactions = list(interactions)
+        names = [c.name for c in self.interactions]
+        if len(set(names)) != len(names):
+            raise ValueError(f"duplicate interaction names in {names}")
         self.relative_force_tolerance = relative_force_tolerance
-        for c in self.surface_contacts + self.node_contacts:
-            if c.body not in rigid.index:
-                raise ValueError(f"contact {c.name!r} names unknown rigid body {c.body!r}")
-            c.set_body_reference(rigid.bodies[rigid.index[c.body]].position_m)
-        for c in self.point_contacts:
-            for name in (c.lower, c.upper):
-                if name not in rigid.index:
-                    raise ValueError(f"contact {c.name!r} names unknown rigid body {name!r}")
         self.n_fe = fe.n_owned if fe is not None else 0
         self.m = rigid.size
         self.m_local = self.m if comm.rank == 0 else 0
         self._setup_contact_dofs()
+        for c in self.interactions:
+            c.bind(self)
         self.cache = EffectiveOperatorCache(fe, scheme, self.contact_global) if fe is not None else None
-        self.fields = list({id(c.fields): c.fields for c in self.surface_contacts}.values())
+        self.fields = list({id(c.fields): c.fields for c in self.interactions if hasattr(c, "fields")}.values())
         if fe is not None:
             from dolfinx import fem
 
@@ -114,13 +108,13 @@ class CoupledSystem:
 
     # ----------------------------------------------------------------- setup
     def _setup_contact_dofs(self) -> None:
-        fe_contacts = self.surface_contacts + self.node_contacts
+        fe_contacts = [c for c in self.interactions if c.fe_coupled]
+        self.contact_position = {}
         if self.fe is None or not fe_contacts:
             self.contact_local = np.zeros(0, dtype=np.int32)
             self.contact_global = np.zeros(0, dtype=PETSc.IntType)
             self.translation_S = np.zeros((0, self.rigid.gdim))
             self._S_offset = 0
-            self._node_S = []
             return
         axes = {}
         for c in fe_contacts:
@@ -134,13 +128,8 @@ class CoupledSystem:
         self.translation_S = np.zeros((self.contact_global.size, self.fe.gdim))
         self.translation_S[np.arange(all_axes.size), all_axes] = 1.0
         self._S_offset = sum(g.size for g in gathered[: self.comm.rank])
-        position = {int(g): i for i, g in enumerate(self.contact_global)}
-        self._node_S = []
-        for c in self.node_contacts:
-            mine = [(int(d + self.fe.first_global), int(k)) for d, k in zip(c.local_dofs, c.dof_axes)]
-            pairs = self.comm.bcast(mine, root=c.owner)
-            self._node_S.append((np.array([position[g] for g, _ in pairs], dtype=int),
-                                 np.array([k for _, k in pairs], dtype=int)))
+        # global DOF -> position among the contact DOFs
+        self.contact_position = {int(g): i for i, g in enumerate(self.contact_global)}
 
     def _unknowns_local(self) -> int:
         """Local size of the SNES unknown: (g, dz), held by rank 0."""
@@ -360,9 +349,8 @@ class CoupledSystem:
         self.zd1 = velocity(self.zdd1, st.zd, st.zdd, dt, s)
         self.z_mid = midpoint(z1, st.z, s.alpha_f)
         self.zd_mid = midpoint(self.zd1, st.zd, s.alpha_f)
-        for c in self.surface_contacts:
-            sl = self.rigid.dofs(c.body)
-            c.set_body_state(self.z_mid[sl], self.zd_mid[sl])
+        for c in self.interactions:
+            c.move_to_iterate(self)
 
     def _new_state(self) -> TransientState:
         if self.fe is not None:
@@ -380,31 +368,13 @@ class CoupledSystem:
         r_z = self.rigid.mass_diagonal * (1 - self.scheme.alpha_m) * self.zdd1
         r_z = r_z + self.rigid.mass_diagonal * self.scheme.alpha_m * self.state0.zdd - self.rigid_force_ext
         rc_S = np.zeros(self.contact_global.size)
-        for c in self.surface_contacts:
-            rc = c.assemble_residual()
-            if r is not None:
-                r.axpy(1.0, rc)
-            rc_S += self._gather_S(rc.array_r)
-            forces[c.name] = np.array([rc.dot(tk) for tk in self.translations])
-            r_z[self.rigid.dofs(c.body)] -= forces[c.name]
-        for c, (S, axes) in zip(self.node_contacts, self._node_S):
-            f, _, _ = self._node_force(c)
-            if r is not None and c.local_dofs.size:
-                r.array_w[c.local_dofs] -= f * c.normal[c.dof_axes]
-            rc_S[S] -= f * c.normal[axes]
-            r_z[self.rigid.dofs(c.body)] += f * c.normal
-            forces[c.name] = -f * c.normal
-        for c in self.point_contacts:
-            f, _, _ = self._point_force(c)
-            r_z[self.rigid.dofs(c.upper)] -= f * c.normal
-            r_z[self.rigid.dofs(c.lower)] += f * c.normal
-            forces[c.name] = f * c.normal
+        for c in self.interactions:
+            forces[c.name] = c.add_residual(self, rc_S, r_z, r)
         # Forces at this iterate (reported without re-assembly if it is the converged one); a
         # surface contact's rc.dot is collective, so "any force" is the same on every rank.
         self._forces = forces
         self._forces_at = self._evaluated
-        fe_names = {c.name for c in self.surface_contacts + self.node_contacts}
-        self._fe_contact_active = any(np.any(forces[n] != 0.0) for n in fe_names)
+        self._fe_contact_active = any(np.any(forces[c.name] != 0.0) for c in self.interactions if c.fe_coupled)
         r_z[~self.rigid.free_mask] = 0.0
         return forces, rc_S, r_z
 
@@ -417,28 +387,13 @@ class CoupledSystem:
             out[:s_count] = rc_S - self._unknown[:s_count]
             out[s_count:] = r_z
 
-    def _node_force(self, c: NodeContact):
-        sl = self.rigid.dofs(c.body)
-        delta, rate = c.penetration(self.u_mid, self.v_mid, self.z_mid[sl], self.zd_mid[sl])
-        return c.force(delta, rate)
-
-    def _point_force(self, c: PointContact):
-        lo, up = self.rigid.dofs(c.lower), self.rigid.dofs(c.upper)
-        delta, rate = c.penetration(self.z_mid[lo], self.z_mid[up], self.zd_mid[lo], self.zd_mid[up])
-        return c.force(delta, rate)
-
     def _rigid_block(self, Kzz: np.ndarray) -> np.ndarray:
-        """Add the Kelvin-Voigt links between rigid bodies to the rigid block ``Kzz`` and put
-        identity rows/columns on the prescribed axes."""
-        one_minus_af = 1 - self.scheme.alpha_f
-        for c in self.point_contacts:
-            _, k_f, c_f = self._point_force(c)
-            stiffness = one_minus_af * (k_f + c_f * self.c_vel) * np.outer(c.normal, c.normal)
-            lo, up = self.rigid.dofs(c.lower), self.rigid.dofs(c.upper)
-            Kzz[up, up] += stiffness
-            Kzz[lo, lo] += stiffness
-            Kzz[up, lo] -= stiffness
-            Kzz[lo, up] -= stiffness
+        """Add the rigid-rigid interactions to the rigid block ``Kzz`` and put identity
+        rows/columns on the prescribed axes."""
+        empty = np.zeros((0, 0))
+        for c in self.interactions:
+            if not c.fe_coupled:
+                c.add_tangent(self, empty, empty, empty, Kzz)
         fixed = ~self.rigid.free_mask
         Kzz[fixed, :] = 0.0
         Kzz[:, fixed] = 0.0
@@ -472,28 +427,9 @@ class CoupledSystem:
         B = np.zeros((s_count, m))
         L = np.zeros((m, s_count))
         Kzz = np.diag((1 - self.scheme.alpha_m) * self.c_acc * self.rigid.mass_diagonal)
-        T = self.translation_S
-        owned_rows = (self.contact_local + self.fe.first_global).astype(PETSc.IntType) if self.fe else None
-        for c in self.surface_contacts:
-            A = c.assemble_tangent()
-            block = self._gather_rows(A.getValues(owned_rows, self.contact_global)
-                                      .reshape(owned_rows.size, s_count))
-            Kss += block
-            sl = self.rigid.dofs(c.body)
-            B[:, sl] -= block @ T
-            L[sl, :] -= T.T @ block
-            Kzz[sl, sl] += T.T @ block @ T
-        one_minus_af = 1 - self.scheme.alpha_f
-        for c, (S, axes) in zip(self.node_contacts, self._node_S):
-            _, k_f, c_f = self._node_force(c)
-            block = np.zeros((s_count, s_count))
-            n_S = c.normal[axes]
-            block[np.ix_(S, S)] = one_minus_af * (k_f + c_f * self.c_vel) * np.outer(n_S, n_S)
-            Kss += block
-            sl = self.rigid.dofs(c.body)
-            B[:, sl] -= block @ T
-            L[sl, :] -= T.T @ block
-            Kzz[sl, sl] += T.T @ block @ T
+        for c in self.interactions:
+            if c.fe_coupled:
+                c.add_tangent(self, Kss, B, L, Kzz)
         Kzz = self._rigid_block(Kzz)
         fixed = ~self.rigid.free_mask
         L[fixed, :] = 0.0
@@ -520,6 +456,23 @@ class CoupledSystem:
         """y = J x for local arrays of the unknown."""
         if x.size:
             y[:] = self._Z @ x
+
+    def consistent_rigid_acceleration(self, state: TransientState) -> TransientState:
+        """``state`` with the free rigid accelerations in equilibrium with the external loads and the
+        rigid-rigid interactions at ``state`` (a start inside a closed link, e.g. a disc resting on
+        a plane with friction: an inconsistent a_0 leaves a lasting velocity offset of order
+        dt |a_0 error| / 2 in the trapezoidal rule)."""
+        rigid = self.rigid
+        self.z_mid, self.zd_mid = state.z, state.zd
+        r_z = -rigid.external_force_N(state.t)
+        for c in self.interactions:
+            if not c.fe_coupled:
+                c.add_residual(self, np.zeros(0), r_z, None)
+        self._evaluated = self._fe_key = None       # z_mid no longer belongs to an iterate
+        zdd = state.zdd.copy()
+        free = rigid.free_mask & (rigid.mass_diagonal > 0)
+        zdd[free] = -r_z[free] / rigid.mass_diagonal[free]
+        return TransientState(state.t, state.u, state.v, state.a, state.z, state.zd, zdd)
 
     # ------------------------------------------------------------ checks
     def full_residual_norm(self) -> float:
@@ -556,22 +509,13 @@ class CoupledSystem:
         mid-point of the last evaluated iterate, as gdim vectors [N]."""
         if getattr(self, "_forces_at", None) is self._evaluated and self._evaluated is not None:
             return dict(self._forces)
-        out = {}
-        for c in self.surface_contacts:
-            rc = c.assemble_residual()
-            out[c.name] = np.array([rc.dot(tk) for tk in self.translations])
-        for c in self.node_contacts:
-            f, _, _ = self._node_force(c)
-            out[c.name] = -f * c.normal
-        for c in self.point_contacts:
-            f, _, _ = self._point_force(c)
-            out[c.name] = f * c.normal
-        return out
+        forces, _, _ = self._contact_terms(None)
+        return dict(forces)
 
     @property
     def contact_names(self) -> list[str]:
         """Contact names in the order of ``ContactStatus.closed``."""
-        return [c.name for c in self.surface_contacts + self.node_contacts + self.point_contacts]
+        return [c.name for c in self.interactions]
 
     def destroy(self) -> None:
         if self.cache is not None:

@@ -4,12 +4,15 @@ time loop -> HDF5 time series, plots and a results dict for summary.json.
 Loads on the FE body: gravity and a constant total force (the downforce) are applied as
 mass-proportional body forces, i.e. the load vector of each axis k is M t_k (t_k the unit
 translation) times (g_k + F_k / m_total). The drive voltage U(t) is prescribed on the potential DOFs
-of electrodes of kind 'voltage'; supports, ground electrodes and non-piezoelectric regions are held
-at 0.
+of electrodes of kind 'voltage', each with its own amplitude and phase (multi-phase drive:
+U_e(t) = A_e sin(wt + phase_e) from rest, A_e cos(wt + phase_e) from the harmonic steady state);
+supports, ground electrodes and non-piezoelectric regions are held at 0.
 """
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -28,44 +31,61 @@ from app.transient.checkpoint import (
     load_checkpoint,
     mark_started,
 )
-from app.transient.contact import MidpointFields, NodeContact, ObstacleShape, PointContact, SurfaceContact
+from app.transient.contact import MidpointFields
 from app.transient.control import StepController, StepSizes
 from app.transient.coupled import CoupledSystem
 from app.transient.fe import LinearFE
 from app.transient.fields import FieldSeriesExport
 from app.transient.history import Progress, TimeSeriesExport, plot_time_series
 from app.transient.impacts import statistics_from_file
-from app.transient.rigid import RigidBody, RigidSet
+from app.transient.interactions import BuildContext, build_interactions
+from app.transient.rigid import RigidBody, RigidSet, constant_rate_motion
 from app.transient.state import TransientState
 from app.transient.stepper import TimeStepper
 from forms.kinematics import volume_weight
 
 
-def _facet_tag(model, ref, file, key) -> int:
-    names = model.mesh_data.facet_names
-    if isinstance(ref, int) and ref in names.values():
-        return ref
-    if isinstance(ref, str) and ref in names:
-        return names[ref]
-    known = ", ".join(names) or "none"
-    raise CaseError(file, key, f"facet group {ref!r} is not in the mesh (mesh has: {known})")
-
-
 class VoltageDrive:
-    """U(t) = U0 sin(wt) (start at rest) or U0 cos(wt) (harmonic start) on the driven potential DOFs,
-    held in the Function the Dirichlet condition was built from."""
+    """Multi-phase drive: U_e(t) = A_e sin(wt + phase_e) (start at rest) or A_e cos(wt + phase_e)
+    (harmonic start) on the potential DOFs of each driven electrode e, held in the Function the
+    Dirichlet condition was built from. A_e = amplitude_V * weight_e: ``amplitude_V`` is the
+    largest electrode amplitude (set by the case or by the target-amplitude solve, which scales all
+    phases together), ``weight_e`` in (0, 1] the electrode's share of it."""
 
-    def __init__(self, values: fem.Function, dofs: np.ndarray, amplitude_V: float, frequency_Hz: float,
-                 cosine: bool):
-        self.values, self.dofs = values, dofs
-        self.amplitude_V, self.omega = amplitude_V, 2 * math.pi * frequency_Hz
-        self.phase = 0.5 * math.pi if cosine else 0.0
+    def __init__(self, values: fem.Function, electrodes: list[tuple[str, np.ndarray, float, float]],
+                 frequency_Hz: float, cosine: bool):
+        """``electrodes``: (name, potential DOFs, weight, phase [rad]) of each driven electrode."""
+        self.values, self.electrodes = values, electrodes
+        self.amplitude_V, self.omega = 0.0, 2 * math.pi * frequency_Hz
+        self.start_phase = 0.5 * math.pi if cosine else 0.0
+
+    def electrode_voltages_V(self, t: float) -> dict[str, float]:
+        return {name: self.amplitude_V * weight * math.sin(self.omega * t + phase + self.start_phase)
+                for name, _, weight, phase in self.electrodes}
 
     def voltage_V(self, t: float) -> float:
-        return self.amplitude_V * math.sin(self.omega * t + self.phase)
+        """U(t) of the first driven electrode (the drive column of the time series)."""
+        if not self.electrodes:
+            return 0.0
+        _, _, weight, phase = self.electrodes[0]
+        return self.amplitude_V * weight * math.sin(self.omega * t + phase + self.start_phase)
 
     def __call__(self, t: float) -> None:
-        self.values.x.array[self.dofs] = self.voltage_V(t)
+        for _name, dofs, weight, phase in self.electrodes:
+            self.values.x.array[dofs] = self.amplitude_V * weight * math.sin(self.omega * t + phase + self.start_phase)
+
+
+def drive_weights(case) -> tuple[float, dict[str, float]]:
+    """(largest electrode amplitude [V], weight of each driven electrode): the nominal amplitude of
+    an electrode is its amplitude_V, else transient.drive.voltage_V; all nominal amplitudes 0 (a
+    target-amplitude case) weigh 1."""
+    voltage = case.transient.drive.voltage_V
+    nominal = {n: (e.amplitude_V if e.amplitude_V is not None else voltage)
+               for n, e in case.electrodes.items() if e.kind == "voltage"}
+    largest = max(nominal.values(), default=0.0)
+    if largest <= 0.0:
+        return 0.0, {n: 1.0 for n in nominal}
+    return largest, {n: a / largest for n, a in nominal.items()}
 
 
 class TransientModel:
@@ -89,6 +109,10 @@ class TransientModel:
         self.drive_point = cfg.drive.point if cfg.drive.point in case.points else None
         if cfg.drive.tip_amplitude_m is not None and self.drive_point is None:
             raise CaseError(file, "transient.drive.point", f"unknown point {cfg.drive.point!r}")
+        if model.kind == "axisymmetric" and any(b.rotations for b in cfg.bodies):
+            i = next(i for i, b in enumerate(cfg.bodies) if b.rotations)
+            raise CaseError(file, f"transient.bodies[{i}].rotations",
+                            "an axisymmetric model has no rotational DOF (no torsion); use plane_strain or 3d")
         # Dirichlet DOFs: supports, grounded regions, ground and driven electrodes (values in g).
         driven = [model.electrode_dofs[n] for n in model.electrodes_of("voltage")]
         self.drive_dofs = np.unique(np.concatenate(driven)).astype(np.int32) if driven else np.zeros(0, np.int32)
@@ -115,62 +139,62 @@ class TransientModel:
             if self.fe_acceleration[k]:
                 loads.append((ufl.action(model.mass, t_k), lambda t, s=float(self.fe_acceleration[k]): s))
         self.damping_frequency_Hz = case.damping.reference_frequency_Hz or cfg.drive.frequency_Hz
-        self.drive = VoltageDrive(self.g, self.drive_dofs, 0.0, cfg.drive.frequency_Hz,
-                                  cosine=cfg.initial_state == "harmonic")
+        self.nominal_voltage_V, weights = drive_weights(case)
+        self.drive = VoltageDrive(self.g, [(n, model.electrode_dofs[n], weights[n],
+                                            math.radians(case.electrodes[n].phase_deg))
+                                           for n in model.electrodes_of("voltage")],
+                                  cfg.drive.frequency_Hz, cosine=cfg.initial_state == "harmonic")
         self.fe = LinearFE(W, W.sub(0), model.mass, model.stiffness, model.damping(self.damping_frequency_Hz),
                            bcs=[bc], loads=loads, update_dirichlet=self.drive)
         self.rigid = RigidSet([self._body(b, gravity) for b in cfg.bodies])
-        fields = MidpointFields(self.fe)
-        surface, point, node = [], [], []
-        for i, c in enumerate(cfg.contacts):
-            if c.kind == "surface":
-                tag = _facet_tag(model, c.facets, file, f"transient.contacts[{i}].facets")
-                if len(c.normal or [0.0] * gdim) != gdim:
-                    raise CaseError(file, f"transient.contacts[{i}].normal", f"needs {gdim} components")
-                try:
-                    shape = (ObstacleShape("plane", normal=tuple(c.normal)) if c.shape == "plane"
-                             else ObstacleShape("sphere", radius_m=c.radius_m, normal=tuple(c.normal or ())))
-                except ValueError as exc:
-                    raise CaseError(file, f"transient.contacts[{i}].normal", str(exc)) from None
-                surface.append(SurfaceContact(c.name, self.fe, model.mesh_data.facet_tags, tag, c.body, shape,
-                                              c.stiffness, c.damping, weight=weight, fields=fields))
-            elif c.kind == "node":
-                key = f"transient.contacts[{i}]"
-                if c.node_point not in case.points:
-                    raise CaseError(file, f"{key}.node_point", f"unknown point {c.node_point!r} (see [points])")
-                try:
-                    node.append(NodeContact(c.name, self.fe, case.points[c.node_point].coordinates_m, c.body,
-                                            c.radius_m, c.normal, c.stiffness, c.damping, fields=fields))
-                except ValueError as exc:
-                    raise CaseError(file, f"{key}.normal", str(exc)) from None
-            else:
-                if len(c.direction) != gdim:
-                    raise CaseError(file, f"transient.contacts[{i}].direction", f"needs {gdim} components")
-                point.append(PointContact(c.name, c.lower, c.upper, c.direction, c.touch_distance_m,
-                                          c.stiffness, c.damping))
-        self.system = CoupledSystem(comm, cfg.scheme.scheme(), self.fe, self.rigid, surface, point,
-                                    node_contacts=node)
+        context = BuildContext(case, model, self.fe, MidpointFields(self.fe), weight, gdim, file, self.rigid)
+        interactions = build_interactions(cfg.contacts, context)
+        try:
+            self.system = CoupledSystem(comm, cfg.scheme.scheme(), self.fe, self.rigid, interactions)
+        except ValueError as exc:
+            raise CaseError(file, "transient.contacts", str(exc)) from None
 
     def _body(self, b, gravity) -> RigidBody:
+        """A schema body -> RigidBody: held translations move at their given velocity (0: hold),
+        rotations are free, spun at a constant rate or fixed."""
         n = len(b.position_m)
         velocity = b.velocity_m_per_s or [0.0] * n
+        rotations = b.rotations
+        angles = [r.angle_rad for r in rotations]
+        rates = [r.rate_rad_per_s if r.motion != "fixed" else 0.0 for r in rotations]
+        free = [False] * n if b.fixed else list(b.free_axes or [True] * n)
+        free += [r.motion == "free" for r in rotations]
         if b.fixed:
-            return RigidBody(b.name, b.mass_kg, b.position_m, [0.0] * n, [0.0] * n, prescribed_axes=(True,) * n)
+            velocity = [0.0] * n
         force = np.asarray(b.applied_force_N, dtype=float) if b.applied_force_N else None
-        free = b.free_axes or [True] * n
-        return RigidBody(b.name, b.mass_kg, b.position_m, velocity, gravity,
+        torque = np.array([r.torque_N_m for r in rotations]) if any(r.torque_N_m for r in rotations) else None
+        prescribed = None
+        if not all(free):
+            prescribed = constant_rate_motion(list(b.position_m) + angles, list(velocity) + rates)
+        return RigidBody(b.name, b.mass_kg, b.position_m, velocity, [0.0] * n if b.fixed else gravity,
                          applied_force_N=(lambda t, f=force: f) if force is not None else None,
-                         prescribed_axes=tuple(not f for f in free))
+                         prescribed_axes=tuple(not f for f in free), prescribed=prescribed,
+                         rotation_axes=tuple(r.axis for r in rotations),
+                         inertia_kg_m2=tuple(r.inertia_kg_m2 for r in rotations), angle_rad=angles,
+                         angular_velocity_rad_per_s=rates,
+                         applied_torque_N_m=(lambda t, m=torque: m) if torque is not None else None)
 
     # ----------------------------------------------------------- initial state
     def initial_state(self) -> tuple[TransientState, float]:
-        """(state at t = 0, drive amplitude [V]). The harmonic start uses the steady state of
-        V cos(wt): x(t) = Re[(x_re + i x_im) e^{iwt}], so u0 = x_re, v0 = -w x_im, a0 = -w^2 x_re."""
+        """(state at t = 0, drive amplitude [V], the largest electrode amplitude). The harmonic start
+        uses the steady state of the phasors c_e = w_e exp(i phase_e) per volt of amplitude,
+        X = sum_e c_e X_e (X_e: electrode e driven alone, the others grounded), x(t) = Re[X e^{iwt}]:
+        u0 = Re X, v0 = -w Im X, a0 = -w^2 Re X, all scaled by the amplitude. The target tip
+        amplitude scales all phases together: amplitude = target / |X(point)|."""
         cfg, model = self.cfg, self.model
-        voltage = cfg.drive.voltage_V
+        voltage = self.nominal_voltage_V
         n = fem.Function(model.W).x.array.size
         u0, v0, a0 = np.zeros(n), np.zeros(n), np.zeros(n)
         if cfg.drive.tip_amplitude_m is not None or cfg.initial_state == "harmonic":
+            if not self.drive.electrodes:
+                key = "drive.tip_amplitude_m" if cfg.drive.tip_amplitude_m is not None else "initial_state"
+                raise CaseError(self.case.source, f"transient.{key}",
+                                "needs an electrode of kind 'voltage' (a harmonic solve)")
             x_re, x_im, amplitude_per_V = self._harmonic_per_volt()
             kill_point("harmonic_start")
             if cfg.drive.tip_amplitude_m is not None:
@@ -186,21 +210,43 @@ class TransientModel:
         self.drive.amplitude_V = voltage
         self.drive(0.0)
         z, zd, zdd = self.rigid.initial_state()
-        return TransientState(0.0, u0, v0, a0, z, zd, zdd), voltage
+        state = self.system.consistent_rigid_acceleration(TransientState(0.0, u0, v0, a0, z, zd, zdd))
+        return state, voltage
 
     def resume_drive(self, voltage_V: float) -> None:
         """Drive amplitude of a resumed run (saved in the checkpoint: no harmonic solve)."""
         self.drive.amplitude_V = voltage_V
 
     def _harmonic_per_volt(self):
-        """Local (with ghosts) arrays of the steady state per volt, and the amplitude per volt at
-        the drive point."""
+        """Local (with ghosts) arrays Re X, Im X of the steady state per volt of drive amplitude
+        (all electrodes with their weights and phases), and |X| at the drive point."""
         from app.fe.operators import Operators
+
+        # the transient's own K, M, C (same forms, assembled without BCs): no second assembly
+        ops = Operators(self.fe.K, self.fe.M, self.fe.C)
+        x_re, x_im, at_point = 0.0, 0.0, 0.0
+        for name, _, weight, phase in self.drive.electrodes:
+            e_re, e_im, point = self._harmonic_of_electrode(ops, name)
+            c = weight * complex(math.cos(phase), math.sin(phase))
+            x_re = x_re + (c.real * e_re - c.imag * e_im)
+            x_im = x_im + (c.imag * e_re + c.real * e_im)
+            at_point = at_point + c * point
+        amplitude = abs(at_point) if self.drive_point else float("nan")
+        return x_re, x_im, amplitude
+
+    def _harmonic_of_electrode(self, ops, name: str):
+        """(Re, Im of the steady state, complex displacement at the drive point) per volt on
+        electrode ``name`` alone: the other driven electrodes are grounded (app.harmonic drives
+        every 'voltage' electrode of the model it is given with one voltage)."""
         from app.harmonic import HarmonicSolver
 
         model = self.model
-        # the transient's own K, M, C (same forms, assembled without BCs): no second assembly
-        ops = Operators(self.fe.K, self.fe.M, self.fe.C)
+        if len(self.drive.electrodes) > 1:
+            electrodes = {n: (e if n == name or e.kind != "voltage"
+                              else dataclasses.replace(e, kind="ground", amplitude_V=None, phase_deg=0.0))
+                          for n, e in self.case.electrodes.items()}
+            model = copy.copy(model)
+            model.case = dataclasses.replace(self.case, electrodes=electrodes)
         solver = HarmonicSolver(model, ops, 1.0, prefix="transient_harmonic_")
         point = solver.solve(self.cfg.drive.frequency_Hz)
         out = []
@@ -209,9 +255,9 @@ class TransientModel:
             f.vector.array_w[:] = vec.array_r
             f.x.scatter_forward()
             out.append(f.x.array.copy())
-        amplitude = abs(point.displacement_m[self.drive_point]) if self.drive_point else float("nan")
+        at_point = point.displacement_m[self.drive_point] if self.drive_point else 0.0
         solver.destroy()
-        return out[0], out[1], amplitude
+        return out[0], out[1], at_point
 
 
 class PointSampler:
@@ -252,12 +298,17 @@ def _units(tm: TransientModel, case) -> dict[str, str]:
     units = {"time_s": "s", "dt_s": "s", "drive_voltage_V": "V"}
     for name in case.points:
         units[f"{name}_displacement_m"] = "m"
+    if len(tm.drive.electrodes) > 1:
+        for name, *_ in tm.drive.electrodes:
+            units[f"{name}_voltage_V"] = "V"
     for b in tm.rigid.bodies:
         units[f"{b.name}_position_m"] = "m"
         units[f"{b.name}_velocity_m_per_s"] = "m/s"
-    for c in case.transient.contacts:
-        units[f"{c.name}_force_N"] = "N (on the rigid body / upper body)"
-        units[f"{c.name}_closed"] = "1 = closed"
+        if b.rotation_axes:
+            units[f"{b.name}_angle_rad"] = "rad (" + ", ".join(b.rotation_axes) + ")"
+            units[f"{b.name}_angular_velocity_rad_per_s"] = "rad/s (" + ", ".join(b.rotation_axes) + ")"
+    for c in tm.system.interactions:
+        units.update(c.columns())
     return units
 
 
@@ -302,6 +353,8 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                               resume_rows=resumed.rows if resumed is not None else None)
     system, model = tm.system, tm.model
     contact_names = system.contact_names
+    interactions = system.interactions
+    multi_phase = len(tm.drive.electrodes) > 1
 
     fields = None
     if case.output.fields:
@@ -318,15 +371,21 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
         if fields is not None:
             fields.write(rec["time_s"], rec["position_m"])
         row = {"time_s": rec["time_s"], "dt_s": rec["dt_s"], "drive_voltage_V": tm.drive.voltage_V(rec["time_s"])}
+        if multi_phase:
+            for name, value in tm.drive.electrode_voltages_V(rec["time_s"]).items():
+                row[f"{name}_voltage_V"] = value
         for name, value in sampler.values(system.solution_array).items():
             row[f"{name}_displacement_m"] = value
         for b in tm.rigid.bodies:
             sl = tm.rigid.dofs(b.name)
             row[f"{b.name}_position_m"] = rec["position_m"][sl]
             row[f"{b.name}_velocity_m_per_s"] = rec["velocity_m_per_s"][sl]
-        for j, name in enumerate(contact_names):
-            row[f"{name}_force_N"] = rec["contact_force_N"][name]
-            row[f"{name}_closed"] = float(rec["contact_closed"][j])
+            if b.rotation_axes:
+                rot = tm.rigid.rotation_dofs(b.name)
+                row[f"{b.name}_angle_rad"] = rec["position_m"][rot]
+                row[f"{b.name}_angular_velocity_rad_per_s"] = rec["velocity_m_per_s"][rot]
+        for j, c in enumerate(interactions):
+            row.update(c.row(rec["contact_force_N"][c.name], bool(rec["contact_closed"][j])))
         series.write(row)
         kill_point("step")
 

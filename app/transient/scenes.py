@@ -164,7 +164,7 @@ def build_ball_drop(comm, ball: BallDrop, scheme: TimeScheme):
     rigid = RigidSet([ground, ball_body])
     link = PointContact("ball_ground", "ground", "ball", [1.0], ball.diameter_m / 2,
                         ball.stiffness_N_per_m, ball.damping_N_s_per_m)
-    system = CoupledSystem(comm, scheme, None, rigid, [], [link])
+    system = CoupledSystem(comm, scheme, None, rigid, [link])
     z, zd, zdd = rigid.initial_state()
     empty = np.zeros(0)
     return system, TransientState(0.0, empty, empty, empty, z, zd, zdd)

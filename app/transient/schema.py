@@ -55,14 +55,38 @@ class DriveSection:
 
 
 @dataclass(frozen=True)
+class RotationSection:
+    axis: Literal["x", "y", "z", "plane"] = param(
+        doc="rotation axis through the body's reference point: x, y or z in 3D; 'plane' in 2D (plane strain: "
+            "counter-clockwise from the first mesh axis to the second)")
+    motion: Literal["free", "constant_rate", "fixed"] = param(
+        "free", doc="free (integrated), prescribed at constant rate_rad_per_s (a spinning rotor), or fixed")
+    inertia_kg_m2: float = param(0.0, ge=0, unit="kg m^2", doc="moment of inertia about the axis (free rotation)")
+    angle_rad: float = param(0.0, unit="rad", doc="initial angle")
+    rate_rad_per_s: float = param(
+        0.0, unit="rad/s", doc="initial (free) or prescribed (constant_rate) angular velocity")
+    torque_N_m: float = param(0.0, unit="N m", doc="constant applied torque about the axis (free rotation)")
+
+    def check(self, file, prefix):
+        if self.motion == "free" and not self.inertia_kg_m2 > 0:
+            raise CaseError(file, f"{prefix}.inertia_kg_m2", "a free rotation needs a positive inertia")
+        if self.motion == "fixed" and self.rate_rad_per_s != 0.0:
+            raise CaseError(file, f"{prefix}.rate_rad_per_s", "a fixed rotation has no rate (use constant_rate)")
+
+
+@dataclass(frozen=True)
 class BodySection:
     name: str = param(doc="rigid body name, used by contacts")
     position_m: list[float] = param(doc="reference point (mesh axes: r, z axisymmetric)")
     mass_kg: float = param(0.0, ge=0, unit="kg", doc="mass (0 only for a fixed body)")
-    velocity_m_per_s: list[float] | None = param(None, doc="initial velocity (default 0)")
+    velocity_m_per_s: list[float] | None = param(
+        None, doc="initial velocity (default 0); a held axis moves at this constant velocity (a belt)")
     fixed: bool = param(False, doc="immovable obstacle (wall, ground)")
-    free_axes: list[bool] | None = param(None, doc="per axis: free (true) or held (false); default all free")
+    free_axes: list[bool] | None = param(
+        None, doc="per axis: free (true) or held (false, moving at its velocity_m_per_s); default all free")
     applied_force_N: list[float] | None = param(None, unit="N", doc="constant applied force (besides gravity)")
+    rotations: list[RotationSection] = param(
+        default_factory=list, doc="rotational DOFs [[transient.bodies.rotations]] (none: the body only translates)")
 
     def check(self, file, prefix):
         n = len(self.position_m)
@@ -72,54 +96,120 @@ class BodySection:
                 raise CaseError(file, f"{prefix}.{key}", f"needs {n} entries like position_m")
         if not self.fixed and not self.mass_kg > 0:
             raise CaseError(file, f"{prefix}.mass_kg", "a body that is not fixed needs a positive mass")
+        allowed = ("plane",) if n == 2 else ("x", "y", "z")
+        axes = [r.axis for r in self.rotations]
+        for i, axis in enumerate(axes):
+            if axis not in allowed:
+                raise CaseError(file, f"{prefix}.rotations[{i}].axis",
+                                f"{axis!r} is not a rotation axis in {n}D (use {', '.join(allowed)})")
+            if axis in axes[:i]:
+                raise CaseError(file, f"{prefix}.rotations[{i}].axis", f"duplicate rotation axis {axis!r}")
+            if self.fixed and self.rotations[i].motion == "free":
+                raise CaseError(file, f"{prefix}.rotations[{i}].motion", "a fixed body has no free rotation")
 
 
 @dataclass(frozen=True)
-class ContactSection:
+class SurfaceFrictionSection:
+    """Regularised Coulomb friction of a surface contact (ANSYS TB,FRIC / contact real constants)."""
+
+    mu_dynamic: float = param(ge=0, doc="kinetic coefficient mu_d [MU]")
+    static_ratio: float = param(1.0, gt=0, doc="mu_s / mu_d [FACT]")
+    decay_s_per_m: float = param(0.0, ge=0, unit="s/m", doc="exponential decay of mu with slip speed [DC]")
+    shear_cap_Pa: float = param(1e20, gt=0, unit="Pa", doc="largest friction shear stress [TAUMAX]")
+    regularisation_speed_m_per_s: float = param(
+        1e-4, gt=0, unit="m/s", doc="slip speed below which the law is viscous (stick regularisation)")
+
+    def friction(self):
+        from app.transient.contact import Friction
+
+        return Friction(self.mu_dynamic, self.static_ratio, self.decay_s_per_m, self.shear_cap_Pa,
+                        self.regularisation_speed_m_per_s)
+
+
+@dataclass(frozen=True)
+class LinkFrictionSection:
+    """Regularised Coulomb friction of a point (rigid-rigid) or node contact: as the surface law, the cap is a
+    force."""
+
+    mu_dynamic: float = param(ge=0, doc="kinetic coefficient mu_d [MU]")
+    static_ratio: float = param(1.0, gt=0, doc="mu_s / mu_d [FACT]")
+    decay_s_per_m: float = param(0.0, ge=0, unit="s/m", doc="exponential decay of mu with slip speed [DC]")
+    force_cap_N: float = param(1e20, gt=0, unit="N", doc="largest friction force (TAUMAX times contact area)")
+    regularisation_speed_m_per_s: float = param(
+        1e-4, gt=0, unit="m/s", doc="slip speed below which the law is viscous (stick regularisation)")
+
+    def friction(self):
+        from app.transient.contact import Friction
+
+        return Friction(self.mu_dynamic, self.static_ratio, self.decay_s_per_m, self.force_cap_N,
+                        self.regularisation_speed_m_per_s)
+
+
+# [[transient.contacts]] is a tagged union on `kind`: one dataclass per kind (app.case.validate
+# dispatches a list entry on its `kind` and names a key of another kind). A new kind is a new class
+# here plus its entry in app.transient.interactions.INTERACTIONS.
+@dataclass(frozen=True, kw_only=True)
+class SurfaceContactSection:
     name: str = param(doc="contact name (time series key)")
-    kind: Literal["surface", "point", "node"] = param(
-        doc="FE facets vs rigid body, rigid vs rigid (Kelvin-Voigt), or one FE node vs a rigid sphere (Hertz)")
-    stiffness: float = param(gt=0, doc="penalty: Pa/m (surface, FKN as absolute value), N/m (point) or "
-                                       "N/m^1.5 (node: Hertz (4/3) E* sqrt(R))")
-    damping: float = param(0.0, ge=0, doc="normal damping: Pa s/m (surface) or N s/m (point, node)")
-    # surface contacts
-    facets: TagRef | None = param(None, doc="facet group of the FE surface (surface)")
-    body: str | None = param(None, doc="rigid body the surface or node touches (surface, node)")
-    node_point: str | None = param(None, doc="named [points] entry; its nearest FE node is the contact node (node)")
-    shape: Literal["plane", "sphere"] = param("plane", doc="obstacle shape of the body (surface)")
+    kind: Literal["surface"] = param(doc="FE facets against an obstacle shape of a rigid body (penalty)")
+    stiffness: float = param(gt=0, unit="Pa/m", doc="penalty per unit area (FKN as an absolute value)")
+    damping: float = param(0.0, ge=0, unit="Pa s/m", doc="normal viscous pressure per unit gap rate")
+    facets: TagRef = param(doc="facet group of the FE surface")
+    body: str = param(doc="rigid body the surface touches")
+    shape: Literal["plane", "sphere"] = param("plane", doc="obstacle shape of the body")
     normal: list[float] | None = param(
         None, doc="plane: outward unit normal, towards the FE body; sphere (optional): unit vector from the centre "
-                  "towards the contact zone, the gap is then formed without round-off (large radii); node: unit "
-                  "vector from sphere centre to node")
-    radius_m: float | None = param(None, gt=0, unit="m", doc="sphere radius (surface sphere, node)")
-    # point contacts
-    lower: str | None = param(None, doc="lower body (point)")
-    upper: str | None = param(None, doc="upper body (point)")
-    direction: list[float] | None = param(None, doc="unit vector from lower to upper (point)")
-    touch_distance_m: float = param(0.0, ge=0, unit="m", doc="centre distance at first touch (point)")
+                  "towards the contact zone, the gap is then formed without round-off (large radii)")
+    radius_m: float | None = param(None, gt=0, unit="m", doc="sphere radius")
+    friction: SurfaceFrictionSection | None = param(None, doc="Coulomb friction (none: frictionless)")
 
     def check(self, file, prefix):
-        if self.kind == "surface":
-            for key in ("facets", "body"):
-                if getattr(self, key) is None:
-                    raise CaseError(file, f"{prefix}.{key}", "required for a surface contact")
-            if self.shape == "plane" and self.normal is None:
-                raise CaseError(file, f"{prefix}.normal", "a plane obstacle needs a normal")
-            if self.shape == "sphere" and self.radius_m is None:
-                raise CaseError(file, f"{prefix}.radius_m", "a sphere obstacle needs a radius")
-        elif self.kind == "node":
-            for key in ("body", "node_point", "radius_m", "normal"):
-                if getattr(self, key) is None:
-                    raise CaseError(file, f"{prefix}.{key}", "required for a node contact")
-        else:
-            for key in ("lower", "upper", "direction"):
-                if getattr(self, key) is None:
-                    raise CaseError(file, f"{prefix}.{key}", "required for a point contact")
+        if self.shape == "plane" and self.normal is None:
+            raise CaseError(file, f"{prefix}.normal", "a plane obstacle needs a normal")
+        if self.shape == "sphere" and self.radius_m is None:
+            raise CaseError(file, f"{prefix}.radius_m", "a sphere obstacle needs a radius")
 
     def bodies(self) -> list[tuple[str, str]]:
-        """(key, body name) pairs this contact refers to."""
-        keys = ("body",) if self.kind in ("surface", "node") else ("lower", "upper")
-        return [(k, getattr(self, k)) for k in keys]
+        return [("body", self.body)]
+
+
+@dataclass(frozen=True, kw_only=True)
+class NodeContactSection:
+    name: str = param(doc="contact name (time series key)")
+    kind: Literal["node"] = param(doc="one FE node against a rigid sphere (Hertz)")
+    stiffness: float = param(gt=0, unit="N/m^1.5", doc="Hertz (4/3) E* sqrt(R)")
+    damping: float = param(0.0, ge=0, unit="N s/m", doc="normal damping")
+    body: str = param(doc="rigid body the node touches")
+    node_point: str = param(doc="named [points] entry; its nearest FE node is the contact node")
+    radius_m: float = param(gt=0, unit="m", doc="sphere radius")
+    normal: list[float] = param(doc="unit vector from the sphere centre to the node")
+    friction: LinkFrictionSection | None = param(None, doc="Coulomb friction of the node (none: frictionless)")
+
+    def bodies(self) -> list[tuple[str, str]]:
+        return [("body", self.body)]
+
+
+@dataclass(frozen=True, kw_only=True)
+class PointContactSection:
+    name: str = param(doc="contact name (time series key)")
+    kind: Literal["point"] = param(doc="rigid body against rigid body (Kelvin-Voigt link)")
+    stiffness: float = param(gt=0, unit="N/m", doc="link stiffness")
+    damping: float = param(0.0, ge=0, unit="N s/m", doc="link damping")
+    lower: str = param(doc="lower body")
+    upper: str = param(doc="upper body")
+    direction: list[float] = param(doc="unit vector from lower to upper")
+    touch_distance_m: float = param(0.0, ge=0, unit="m", doc="reference-point distance at first touch")
+    contact_offset_m: float = param(
+        0.0, ge=0, unit="m", doc="distance from the upper body's reference point to the contact point, against "
+                                 "`direction` (the radius of a disc or ball on the lower body): the lever arm of "
+                                 "friction")
+    friction: LinkFrictionSection | None = param(None, doc="Coulomb friction (none: frictionless)")
+
+    def bodies(self) -> list[tuple[str, str]]:
+        return [("lower", self.lower), ("upper", self.upper)]
+
+
+ContactSection = SurfaceContactSection | NodeContactSection | PointContactSection
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,7 @@ class RunStatistics:
 class EnergyAccount:
     """Mechanical energy of a state and the work of external loads, for balance checks.
 
-    Energy = 1/2 v.Mv + 1/2 u.Ku (FE) + 1/2 m |zd|^2 (rigid) + penalty energies; the work of FE
+    Energy = 1/2 v.Mv + 1/2 u.Ku (FE) + 1/2 m |zd|^2 + 1/2 J omega^2 (rigid) + penalty energies; the work of FE
     loads and rigid-body forces (incl. gravity) is accumulated with the trapezoidal rule."""
 
     def __init__(self, system: CoupledSystem):
@@ -72,19 +72,9 @@ class EnergyAccount:
             out["strain_fe_J"] = self._quadratic(sysm.fe.K, state.u)
             for f in sysm.fields:
                 f.u_mid.x.array[:] = state.u
-            for c in sysm.surface_contacts:
-                sl = sysm.rigid.dofs(c.body)
-                c.set_body_state(state.z[sl], state.zd[sl])
-                out["contact_J"] += c.elastic_energy_J()
-            for c in sysm.node_contacts:
-                sl = sysm.rigid.dofs(c.body)
-                delta, _ = c.penetration(state.u, state.v, state.z[sl], state.zd[sl])
-                out["contact_J"] += c.elastic_energy_J(delta)
+        for c in sysm.interactions:
+            out["contact_J"] += c.stored_energy_J(sysm, state)
         out["kinetic_rigid_J"] = 0.5 * float(np.sum(sysm.rigid.mass_diagonal * state.zd**2))
-        for c in sysm.point_contacts:
-            lo, up = sysm.rigid.dofs(c.lower), sysm.rigid.dofs(c.upper)
-            delta, _ = c.penetration(state.z[lo], state.z[up], state.zd[lo], state.zd[up])
-            out["contact_J"] += c.elastic_energy_J(delta)
         out["total_J"] = sum(out.values())
         return out
 
