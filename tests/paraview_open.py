@@ -1,5 +1,6 @@
 """Open a piezodyn field file with ParaView's own XDMF readers and render it (run by pvpython, see
-tests/test_paraview.py): ``xvfb-run -a pvpython tests/paraview_open.py FILE.xdmf OUT.png``.
+tests/test_paraview.py, which gives it a private Xvfb display): by hand,
+``xvfb-run -a pvpython tests/paraview_open.py FILE.xdmf OUT.png``.
 
 Prints one JSON object: the time values, for every reader (Xdmf3ReaderT, Xdmf3ReaderS and the
 legacy XDMFReader) its blocks with their point, cell and field arrays, and after Warp By Vector

@@ -1,7 +1,7 @@
 """Results open in ParaView: a transient result (serial and on 2 ranks) and a modal result, read by
-ParaView's own XDMF readers through pvpython under Xvfb (tests/paraview_open.py): Warp By Vector
-on the displacement, the potential on the same (warped) grid, the region tags, the rigid bodies as
-their own blocks, the mode frequencies as the time values. Skipped only when pvpython or xvfb-run
+ParaView's own XDMF readers through pvpython on a private Xvfb display (tests/paraview_open.py):
+Warp By Vector on the displacement, the potential on the same (warped) grid, the region tags, the rigid bodies as
+their own blocks, the mode frequencies as the time values. Skipped only when pvpython or Xvfb
 is absent (.ci/install.sh installs them). ``PIEZODYN_UPDATE_FIGURES=1`` copies the rendered PNGs
 to docs/figures/.
 
@@ -28,15 +28,33 @@ FE_TINY = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic
 TRANSDUCER_MODAL = ['analyses=["modal"]', "output.plots=false", "geometry.parameters.mesh_size_m=0.003",
                     "geometry.parameters.ceramic_mesh_size_m=0.002"]
 FIGURES = ROOT / "docs" / "figures"
-HAVE_PARAVIEW = shutil.which("pvpython") is not None and shutil.which("xvfb-run") is not None
+HAVE_PARAVIEW = shutil.which("pvpython") is not None and shutil.which("Xvfb") is not None
 needs_paraview = pytest.mark.skipif(not HAVE_PARAVIEW or MPI.COMM_WORLD.size > 1,
-                                    reason="needs pvpython and xvfb-run (.ci/install.sh installs them); serial")
+                                    reason="needs pvpython and Xvfb (.ci/install.sh installs them); serial")
 
 
-def open_in_paraview(xdmf: Path, png: Path, at: float | None = None) -> dict:
-    cmd = ["xvfb-run", "-a", "pvpython", str(ROOT / "tests" / "paraview_open.py"), str(xdmf), str(png)]
+@pytest.fixture(scope="module")
+def x_display():
+    """A private Xvfb display. Not ``xvfb-run -a``: it picks the first display without a lock file
+    and races with any other xvfb-run starting at the same moment (seen on this shared machine as
+    'bad X server connection. DISPLAY=:99' in 2 of 6 runs); ``-displayfd`` lets the server itself
+    take a free display and report it once it accepts connections."""
+    read, write = os.pipe()
+    server = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+                              pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write)
+    with os.fdopen(read) as pipe:
+        number = pipe.readline().strip()
+    assert number, "Xvfb did not start"
+    yield f":{number}"
+    server.terminate()
+    server.wait(timeout=30)
+
+
+def open_in_paraview(display: str, xdmf: Path, png: Path, at: float | None = None) -> dict:
+    cmd = ["pvpython", str(ROOT / "tests" / "paraview_open.py"), str(xdmf), str(png)]
     result = subprocess.run(cmd + ([repr(at)] if at is not None else []), capture_output=True, text=True,
-                            timeout=300, cwd=xdmf.parent, env=dict(os.environ, MPLBACKEND="Agg"))
+                            timeout=300, cwd=xdmf.parent, env=dict(os.environ, MPLBACKEND="Agg", DISPLAY=display))
     lines = [line for line in result.stdout.splitlines() if line.startswith("PIEZODYN-REPORT ")]
     assert lines, f"pvpython failed ({result.returncode}): {result.stderr[-3000:]}"
     assert png.is_file() and png.stat().st_size > 10_000
@@ -91,28 +109,29 @@ def transient_result(tmp_path_factory):
 
 
 @needs_paraview
-def test_transient_result_in_paraview(transient_result):
-    report = open_in_paraview(transient_result / "transient_fields.xdmf", transient_result / "paraview_transient.png")
+def test_transient_result_in_paraview(x_display, transient_result):
+    report = open_in_paraview(x_display, transient_result / "transient_fields.xdmf",
+                              transient_result / "paraview_transient.png")
     check_transient(report, transient_result)
 
 
 @needs_paraview
-def test_two_rank_transient_result_in_paraview(tmp_path):
+def test_two_rank_transient_result_in_paraview(x_display, tmp_path):
     result = run_cli("run", CASES / "usdc-fe.toml", "--out", tmp_path, "--quiet",
                      *[a for o in FE_TINY for a in ("--set", o)], mpi=2)
     assert result.returncode == 0, result.stderr[-2000:]
-    report = open_in_paraview(tmp_path / "transient_fields.xdmf", tmp_path / "paraview_transient_2ranks.png")
+    report = open_in_paraview(x_display, tmp_path / "transient_fields.xdmf", tmp_path / "paraview_transient_2ranks.png")
     check_transient(report, tmp_path)
 
 
 @needs_paraview
-def test_modal_result_in_paraview(tmp_path):
+def test_modal_result_in_paraview(x_display, tmp_path):
     result = run_cli("run", CASES / "usdc-transducer.toml", "--out", tmp_path, "--quiet",
                      *[a for o in TRANSDUCER_MODAL for a in ("--set", o)])
     assert result.returncode == 0, result.stderr[-2000:]
     modal = json.loads((tmp_path / "summary.json").read_text())["results"]["modal"]
     frequencies = [m["resonance_Hz"] for m in modal["modes"]]
-    report = open_in_paraview(tmp_path / "modes_short.xdmf", tmp_path / "paraview_modes.png",
+    report = open_in_paraview(x_display, tmp_path / "modes_short.xdmf", tmp_path / "paraview_modes.png",
                               at=modal["working_resonance_Hz"])
     for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
         np.testing.assert_allclose(report[reader]["times"], frequencies, rtol=1e-12)   # time = frequency [Hz]
