@@ -29,13 +29,3 @@ def vector_space(mesh, family: str, degree: int):
 
 def scalar_space(mesh, family: str, degree: int):
     return fem.FunctionSpace(mesh, (family, degree))
-
-
-def petsc_vector(function):
-    """The PETSc Vec sharing memory with a Function (``u.x.petsc_vec`` from 0.8)."""
-    return function.vector
-
-
-def write_meshtags(xdmf, tags, mesh):
-    """``XDMFFile.write_meshtags`` (takes the geometry as a second argument from 0.8)."""
-    xdmf.write_meshtags(tags)

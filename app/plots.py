@@ -189,7 +189,8 @@ def replot(result_dir: str | Path, write: bool = True) -> list[str]:
         bodies = [b["name"] for b in section.get("bodies", [])
                   if not b.get("fixed") and (b.get("free_axes") is None or any(b["free_axes"]))]
         contacts = [c["name"] for c in section.get("contacts", [])]
+        downforce = (section.get("loads") or {}).get("fe_force_N") or [0.0]
+        title = f"{Path(case.get('source', 'case')).stem}, downforce {float(np.linalg.norm(downforce)):.3g} N"
         written += plot_time_series(series, result_dir / "transient_motion.png", result_dir / "transient_force.png",
-                                    (section.get("drive") or {}).get("point"), bodies,
-                                    contacts[-1] if contacts else None)
+                                    (section.get("drive") or {}).get("point"), bodies, contacts, title=title)
     return written

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import os
 import platform
-import sys
 from pathlib import Path
 
 from mpi4py import MPI
@@ -234,12 +233,3 @@ def print_table(results: dict, log) -> None:
     for label, value, unit in rows:
         log(f"{label:<{width}}  {value:>14} {unit}")
     log("-" * (width + 24))
-
-
-def main_run(args) -> int:
-    run_case(args.case, args.set, args.out, quiet=args.quiet, resume=bool(getattr(args, "resume", None)))
-    return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main_run(sys.argv[1:]))

@@ -423,9 +423,10 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     results["contacts"], results["statistics"] = comm.bcast(summaries, root=0)
     if case.output.plots and comm.rank == 0:
         bodies = [b.name for b in tm.rigid.bodies if b.free_axes_mask.any()]
-        force_contact = contact_names[-1] if contact_names else None
+        downforce = np.asarray(cfg.loads.fe_force_N or [0.0])
+        title = f"{Path(case.source).stem}, downforce {np.linalg.norm(downforce):.3g} N"
         results["plots"] = plot_time_series(h5_path, out_dir / "transient_motion.png", out_dir / "transient_force.png",
-                                            tm.drive_point, bodies, force_contact)
+                                            tm.drive_point, bodies, contact_names, title=title)
     results["outputs"] = [h5_path.name, *checkpoint.files(), *(fields.files() if fields is not None else []),
                           *results.get("plots", [])]
     system.destroy()

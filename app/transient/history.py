@@ -86,8 +86,9 @@ class TimeSeriesExport:
 
 
 def plot_time_series(h5_path: Path, png_motion: Path, png_force: Path, point: str | None, bodies: list[str],
-                     force_contact: str | None) -> list[str]:
-    """Fig. 7/9-like displacement plot (tip, bodies, vertical component) and Fig. 5-like force plot."""
+                     force_contacts: list[str], title: str = "") -> list[str]:
+    """Fig. 7/9-like displacement plot (tip, bodies, vertical component) and Fig. 5-like force plot
+    with one panel per contact (force magnitude on the rigid body), both titled ``title``."""
     import h5py
     import matplotlib
 
@@ -109,17 +110,22 @@ def plot_time_series(h5_path: Path, png_motion: Path, png_force: Path, point: st
                 ax.plot(t_ms, (z - z[0]) * 1e6, label=body, lw=0.8)
         ax.set_xlabel("time [ms]")
         ax.set_ylabel("axial displacement [µm]")
+        if title:
+            ax.set_title(title)
         ax.legend()
         fig.tight_layout()
         fig.savefig(png_motion, dpi=120)
         plt.close(fig)
         written.append(png_motion.name)
-        key = f"{force_contact}_force_N" if force_contact else None
-        if key and key in f:
-            fig, ax = plt.subplots(figsize=(8, 3))
-            ax.plot(t_ms, np.linalg.norm(f[key][:], axis=1), lw=0.8)
-            ax.set_xlabel("time [ms]")
-            ax.set_ylabel(f"{force_contact} force [N]")
+        contacts = [c for c in force_contacts if f"{c}_force_N" in f]
+        if contacts:
+            fig, axes = plt.subplots(len(contacts), 1, figsize=(8, 1.2 + 1.8 * len(contacts)), sharex=True,
+                                     squeeze=False)
+            for ax, contact in zip(axes[:, 0], contacts):
+                ax.plot(t_ms, np.linalg.norm(f[f"{contact}_force_N"][:], axis=1), lw=0.8)
+                ax.set_ylabel(f"{contact} [N]")
+            axes[-1, 0].set_xlabel("time [ms]")
+            axes[0, 0].set_title(f"{title}: contact forces" if title else "contact forces")
             fig.tight_layout()
             fig.savefig(png_force, dpi=120)
             plt.close(fig)
