@@ -18,6 +18,7 @@ from app.errors import CaseError
 from app.exports import write_json_atomic
 from app.mpi_log import PhaseTimer, make_log
 from app.progress import silenced
+from app.tiers import TIERS
 
 
 def versions() -> dict:
@@ -100,23 +101,24 @@ def run_case(case_path: str | Path, overrides: list[str] | None = None, out_dir:
     log(f"piezodyn {__version__}: {case.title or Path(case_path).name} -> {out}/ ({comm.size} MPI rank(s))")
     summary = {"case": to_dict(case), "versions": versions(), "mpi_size": comm.size, "results": {},
                "outputs": []}
-    if case.tier == "lumped":
-        from app.lumped import driver
-
-        with timer.phase("lumped"):
-            summary["results"]["lumped"] = driver.run(case.lumped, out, comm, log)
-        files = summary["results"]["lumped"].get("files", {})
-        summary["outputs"] += [files["time_series"]] if "time_series" in files else []
-        summary["outputs"] += list(files.get("plots", []))
-    else:
-        with silenced(quiet):  # --quiet: no transient progress either
-            run_fe(case, out, comm, log, timer, summary, resume)
+    with silenced(quiet):  # --quiet: no progress output either
+        TIERS[case.tier].run(case, out, comm, log, timer, summary, resume)
     summary["wall_time_s"] = timer.seconds
     summary["outputs"].append("summary.json")
     if comm.rank == 0:
         write_json_atomic(out / "summary.json", summary)
     log(f"summary: {out / 'summary.json'}")
     return summary
+
+
+def run_lumped(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, resume: bool) -> None:
+    from app.lumped import driver
+
+    with timer.phase("lumped"):
+        summary["results"]["lumped"] = driver.run(case.lumped, out, comm, log)
+    files = summary["results"]["lumped"].get("files", {})
+    summary["outputs"] += [files["time_series"]] if "time_series" in files else []
+    summary["outputs"] += list(files.get("plots", []))
 
 
 def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, resume: bool) -> None:

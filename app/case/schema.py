@@ -171,8 +171,9 @@ class Case:
                                     f"unknown material {region.material!r}; defined: {', '.join(self.materials)}")
                 if isinstance(region.poling, list) and (len(region.poling) != 3 or not any(region.poling)):
                     raise CaseError(file, f"regions[{i}].poling", "a poling vector needs 3 non-zero-norm entries")
-        runnable = {"fe": ("modal", "harmonic", "circuit", "transient"),
-                    "modal": ("modal", "harmonic", "circuit", "transient"), "lumped": ("lumped",)}[self.tier]
+        from app.tiers import TIERS
+
+        runnable = TIERS[self.tier].analyses
         for i, analysis in enumerate(self.analyses or []):
             if analysis not in runnable:
                 raise CaseError(file, f"analyses[{i}]", f"tier {self.tier!r} cannot run analysis {analysis!r} "
@@ -258,12 +259,12 @@ def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
             raise CaseError(file, name, "this section is not supported by this build")
     case = from_dict(Case, raw, file)
     materials = {name: resolve(m, file, f"materials.{name}") for name, m in case.materials.items()}
-    analyses = case.analyses if case.analyses is not None else (["lumped"] if case.tier == "lumped" else ["modal"])
+    from app.tiers import TIERS, check_tier
+
+    default = list(TIERS[case.tier].default_analyses) if case.tier in TIERS else []
+    analyses = case.analyses if case.analyses is not None else default
     case = replace(case, materials=materials, analyses=analyses, source=str(path.resolve()), **extra)
+    check_tier(case, file)
     if case.tier == "modal" and case.transient is not None:
         _check_modal_tier(case.transient, file)
-    if case.tier == "lumped" and case.lumped is None:
-        raise CaseError(file, "lumped", "section required for tier = 'lumped'")
-    if "transient" in case.analyses and case.transient is None:
-        raise CaseError(file, "transient", "section required by analysis 'transient'")
     return case

@@ -1,0 +1,80 @@
+"""Model tiers as a registry keyed by the case's ``tier``: what each tier runs, the sections it
+needs and the sections it cannot use, checked when the case is validated (before any mesh).
+
+A new tier is one :class:`Tier` entry here plus its runner
+function; ``app.runner.run_case`` dispatches through :data:`TIERS`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib import import_module
+
+from app.errors import CaseError
+
+
+@dataclass(frozen=True)
+class Tier:
+    """``analyses``: what the tier can run (first ``default_analyses`` when the case lists none);
+    ``requires``: sections every case of the tier needs; ``analysis_sections``: sections an
+    analysis needs; ``foreign``: sections of other tiers, an error here (they would be ignored);
+    ``runner``: ``"module:function"`` called as ``f(case, out, comm, log, timer, summary, resume)``."""
+
+    name: str
+    doc: str
+    analyses: tuple[str, ...]
+    default_analyses: tuple[str, ...]
+    runner: str
+    requires: tuple[str, ...] = ()
+    analysis_sections: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    foreign: tuple[str, ...] = ()
+
+    def run(self, *args):
+        module, _, function = self.runner.partition(":")
+        return getattr(import_module(module), function)(*args)
+
+
+TIERS: dict[str, Tier] = {
+    "fe": Tier(
+        "fe", "full finite-element model (dolfinx)",
+        analyses=("modal", "harmonic", "circuit", "transient"), default_analyses=("modal",),
+        runner="app.runner:run_fe", requires=("geometry",),
+        analysis_sections={"transient": ("transient",)},
+        foreign=("lumped",)),
+    "modal": Tier(
+        "modal", "modal-reduced FE: the transient on a Craig-Bampton basis (docs/reduced.md); the "
+                 "frequency-domain analyses on the FE model",
+        analyses=("modal", "harmonic", "circuit", "transient"), default_analyses=("transient",),
+        runner="app.runner:run_fe", requires=("geometry",),
+        analysis_sections={"transient": ("transient",)},
+        foreign=("lumped",)),
+    "lumped": Tier(
+        "lumped", "lumped-parameter drill model (transducer modes + rigid bodies)",
+        analyses=("lumped",), default_analyses=("lumped",),
+        runner="app.runner:run_lumped", requires=("lumped",),
+        foreign=("geometry", "transient")),
+}
+
+
+def check_tier(case, file: str) -> None:
+    """Tier-level input checks of a loaded case (one CaseError naming the key)."""
+    tier = TIERS.get(case.tier)
+    if tier is None:
+        raise CaseError(file, "tier", f"unknown tier {case.tier!r} (tiers: {', '.join(TIERS)})")
+    for i, analysis in enumerate(case.analyses or ()):
+        if analysis not in tier.analyses:
+            raise CaseError(file, f"analyses[{i}]", f"{analysis!r} is not an analysis of tier {tier.name!r} "
+                                                    f"(it runs: {', '.join(tier.analyses)})")
+    for section in tier.requires:
+        if getattr(case, section) is None:
+            raise CaseError(file, section, f"section required for tier = {tier.name!r}")
+    for analysis in case.analyses or ():
+        for section in tier.analysis_sections.get(analysis, ()):
+            if getattr(case, section) is None:
+                raise CaseError(file, section, f"section required by analysis {analysis!r}")
+    for section in tier.foreign:
+        if getattr(case, section) is not None:
+            owners = [t.name for t in TIERS.values() if section in t.requires or
+                      any(section in s for s in t.analysis_sections.values())]
+            raise CaseError(file, section, f"belongs to tier {' or '.join(map(repr, owners))}, "
+                                           f"not {tier.name!r}")
