@@ -73,11 +73,18 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
         with timer.phase("assemble"):
             ops = assemble_operators(model)
     if "modal" in case.analyses:
-        from app.modal import modal_summary, run_modal
+        from app.modal import modal_summary, mode_table, mode_table_lines, run_modal, write_mode_csv
 
         with timer.phase("modal"):
             modal = run_modal(model, ops)
             results["modal"] = modal_summary(model, modal)
+        rows = mode_table(modal)
+        if modal.orders is not None:
+            for line in mode_table_lines(rows, modal.working):
+                log(line)
+        if comm.rank == 0:
+            write_mode_csv(out / "modes.csv", rows)
+        summary["outputs"].append("modes.csv")
         f_r, f_a = modal.working_mode.frequency_Hz, modal.antiresonance_Hz()
         log(f"modal: working mode f_r = {f_r:.2f} Hz" + (f", f_a = {f_a:.2f} Hz, k_eff = "
                                                           f"{results['modal']['working_k_eff']:.4f}" if f_a else ""))
@@ -91,14 +98,20 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
     if damping_f is None and case.harmonic is not None and case.harmonic.f_start_Hz is not None:
         damping_f = 0.5 * (case.harmonic.f_start_Hz + case.harmonic.f_stop_Hz)
     if "harmonic" in case.analyses or "circuit" in case.analyses:
-        from app.harmonic import harmonic_summary, run_harmonic
+        from app.harmonic import harmonic_summary, run_harmonic, wave_lines
 
         with timer.phase("assemble"):
             add_damping(ops, model, damping_f)
         if "harmonic" in case.analyses:
             with timer.phase("harmonic"):
-                harmonic = run_harmonic(model, ops, f_r, f_a, log)
+                wave_writer = None
+                if case.output.fields and case.harmonic.wave and case.harmonic.wave.animation_frames:
+                    def wave_writer(model_, solver, frequency_Hz):
+                        write_wave(model_, solver, frequency_Hz, case.harmonic.wave.animation_frames, out, summary)
+                harmonic = run_harmonic(model, ops, f_r, f_a, log, wave_writer)
                 results["harmonic"] = harmonic_summary(harmonic)
+                for line in wave_lines(results["harmonic"].get("travelling_wave")):
+                    log(line)
         if "circuit" in case.analyses:
             from app.circuit import equivalent_circuit
 
@@ -132,6 +145,26 @@ def write_modes(model, modal, out: Path, summary: dict) -> None:
             export.write(model.displacement(mode.vector), i)
         export.close()
         summary["outputs"].append(name)
+
+
+def write_wave(model, solver, frequency_Hz: float, frames: int, out: Path, summary: dict) -> None:
+    """The steady wave u(t) = Re(x exp(i omega t)) over one period as an XDMF series ('time' in s)."""
+    import math
+
+    from app.exports import ModeShapeExport
+
+    x_re, x_im = solver.full_solution()
+    u_re = model.displacement(x_re).copy()
+    u_im = model.displacement(x_im).copy()
+    u_t = u_re.copy()
+    period = 1.0 / frequency_Hz
+    export = ModeShapeExport(out / "travelling_wave.xdmf", model.mesh)
+    for k in range(frames):
+        phase = 2 * math.pi * k / frames
+        u_t.x.array[:] = math.cos(phase) * u_re.x.array - math.sin(phase) * u_im.x.array
+        export.write(u_t, k * period / frames)
+    export.close()
+    summary["outputs"].append("travelling_wave.xdmf")
 
 
 def print_table(results: dict, log) -> None:
