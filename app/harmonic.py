@@ -222,9 +222,11 @@ def wave_measures(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: flo
 
 
 def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float | None, log,
-                 wave_writer=None) -> HarmonicResult:
-    """Sweep, |Y| extrema, target amplitude and travelling-wave measures. ``wave_writer(model, solver,
-    f)``, when given, exports the steady wave of the solver's last solution (the runner's export)."""
+                 wave_writer=None, wave_frequency_Hz: float | None = None) -> HarmonicResult:
+    """Sweep, |Y| extrema, target amplitude and travelling-wave measures. The wave is evaluated at
+    harmonic.wave.frequency_Hz, else ``wave_frequency_Hz`` (the runner passes the centre of the
+    working mode's split pair), else f_r, else the |Y| peak. ``wave_writer(model, solver, f)``, when
+    given, exports the steady wave of the solver's last solution (the runner's export)."""
     cfg = model.case.harmonic
     solver = HarmonicSolver(model, ops, cfg.voltage_V)
     try:
@@ -261,7 +263,7 @@ def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float |
             result.voltage_for_target_V = (result.drive_scale_for_target * cfg.voltage_V
                                            if amp > 0 else None)
         if cfg.wave is not None:
-            wave_f = cfg.wave.frequency_Hz or f_r or result.peak_Hz
+            wave_f = cfg.wave.frequency_Hz or wave_frequency_Hz or f_r or result.peak_Hz
             result.wave_point = solver.solve(wave_f)
             result.wave = wave_measures(model, solver, cfg.wave, wave_f)
             if wave_writer is not None:

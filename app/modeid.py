@@ -4,7 +4,8 @@ Displacements are sampled round a circle (r, z) and along a generatrix, turned i
 components (r, theta, z) and Fourier-analysed round the circle:
 - circumferential order n: the harmonic with the most energy over all three components;
 - axial order m: 1 + the sign changes of the n-th harmonic of u_r along the generatrix (weak values
-  below 5 % of the largest are skipped), so m = 1 is the family without a nodal circle;
+  below 5 % of the largest are skipped), so m = 1 is the family without a nodal circle; not given
+  for torsional (u_theta-dominated) modes;
 - partner: the other mode of the same (m, n) nearest in frequency; split = its frequency difference.
 """
 
@@ -143,7 +144,7 @@ class ModeIdentifier:
     def order(self, u) -> ModeOrder:
         n, component, purity = circumferential_order(self.circle_cylindrical(u))
         m = None
-        if self.line is not None:
+        if self.line is not None and component != "theta":  # u_r says nothing of a torsional shape
             values = self.line(u).reshape(self.theta.size, self.n_z, 3)
             u_r = np.cos(self.theta)[:, None] * values[..., 0] + np.sin(self.theta)[:, None] * values[..., 1]
             m = axial_order(u_r, n)

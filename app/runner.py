@@ -108,7 +108,7 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
                 if case.output.fields and case.harmonic.wave and case.harmonic.wave.animation_frames:
                     def wave_writer(model_, solver, frequency_Hz):
                         write_wave(model_, solver, frequency_Hz, case.harmonic.wave.animation_frames, out, summary)
-                harmonic = run_harmonic(model, ops, f_r, f_a, log, wave_writer)
+                harmonic = run_harmonic(model, ops, f_r, f_a, log, wave_writer, pair_centre_Hz(modal))
                 results["harmonic"] = harmonic_summary(harmonic)
                 for line in wave_lines(results["harmonic"].get("travelling_wave")):
                     log(line)
@@ -145,6 +145,13 @@ def write_modes(model, modal, out: Path, summary: dict) -> None:
             export.write(model.displacement(mode.vector), i)
         export.close()
         summary["outputs"].append(name)
+
+
+def pair_centre_Hz(modal) -> float | None:
+    """Centre of the working mode and its degenerate partner: a two-phase drive runs between them."""
+    if modal is None or modal.orders is None or modal.orders[modal.working].partner is None:
+        return None
+    return 0.5 * (modal.working_mode.frequency_Hz + modal.short[modal.orders[modal.working].partner].frequency_Hz)
 
 
 def write_wave(model, solver, frequency_Hz: float, frames: int, out: Path, summary: dict) -> None:

@@ -31,9 +31,10 @@ def stator():
 
 def _solve(stator, phasors, frequency_Hz=None):
     from app.harmonic import HarmonicSolver, wave_measures
+    from app.runner import pair_centre_Hz
 
     model, ops, modal = stator
-    f = frequency_Hz or modal.working_mode.frequency_Hz
+    f = frequency_Hz or pair_centre_Hz(modal)
     solver = HarmonicSolver(model, ops, 200.0, prefix="test_phases_", phasors=phasors)
     try:
         point = solver.solve(f)
