@@ -1,8 +1,12 @@
 """Harmonic analysis with damping on a real PETSc build.
 
 The complex system (K - omega^2 M + i omega C) x = f is solved as the real 2x2 block system
-[[A, -omega C], [omega C, A]] [x_re; x_im] = [f_re; f_im], A = K - omega^2 M, with driven electrodes
-at the drive voltage (real). Admittance Y = i omega Q / V with Q the driven electrodes' charge.
+[[A, -omega C], [omega C, A]] [x_re; x_im] = [f_re; f_im], A = K - omega^2 M. Each driven electrode
+e is held at its phasor V_e = A_e exp(i phase_e) (U_e(t) = A_e cos(omega t + phase_e)): the real and
+imaginary parts are the Dirichlet values of the two halves. Admittance of an electrode
+Y_e = i omega Q_e / V_e with Q_e its charge; the summary admittance Y = i omega sum_e Q_e / voltage_V
+(for one phase at the default amplitude, the electrode's admittance). Floating electrodes report
+their potential phasor (a sensor's voltage).
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from dolfinx import fem
 from petsc4py import PETSc
 
 from app.errors import NumericalFailure
@@ -25,29 +30,57 @@ class HarmonicPoint:
     charge_C: complex
     admittance_S: complex
     displacement_m: dict[str, complex] = field(default_factory=dict)
+    electrode_admittance_S: dict[str, complex] = field(default_factory=dict)
+    floating_voltage_V: dict[str, complex] = field(default_factory=dict)
+    electrode_charge_C: dict[str, complex] = field(default_factory=dict)
+
+
+def drive_phasors(model: FEModel, voltage_V: float) -> dict[str, complex]:
+    """Phasor [V] of each driven electrode: amplitude_V (default ``voltage_V``) at phase_deg."""
+    out = {}
+    for name in model.electrodes_of("voltage"):
+        electrode = model.case.electrodes[name]
+        amplitude = voltage_V if electrode.amplitude_V is None else electrode.amplitude_V
+        out[name] = amplitude * complex(math.cos(math.radians(electrode.phase_deg)),
+                                        math.sin(math.radians(electrode.phase_deg)))
+    return out
 
 
 class HarmonicSolver:
     """Solves the driven steady state at one frequency at a time, reusing one block matrix and one
     LU factorisation object (numeric refactorisation per frequency)."""
 
-    def __init__(self, model: FEModel, ops: Operators, voltage_V: float, prefix: str = "harmonic_"):
+    def __init__(self, model: FEModel, ops: Operators, voltage_V: float, prefix: str = "harmonic_",
+                 phasors: dict[str, complex] | None = None):
         self.model, self.ops, self.voltage_V = model, ops, voltage_V
         self.comm = ops.K.getComm()
         driven = model.electrodes_of("voltage")
         if not driven:
             raise NumericalFailure("harmonic analysis needs an electrode of kind 'voltage'")
+        self.phasors = drive_phasors(model, voltage_V) if phasors is None else phasors
         self.constraints: ConstraintSet = electrical_state(model, "driven")
         self.chi = indicator(model, driven)
-        x_drive = self.chi.copy()
-        x_drive.scale(voltage_V)
+        self.chi_e = {name: indicator(model, [name]) for name in driven}
+        values = fem.Function(model.W)  # assigned, not summed: DOFs shared by electrodes count once
+        values_im = fem.Function(model.W)
+        for name, phasor in self.phasors.items():
+            values.x.array[model.electrode_dofs[name]] = phasor.real
+            values_im.x.array[model.electrode_dofs[name]] = phasor.imag
+        x_drive, x_drive_im = values.vector.copy(), values_im.vector.copy()
+        self.floating_dofs = {}
+        n_owned = model.W.dofmap.index_map.size_local
+        for name in model.electrodes_of("floating"):
+            dofs = model.electrode_dofs[name]
+            self.floating_dofs[name] = dofs[dofs < n_owned][:1]
         self.K_r = self.constraints.reduce(ops.K)
         self.M_r = self.constraints.reduce(ops.M)
         self.C_r = self.constraints.reduce(ops.C) if ops.C is not None else self.M_r.duplicate()
         if ops.C is None:
             self.C_r.zeroEntries()
         self.x_drive_r = self.constraints.reduce_vector(x_drive)
+        x_drive_im_r = self.constraints.reduce_vector(x_drive_im)
         x_drive.destroy()
+        x_drive_im.destroy()
         self.A = self.K_r.duplicate(copy=True)
         self.Cp = self.C_r.duplicate(copy=True)
         self.Cm = self.C_r.duplicate(copy=True)
@@ -67,6 +100,8 @@ class HarmonicSolver:
         self.x_bc = self.b.duplicate()
         self.x_bc.zeroEntries()
         self.x_bc.array[: self.n_local] = self.x_drive_r.array_r
+        self.x_bc.array[self.n_local:] = x_drive_im_r.array_r
+        x_drive_im_r.destroy()
         self.rows = self._block_rows()
         self.x_full_re = ops.K.createVecRight()
         self.x_full_im = ops.K.createVecRight()
@@ -98,16 +133,30 @@ class HarmonicSolver:
         self.y_im.array[:] = self.y.array_r[self.n_local:]
         self.constraints.expand(self.y_re, self.x_full_re)
         self.constraints.expand(self.y_im, self.x_full_im)
+        charges = {name: complex(charge(self.ops.K, self.x_full_re, chi), charge(self.ops.K, self.x_full_im, chi))
+                   for name, chi in self.chi_e.items()}
         q = complex(charge(self.ops.K, self.x_full_re, self.chi), charge(self.ops.K, self.x_full_im, self.chi))
         re = self.model.point_values(self.x_full_re)
         im = self.model.point_values(self.x_full_im)
         displacement = {name: complex(re[name], im[name]) for name in re}
-        return HarmonicPoint(frequency_Hz, q, 1j * omega * q / self.voltage_V, displacement)
+        electrode_y = {name: 1j * omega * charges[name] / self.phasors[name] for name in charges
+                       if abs(self.phasors[name]) > 0}
+        floating = {}
+        for name, dof in self.floating_dofs.items():
+            local = complex(self.x_full_re.array_r[dof[0]], self.x_full_im.array_r[dof[0]]) if dof.size else 0j
+            has = self.model.comm.allreduce(1 if dof.size else 0)
+            floating[name] = self.model.comm.allreduce(local) / max(has, 1)
+        return HarmonicPoint(frequency_Hz, q, 1j * omega * q / self.voltage_V, displacement, electrode_y, floating,
+                             charges)
+
+    def full_solution(self) -> tuple[PETSc.Vec, PETSc.Vec]:
+        """(real, imaginary) full u-phi vectors of the last solve (owned by the solver)."""
+        return self.x_full_re, self.x_full_im
 
     def destroy(self):
         for obj in (self.K_r, self.M_r, self.C_r, self.A, self.Cp, self.Cm, self.nest, self.B, self.ksp,
                     self.b, self.y, self.x_bc, self.x_drive_r, self.chi, self.x_full_re, self.x_full_im,
-                    self.y_re, self.y_im):
+                    self.y_re, self.y_im, *self.chi_e.values()):
             obj.destroy()
 
 
@@ -137,6 +186,9 @@ class HarmonicResult:
     trough_Hz: float | None = None
     peak: HarmonicPoint | None = None
     voltage_for_target_V: float | None = None
+    drive_scale_for_target: float | None = None
+    wave: dict | None = None
+    wave_point: HarmonicPoint | None = None
 
 
 def frequency_grid(model: FEModel, f_r: float | None, f_a: float | None) -> np.ndarray:
@@ -152,7 +204,29 @@ def frequency_grid(model: FEModel, f_r: float | None, f_a: float | None) -> np.n
     return np.unique(np.concatenate([grid, extra]))
 
 
-def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float | None, log) -> HarmonicResult:
+def wave_measures(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: float) -> dict:
+    """Travelling-wave measures (app.modeid.travelling_wave) of the solver's last solution."""
+    from app.modeid import PointSet, circle_points, cylindrical, travelling_wave
+
+    points, theta = circle_points(cfg.circle_radius_m, cfg.circle_height_m, cfg.n_points)
+    probe = PointSet(model.mesh, points)
+    if not probe.found.all():
+        from app.errors import CaseError
+
+        raise CaseError(model.case.source, "harmonic.wave.circle_radius_m", "the circle leaves the mesh")
+    x_re, x_im = solver.full_solution()
+    u_re = cylindrical(probe(model.displacement(x_re)), theta)
+    u_im = cylindrical(probe(model.displacement(x_im)), theta)
+    return travelling_wave(u_re + 1j * u_im, theta, tuple(cfg.normal_rz), cfg.order, frequency_Hz,
+                           cfg.circle_radius_m)
+
+
+def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float | None, log,
+                 wave_writer=None, wave_frequency_Hz: float | None = None) -> HarmonicResult:
+    """Sweep, |Y| extrema, target amplitude and travelling-wave measures. The wave is evaluated at
+    harmonic.wave.frequency_Hz, else ``wave_frequency_Hz`` (the runner passes the centre of the
+    working mode's split pair), else f_r, else the |Y| peak. ``wave_writer(model, solver, f)``, when
+    given, exports the steady wave of the solver's last solution (the runner's export)."""
     cfg = model.case.harmonic
     solver = HarmonicSolver(model, ops, cfg.voltage_V)
     try:
@@ -184,7 +258,16 @@ def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float |
         result.peak = solver.solve(result.peak_Hz)
         if cfg.target is not None:
             amp = abs(result.peak.displacement_m[cfg.target.point])
-            result.voltage_for_target_V = cfg.target.amplitude_m / amp * cfg.voltage_V if amp > 0 else None
+            # linear: every electrode's phasor scales by one common factor
+            result.drive_scale_for_target = cfg.target.amplitude_m / amp if amp > 0 else None
+            result.voltage_for_target_V = (result.drive_scale_for_target * cfg.voltage_V
+                                           if amp > 0 else None)
+        if cfg.wave is not None:
+            wave_f = cfg.wave.frequency_Hz or wave_frequency_Hz or f_r or result.peak_Hz
+            result.wave_point = solver.solve(wave_f)
+            result.wave = wave_measures(model, solver, cfg.wave, wave_f)
+            if wave_writer is not None:
+                wave_writer(model, solver, wave_f)
         log(f"harmonic: {len(grid)} frequencies + {len(cache)} refinement solves, |Y| peak at "
             f"{result.peak_Hz:.1f} Hz")
         return result
@@ -208,4 +291,36 @@ def harmonic_summary(result: HarmonicResult) -> dict:
             out[f"displacement_{name}_at_peak_amplitude_m"] = abs(result.peak.displacement_m[name])
     if result.voltage_for_target_V is not None:
         out["voltage_for_target_amplitude_V"] = result.voltage_for_target_V
+        out["drive_scale_for_target"] = result.drive_scale_for_target
+    peak = result.peak
+    if peak is not None and (len(peak.electrode_admittance_S) > 1 or peak.floating_voltage_V):
+        out["electrode_admittance_at_peak_S"] = peak.electrode_admittance_S
+        for name in peak.electrode_admittance_S:
+            out[f"admittance_{name}_magnitude_S"] = [abs(p.electrode_admittance_S[name]) for p in result.points]
+        for name in peak.floating_voltage_V:
+            out[f"floating_{name}_voltage_amplitude_V"] = [abs(p.floating_voltage_V[name]) for p in result.points]
+        out["floating_voltage_at_peak_V"] = peak.floating_voltage_V
+    if result.wave is not None:
+        wave = dict(result.wave)
+        point = result.wave_point
+        wave["electrode_admittance_S"] = point.electrode_admittance_S
+        wave["electrode_admittance_magnitude_S"] = {k: abs(v) for k, v in point.electrode_admittance_S.items()}
+        wave["floating_voltage_V"] = point.floating_voltage_V
+        wave["floating_voltage_amplitude_V"] = {k: abs(v) for k, v in point.floating_voltage_V.items()}
+        out["travelling_wave"] = wave
     return out
+
+
+def wave_lines(wave: dict | None) -> list[str]:
+    """Terminal lines of the travelling-wave measures."""
+    if not wave:
+        return []
+    lines = [f"travelling wave at {wave['frequency_Hz']:.1f} Hz: min/max {wave['travelling_wave_ratio']:.3f}, "
+             f"towards {wave['direction']}, {wave['wave_speed_m_per_s']:.1f} m/s",
+             f"contact ellipse: normal {wave['ellipse_normal_amplitude_m'] * 1e6:.3f} um, tangential "
+             f"{wave['ellipse_tangential_amplitude_m'] * 1e6:.3f} um, phase {wave['ellipse_phase_deg']:.1f} deg"]
+    for name, y in wave["electrode_admittance_magnitude_S"].items():
+        lines.append(f"  |Y_{name}| = {y * 1e3:.4g} mS")
+    for name, v in wave["floating_voltage_amplitude_V"].items():
+        lines.append(f"  floating electrode {name}: {v:.4g} V amplitude")
+    return lines

@@ -88,6 +88,7 @@ class ModalResult:
     open: list[Mode]
     pairs: list[tuple[int, int | None, float | None]]  # (short index, open index, k_eff)
     working: int  # index into short
+    orders: list | None = None  # app.modeid.ModeOrder per short mode, when the case asks
 
     @property
     def working_mode(self) -> Mode:
@@ -125,11 +126,50 @@ def run_modal(model: FEModel, ops: Operators) -> ModalResult:
             pairs.append((i, None, None))
     if not short:
         raise NumericalFailure("no elastic mode found above the rigid-body cutoff; raise modal.n_modes")
-    if cfg.working_mode == "coupling" and any(p[2] for p in pairs):
-        working = max(range(len(pairs)), key=lambda i: pairs[i][2] or 0.0)
+    orders = identify_modes(model, short) if cfg.identify is not None else None
+    candidates = range(len(short))
+    if orders is not None and cfg.identify.working_order is not None:
+        m, n = cfg.identify.working_order
+        candidates = [i for i in candidates if (orders[i].m, orders[i].n) == (m, n)]
+        if not candidates:
+            found_orders = ", ".join(f"({o.m},{o.n})" for o in orders)
+            raise NumericalFailure(f"no mode of order (m, n) = ({m}, {n}) among the modes found ({found_orders}); "
+                                   f"raise modal.n_modes or move modal.target_frequency_Hz")
+    if cfg.working_mode == "coupling" and any(pairs[i][2] for i in candidates):
+        working = max(candidates, key=lambda i: pairs[i][2] or 0.0)
     else:
-        working = min(range(len(short)), key=lambda i: abs(short[i].frequency_Hz - cfg.target_frequency_Hz))
-    return ModalResult(short, opened, pairs, working)
+        working = min(candidates, key=lambda i: abs(short[i].frequency_Hz - cfg.target_frequency_Hz))
+    return ModalResult(short, opened, pairs, working, orders)
+
+
+def identify_modes(model: FEModel, modes: list[Mode]) -> list:
+    """Circumferential and axial orders and degenerate partners (app.modeid) of ``modes``."""
+    from app.errors import CaseError
+    from app.modeid import ModeIdentifier, pair_partners
+
+    try:
+        identifier = ModeIdentifier(model.mesh, model.case.modal.identify)
+    except ValueError as exc:
+        raise CaseError(model.case.source, f"modal.identify.{exc}_radius_m",
+                        "the identification points do not all lie inside the mesh") from None
+    orders = [identifier.order(model.displacement(mode.vector)) for mode in modes]
+    pair_partners([m.frequency_Hz for m in modes], orders)
+    return orders
+
+
+def mode_table(result: ModalResult) -> list[dict]:
+    """One row per short-circuit mode: index, f, (m, n, component, partner split), k_eff, f_a."""
+    rows = []
+    for i, j, k_eff in result.pairs:
+        row = {"index": i, "frequency_Hz": result.short[i].frequency_Hz}
+        if result.orders is not None:
+            o = result.orders[i]
+            row.update({"m": o.m, "n": o.n, "component": o.component, "order_energy_fraction": o.purity,
+                        "partner_index": o.partner, "partner_split_Hz": o.split_Hz})
+        if j is not None:
+            row.update({"antiresonance_Hz": result.open[j].frequency_Hz, "k_eff": k_eff})
+        rows.append(row)
+    return rows
 
 
 def modal_summary(model: FEModel, result: ModalResult) -> dict:
@@ -144,8 +184,17 @@ def modal_summary(model: FEModel, result: ModalResult) -> dict:
         for name, value in model.point_values(mode.vector).items():
             entry[f"modal_mass_at_{name}_kg"] = (1.0 / value**2) if abs(value) > 0 else None
         modes.append(entry)
+    if result.orders is not None:
+        for entry, row in zip(modes, mode_table(result)):
+            entry.update({k: row[k] for k in ("m", "n", "component", "order_energy_fraction", "partner_index",
+                                              "partner_split_Hz")})
     out = {"modes": modes, "working_mode_index": result.working,
            "working_resonance_Hz": result.working_mode.frequency_Hz}
+    if result.orders is not None:
+        o = result.orders[result.working]
+        out.update({"working_m": o.m, "working_n": o.n, "working_partner_split_Hz": o.split_Hz})
+        if o.split_Hz is not None:
+            out["working_partner_split_relative"] = abs(o.split_Hz) / result.working_mode.frequency_Hz
     fa = result.antiresonance_Hz()
     if fa is not None:
         out["working_antiresonance_Hz"] = fa
@@ -153,3 +202,31 @@ def modal_summary(model: FEModel, result: ModalResult) -> dict:
     if result.open and not any(p[1] is not None for p in result.pairs):
         out["open_circuit_Hz"] = [m.frequency_Hz for m in result.open]
     return out
+
+
+MODE_CSV_COLUMNS = ("index", "frequency_Hz", "m", "n", "component", "order_energy_fraction", "partner_index",
+                    "partner_split_Hz", "antiresonance_Hz", "k_eff")
+
+
+def write_mode_csv(path, rows: list[dict]) -> None:
+    """modes.csv: the columns that apply to this run (orders only when identified), one row per mode."""
+    import csv
+
+    columns = [c for c in MODE_CSV_COLUMNS if any(c in row for row in rows)]
+    with open(path, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(columns)
+        for row in rows:
+            writer.writerow(["" if row.get(c) is None else (f"{row[c]:.6g}" if isinstance(row[c], float)
+                                                             else row[c]) for c in columns])
+
+
+def mode_table_lines(rows: list[dict], working: int) -> list[str]:
+    """Terminal lines of the mode table (m, n, f, partner split)."""
+    lines = ["  #   f [Hz]        m   n  comp   partner split [Hz]"]
+    for row in rows:
+        split = row.get("partner_split_Hz")
+        lines.append(f"{'*' if row['index'] == working else ' '}{row['index']:>2d}  {row['frequency_Hz']:>11.2f}"
+                     f"  {row.get('m') if row.get('m') is not None else '-':>2}  {row.get('n', '-'):>2}"
+                     f"  {row.get('component', '-'):>5}  {'' if split is None else f'{split:+.2f}':>12}")
+    return lines

@@ -140,11 +140,18 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
         with timer.phase("assemble"):
             ops = assemble_operators(model)
     if "modal" in case.analyses:
-        from app.modal import modal_summary, run_modal
+        from app.modal import modal_summary, mode_table, mode_table_lines, run_modal, write_mode_csv
 
         with timer.phase("modal"):
             modal = run_modal(model, ops)
             results["modal"] = modal_summary(model, modal)
+        rows = mode_table(modal)
+        if modal.orders is not None:
+            for line in mode_table_lines(rows, modal.working):
+                log(line)
+        if comm.rank == 0:
+            write_mode_csv(out / "modes.csv", rows)
+        summary["outputs"].append("modes.csv")
         f_r, f_a = modal.working_mode.frequency_Hz, modal.antiresonance_Hz()
         log(f"modal: working mode f_r = {f_r:.2f} Hz" + (f", f_a = {f_a:.2f} Hz, k_eff = "
                                                           f"{results['modal']['working_k_eff']:.4f}" if f_a else ""))
@@ -158,14 +165,20 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
     if damping_f is None and case.harmonic is not None and case.harmonic.f_start_Hz is not None:
         damping_f = 0.5 * (case.harmonic.f_start_Hz + case.harmonic.f_stop_Hz)
     if "harmonic" in case.analyses or "circuit" in case.analyses:
-        from app.harmonic import harmonic_summary, run_harmonic
+        from app.harmonic import harmonic_summary, run_harmonic, wave_lines
 
         with timer.phase("assemble"):
             add_damping(ops, model, damping_f)
         if "harmonic" in case.analyses:
             with timer.phase("harmonic"):
-                harmonic = run_harmonic(model, ops, f_r, f_a, log)
+                wave_writer = None
+                if case.output.fields and case.harmonic.wave and case.harmonic.wave.animation_frames:
+                    def wave_writer(model_, solver, frequency_Hz):
+                        write_wave(model_, solver, frequency_Hz, case.harmonic.wave.animation_frames, out, summary)
+                harmonic = run_harmonic(model, ops, f_r, f_a, log, wave_writer, pair_centre_Hz(modal))
                 results["harmonic"] = harmonic_summary(harmonic)
+                for line in wave_lines(results["harmonic"].get("travelling_wave")):
+                    log(line)
         if "circuit" in case.analyses:
             from app.circuit import equivalent_circuit
 
@@ -200,6 +213,33 @@ def write_modes(model, modal, out: Path, summary: dict) -> None:
         for mode in modes:
             export.write(mode.vector, mode.frequency_Hz)
         summary["outputs"] += export.close()
+
+
+def pair_centre_Hz(modal) -> float | None:
+    """Centre of the working mode and its degenerate partner: a two-phase drive runs between them."""
+    if modal is None or modal.orders is None or modal.orders[modal.working].partner is None:
+        return None
+    return 0.5 * (modal.working_mode.frequency_Hz + modal.short[modal.orders[modal.working].partner].frequency_Hz)
+
+
+def write_wave(model, solver, frequency_Hz: float, frames: int, out: Path, summary: dict) -> None:
+    """The steady wave u(t) = Re(x exp(i omega t)) over one period as an XDMF series ('time' in s)."""
+    import math
+
+    from app.exports import ModeShapeExport
+
+    x_re, x_im = solver.full_solution()
+    u_re = model.displacement(x_re).copy()
+    u_im = model.displacement(x_im).copy()
+    u_t = u_re.copy()
+    period = 1.0 / frequency_Hz
+    export = ModeShapeExport(out / "travelling_wave.xdmf", model.mesh)
+    for k in range(frames):
+        phase = 2 * math.pi * k / frames
+        u_t.x.array[:] = math.cos(phase) * u_re.x.array - math.sin(phase) * u_im.x.array
+        export.write(u_t, k * period / frames)
+    export.close()
+    summary["outputs"].append("travelling_wave.xdmf")
 
 
 def print_table(results: dict, log) -> None:

@@ -24,7 +24,8 @@ TagRef = str | int
 @dataclass(frozen=True)
 class GeometrySection:
     model: ModelKind = param("axisymmetric", doc="axisymmetric (r, z), 3d (x, y, z) or plane_strain (x, z)")
-    builder: Literal["bar", "disc", "ring", "transducer"] | None = param(None, doc="gmsh builder to use")
+    builder: Literal["bar", "disc", "ring", "transducer", "stator", "thin_ring"] | None = param(
+        None, doc="gmsh builder to use")
     parameters: dict[str, Any] = param(default_factory=dict, doc="builder parameters (see docs)")
     mesh_file: str | None = param(None, doc=".msh file, relative to the case file")
     degree: int = param(2, ge=1, le=3, doc="Lagrange degree of u and phi")
@@ -83,6 +84,30 @@ class DampingSection:
 
 
 @dataclass(frozen=True)
+class ModeIdentification:
+    """Fourier identification of bodies of revolution about z (see app.modeid)."""
+
+    circle_radius_m: float = param(gt=0, doc="circle sampled for the circumferential order n")
+    circle_height_m: float = param(doc="z of that circle")
+    n_circle_points: int = param(64, ge=8)
+    line_radius_m: float | None = param(None, gt=0, doc="generatrix sampled for the axial order m")
+    line_z_start_m: float | None = param(None)
+    line_z_stop_m: float | None = param(None)
+    n_line_points: int = param(24, ge=3)
+    working_order: list[int] | None = param(None, doc="[m, n]: the working mode is the mode of this order "
+                                                      "nearest the target")
+
+    def check(self, file, prefix):
+        if self.line_radius_m is not None and (self.line_z_start_m is None or self.line_z_stop_m is None):
+            raise CaseError(file, f"{prefix}.line_z_start_m", "give line_z_start_m and line_z_stop_m with "
+                                                               "line_radius_m")
+        if self.working_order is not None and len(self.working_order) != 2:
+            raise CaseError(file, f"{prefix}.working_order", "needs two integers [m, n]")
+        if self.working_order is not None and self.line_radius_m is None:
+            raise CaseError(file, f"{prefix}.working_order", "needs the generatrix (line_radius_m) for m")
+
+
+@dataclass(frozen=True)
 class ModalSection:
     target_frequency_Hz: float = param(gt=0, unit="Hz", doc="shift of the shift-invert transform")
     n_modes: int = param(6, ge=1, le=1000, doc="number of modes (SLEPc nev) per electrical state")
@@ -90,12 +115,30 @@ class ModalSection:
     rigid_cutoff_Hz: float = param(10.0, ge=0, doc="modes below are rigid-body modes and dropped")
     working_mode: Literal["nearest", "coupling"] = param(
         "coupling", doc="nearest to target, or the most strongly coupled of the modes found")
+    identify: ModeIdentification | None = param(None, doc="mode orders (m, n), partners and splits")
 
 
 @dataclass(frozen=True)
 class TargetAmplitude:
     point: str = param()
     amplitude_m: float = param(gt=0, unit="m")
+
+
+@dataclass(frozen=True)
+class TravellingWaveSection:
+    """Wave measures round a circle of a body of revolution about z (see app.modeid.travelling_wave)."""
+
+    circle_radius_m: float = param(gt=0)
+    circle_height_m: float = param()
+    normal_rz: list[float] = param(doc="outward surface normal (n_r, n_z) there, e.g. the inclined face")
+    order: int = param(ge=1, doc="circumferential order n of the wave")
+    n_points: int = param(64, ge=8)
+    frequency_Hz: float | None = param(None, gt=0, doc="default: the modal working mode, else the |Y| peak")
+    animation_frames: int = param(24, ge=0, doc="XDMF frames over one period (0: none)")
+
+    def check(self, file, prefix):
+        if len(self.normal_rz) != 2 or not any(self.normal_rz):
+            raise CaseError(file, f"{prefix}.normal_rz", "needs two numbers, not both zero")
 
 
 @dataclass(frozen=True)
@@ -106,6 +149,7 @@ class HarmonicSection:
     voltage_V: float = param(1.0, gt=0, doc="drive amplitude on voltage electrodes")
     refine_extrema: bool = param(True, doc="locate |Y| peak and trough by golden-section search")
     target: TargetAmplitude | None = None
+    wave: TravellingWaveSection | None = param(None, doc="travelling-wave measures at a circle")
 
     def check(self, file, prefix):
         if (self.f_start_Hz is None) != (self.f_stop_Hz is None):

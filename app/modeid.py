@@ -1,0 +1,199 @@
+"""Mode identification and travelling-wave measures of bodies of revolution about z.
+
+Displacements are sampled round a circle (r, z) and along a generatrix, turned into cylindrical
+components (r, theta, z) and Fourier-analysed round the circle:
+- circumferential order n: the harmonic with the most energy over all three components;
+- axial order m: 1 + the sign changes of the n-th harmonic of u_r along the generatrix (weak values
+  below 5 % of the largest are skipped), so m = 1 is the family without a nodal circle; not given
+  for torsional (u_theta-dominated) modes;
+- partner: the other mode of the same (m, n) nearest in frequency; split = its frequency difference.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from dolfinx import geometry
+from mpi4py import MPI
+
+SKIP_FRACTION = 0.05
+
+
+class PointSet:
+    """Values of a Function at many physical points on any partition (result on every rank)."""
+
+    def __init__(self, mesh, points: np.ndarray):
+        self.mesh = mesh
+        pts = np.zeros((points.shape[0], 3))
+        pts[:, : points.shape[1]] = points
+        self.points = pts
+        tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
+        candidates = geometry.compute_collisions(tree, pts)
+        n_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+        size = mesh.comm.size
+        first = np.full(len(pts), -1, dtype=np.int32)
+        rank_has = np.full(len(pts), size, dtype=np.int32)
+        for i in range(len(pts)):
+            owned = [c for c in candidates.links(i) if c < n_owned and self._contains(c, pts[i])]
+            if owned:
+                first[i] = owned[0]
+                rank_has[i] = mesh.comm.rank
+        owner = np.empty_like(rank_has)
+        mesh.comm.Allreduce(rank_has, owner, op=MPI.MIN)
+        self.found = owner < size
+        mine = owner == mesh.comm.rank
+        self.local_index = np.flatnonzero(mine)
+        self.cells = first[mine]
+
+    def _contains(self, cell: int, point: np.ndarray) -> bool:
+        """Barycentric test on the affine tetrahedron. dolfinx 0.5's compute_colliding_cells (GJK with an
+        absolute tolerance) misses interior points of millimetre-sized cells in SI units."""
+        nodes = self.mesh.geometry.x[self.mesh.geometry.dofmap.links(cell)[:4]]
+        jacobian = (nodes[1:] - nodes[0]).T
+        lam = np.linalg.solve(jacobian, point - nodes[0])
+        return bool(lam.min() >= -1e-10 and lam.sum() <= 1 + 1e-10)
+
+    def __call__(self, function) -> np.ndarray:
+        """(n_points, value_size) array; points outside the mesh give NaN."""
+        size = function.function_space.dofmap.index_map_bs
+        local = np.zeros((len(self.points), size))
+        if self.local_index.size:
+            local[self.local_index] = np.asarray(function.eval(self.points[self.local_index], self.cells)).reshape(
+                self.local_index.size, -1)
+        out = np.empty_like(local)
+        self.mesh.comm.Allreduce(local, out, op=MPI.SUM)
+        out[~self.found] = np.nan
+        return out
+
+
+def circle_points(radius_m: float, height_m: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    theta = 2 * np.pi * np.arange(n) / n
+    return np.column_stack([radius_m * np.cos(theta), radius_m * np.sin(theta), np.full(n, height_m)]), theta
+
+
+def cylindrical(u_xyz: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """(n, 3) Cartesian -> (n, 3) cylindrical (u_r, u_theta, u_z) at angles ``theta``."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.column_stack([c * u_xyz[:, 0] + s * u_xyz[:, 1], -s * u_xyz[:, 0] + c * u_xyz[:, 1], u_xyz[:, 2]])
+
+
+def harmonics(values: np.ndarray) -> np.ndarray:
+    """Complex Fourier coefficients c_k, k = 0..N-1, of samples round the circle along axis 0:
+    values(theta_j) = sum_k c_k exp(i k theta_j)."""
+    return np.fft.fft(values, axis=0) / values.shape[0]
+
+
+def circumferential_order(u_cyl: np.ndarray) -> tuple[int, str, float]:
+    """(n, dominant component 'r'/'theta'/'z', fraction of the energy in order n)."""
+    c = harmonics(u_cyl)
+    n_max = u_cyl.shape[0] // 2
+    energy = np.abs(c) ** 2
+    folded = energy[: n_max + 1].copy()
+    folded[1:n_max] += energy[-1:-n_max:-1]  # order k and its mirror N - k
+    per_order = folded.sum(axis=1)
+    n = int(np.argmax(per_order))
+    component = ("r", "theta", "z")[int(np.argmax(folded[n]))]
+    return n, component, float(per_order[n] / per_order.sum()) if per_order.sum() > 0 else 0.0
+
+
+def axial_order(u_r_grid: np.ndarray, n: int) -> int:
+    """1 + sign changes along the generatrix of the n-th harmonic of u_r; grid (n_theta, n_z)."""
+    c = harmonics(u_r_grid)[n]  # (n_z,)
+    k = int(np.argmax(np.abs(c)))
+    if abs(c[k]) == 0:
+        return 1
+    real = (c * np.exp(-1j * np.angle(c[k]))).real
+    kept = real[np.abs(real) > SKIP_FRACTION * abs(c[k])]
+    return 1 + int(np.count_nonzero(np.diff(np.sign(kept)) != 0))
+
+
+@dataclass
+class ModeOrder:
+    n: int
+    m: int | None
+    component: str
+    purity: float
+    partner: int | None = None
+    split_Hz: float | None = None
+
+
+class ModeIdentifier:
+    """Samples a displacement Function on the identification circle and generatrix."""
+
+    def __init__(self, mesh, cfg):
+        self.cfg = cfg
+        pts, self.theta = circle_points(cfg.circle_radius_m, cfg.circle_height_m, cfg.n_circle_points)
+        self.circle = PointSet(mesh, pts)
+        if not self.circle.found.all():
+            raise ValueError("circle")
+        self.line = None
+        if cfg.line_radius_m is not None:
+            z = np.linspace(cfg.line_z_start_m, cfg.line_z_stop_m, cfg.n_line_points)
+            grid = np.array([[cfg.line_radius_m * math.cos(t), cfg.line_radius_m * math.sin(t), zz]
+                             for t in self.theta for zz in z])
+            self.line = PointSet(mesh, grid)
+            self.n_z = z.size
+            if not self.line.found.all():
+                raise ValueError("line")
+
+    def circle_cylindrical(self, u) -> np.ndarray:
+        return cylindrical(self.circle(u), self.theta)
+
+    def order(self, u) -> ModeOrder:
+        n, component, purity = circumferential_order(self.circle_cylindrical(u))
+        m = None
+        if self.line is not None and component != "theta":  # u_r says nothing of a torsional shape
+            values = self.line(u).reshape(self.theta.size, self.n_z, 3)
+            u_r = np.cos(self.theta)[:, None] * values[..., 0] + np.sin(self.theta)[:, None] * values[..., 1]
+            m = axial_order(u_r, n)
+        return ModeOrder(n, m, component, purity)
+
+
+def pair_partners(frequencies_Hz: list[float], orders: list[ModeOrder]) -> None:
+    """Set each mode's partner (same m, n and dominant component, n > 0, nearest in frequency)."""
+    for i, a in enumerate(orders):
+        if a.n == 0:
+            continue
+        best = None
+        for j, b in enumerate(orders):
+            if j != i and (b.n, b.m, b.component) == (a.n, a.m, a.component):
+                if best is None or abs(frequencies_Hz[j] - frequencies_Hz[i]) < abs(
+                        frequencies_Hz[best] - frequencies_Hz[i]):
+                    best = j
+        if best is not None:
+            a.partner = best
+            a.split_Hz = frequencies_Hz[best] - frequencies_Hz[i]
+
+
+def travelling_wave(u_cyl_phasor: np.ndarray, theta: np.ndarray, normal_rz: tuple[float, float], n: int,
+                    frequency_Hz: float, radius_m: float) -> dict:
+    """Measures of a steady wave from complex displacement phasors (n_points, 3) round a circle.
+
+    Normal displacement w = u_r n_r + u_z n_z (outward normal of the surface in the (r, z) plane);
+    tangential = u_theta. A component c_{-n} exp(-i n theta) of w travels towards +theta."""
+    nr, nz = normal_rz
+    norm = math.hypot(nr, nz)
+    w = (u_cyl_phasor[:, 0] * nr + u_cyl_phasor[:, 2] * nz) / norm
+    t = u_cyl_phasor[:, 1]
+    amp_w, amp_t = np.abs(w), np.abs(t)
+    c = harmonics(w)
+    forward, backward = abs(c[-n % len(w)]), abs(c[n % len(w)])
+    omega = 2 * math.pi * frequency_Hz
+    ratio = float(amp_w.min() / amp_w.max()) if amp_w.max() > 0 else 0.0
+    phase = np.angle(t * np.conj(w))  # tangential relative to normal, per point
+    return {
+        "frequency_Hz": frequency_Hz,
+        "circumferential_order": n,
+        "normal_amplitude_min_m": float(amp_w.min()),
+        "normal_amplitude_max_m": float(amp_w.max()),
+        "travelling_wave_ratio": ratio,
+        "direction": "+theta" if forward >= backward else "-theta",
+        "forward_fraction": float(forward / (forward + backward)) if forward + backward > 0 else 0.0,
+        "wave_speed_m_per_s": omega * radius_m / n if n else None,
+        "wave_angular_speed_rad_per_s": omega / n if n else None,
+        "ellipse_normal_amplitude_m": float(amp_w.mean()),
+        "ellipse_tangential_amplitude_m": float(amp_t.mean()),
+        "ellipse_phase_deg": float(math.degrees(np.angle(np.exp(1j * phase).mean()))),
+    }
