@@ -52,9 +52,21 @@ def x_display():
 
 
 def open_in_paraview(display: str, xdmf: Path, png: Path, at: float | None = None) -> dict:
+    """Run tests/paraview_open.py; its JSON report. A render window that cannot connect to the X
+    server (pvpython aborts in vtkXOpenGLRenderWindow::CreateAWindow before reading anything) is
+    retried: on this shared machine at load ~20 the first connection to a fresh Xvfb failed now and
+    then (with xvfb-run -a as with a private server) and the same call then succeeded. Any other
+    failure fails the test at once."""
+    import time
+
     cmd = ["pvpython", str(ROOT / "tests" / "paraview_open.py"), str(xdmf), str(png)]
-    result = subprocess.run(cmd + ([repr(at)] if at is not None else []), capture_output=True, text=True,
-                            timeout=300, cwd=xdmf.parent, env=dict(os.environ, MPLBACKEND="Agg", DISPLAY=display))
+    for _attempt in range(3):
+        result = subprocess.run(cmd + ([repr(at)] if at is not None else []), capture_output=True, text=True,
+                                timeout=300, cwd=xdmf.parent, env=dict(os.environ, MPLBACKEND="Agg", DISPLAY=display))
+        x_failure = "CreateAWindow" in result.stderr or "bad X server connection" in result.stderr
+        if result.returncode == 0 or not x_failure:
+            break
+        time.sleep(2.0)
     lines = [line for line in result.stdout.splitlines() if line.startswith("PIEZODYN-REPORT ")]
     assert lines, f"pvpython failed ({result.returncode}): {result.stderr[-3000:]}"
     assert png.is_file() and png.stat().st_size > 10_000
