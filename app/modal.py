@@ -204,23 +204,6 @@ def modal_summary(model: FEModel, result: ModalResult) -> dict:
     return out
 
 
-MODE_CSV_COLUMNS = ("index", "frequency_Hz", "m", "n", "component", "order_energy_fraction", "partner_index",
-                    "partner_split_Hz", "antiresonance_Hz", "k_eff")
-
-
-def write_mode_csv(path, rows: list[dict]) -> None:
-    """modes.csv: the columns that apply to this run (orders only when identified), one row per mode."""
-    import csv
-
-    columns = [c for c in MODE_CSV_COLUMNS if any(c in row for row in rows)]
-    with open(path, "w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(columns)
-        for row in rows:
-            writer.writerow(["" if row.get(c) is None else (f"{row[c]:.6g}" if isinstance(row[c], float)
-                                                             else row[c]) for c in columns])
-
-
 def mode_table_lines(rows: list[dict], working: int) -> list[str]:
     """Terminal lines of the mode table (m, n, f, partner split)."""
     lines = ["  #   f [Hz]        m   n  comp   partner split [Hz]"]

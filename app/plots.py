@@ -69,9 +69,13 @@ def write_harmonic_table(path: Path, harmonic: dict) -> None:
 
 
 def write_mode_table(path: Path, modal: dict) -> None:
-    """The mode table as CSV: one row per short-circuit mode, its open-circuit partner and k_eff."""
+    """The mode table as CSV: one row per short-circuit mode, its open-circuit partner and k_eff, and
+    its orders (m, n, component, partner and split) when the case asks for mode identification."""
     modes = modal.get("modes") or []
-    columns = ["mode"] + [k for k in (modes[0] if modes else {}) if not isinstance(modes[0][k], (list, dict))]
+    keys: dict[str, None] = {}      # union of the modes' scalar keys, in first-seen order
+    for mode in modes:
+        keys.update({k: None for k, v in mode.items() if not isinstance(v, (list, dict))})
+    columns = ["mode", *keys]
     with open(path, "w", newline="") as out:
         writer = csv.writer(out)
         writer.writerow(columns + ["working"])

@@ -140,7 +140,7 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
         with timer.phase("assemble"):
             ops = assemble_operators(model)
     if "modal" in case.analyses:
-        from app.modal import modal_summary, mode_table, mode_table_lines, run_modal, write_mode_csv
+        from app.modal import modal_summary, mode_table, mode_table_lines, run_modal
 
         with timer.phase("modal"):
             modal = run_modal(model, ops)
@@ -149,9 +149,6 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
         if modal.orders is not None:
             for line in mode_table_lines(rows, modal.working):
                 log(line)
-        if comm.rank == 0:
-            write_mode_csv(out / "modes.csv", rows)
-        summary["outputs"].append("modes.csv")
         f_r, f_a = modal.working_mode.frequency_Hz, modal.antiresonance_Hz()
         log(f"modal: working mode f_r = {f_r:.2f} Hz" + (f", f_a = {f_a:.2f} Hz, k_eff = "
                                                           f"{results['modal']['working_k_eff']:.4f}" if f_a else ""))

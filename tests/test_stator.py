@@ -43,5 +43,6 @@ def test_stator_modal_two_ranks_equal_serial(cli, tmp_path):
         assert (mp["m"], mp["n"], mp["component"]) == (ms["m"], ms["n"], ms["component"])
     rows = list(csv.DictReader(open(tmp_path / "s" / "modes.csv")))
     assert [int(r["n"]) for r in rows] == [m["n"] for m in s["modes"]]
-    assert float(rows[s["working_mode_index"]]["frequency_Hz"]) == pytest.approx(s["working_resonance_Hz"],
+    assert float(rows[s["working_mode_index"]]["resonance_Hz"]) == pytest.approx(s["working_resonance_Hz"],
                                                                                  rel=1e-5)
+    assert rows[s["working_mode_index"]]["working"] == "1"
