@@ -239,6 +239,31 @@ def write_wave(model, solver, frequency_Hz: float, frames: int, out: Path, summa
     summary["outputs"].append("travelling_wave.xdmf")
 
 
+def transient_rows(transient: dict | None) -> list[tuple[str, str, str]]:
+    """End-of-run lines of a transient run (FE and modal tiers): drive, cost, and per contact its
+    impacts, largest force and rate; the foundation's mean force and power; the transducer's rise."""
+    if not transient:
+        return []
+    rows = [("simulated time", f"{transient['simulated_time_s'] * 1e3:.4g}", "ms"),
+            ("drive amplitude", f"{transient['drive_voltage_V']:.4g}", "V"),
+            ("steps / cut-backs", f"{transient['steps']} / {transient['cutbacks']}", "-"),
+            ("wall time per simulated ms", f"{transient['wall_s_per_simulated_ms']:.4g}", "s")]
+    stats = transient.get("statistics") or {}
+    rates = stats.get("impact_rate_per_s", {})
+    for name, contact in (transient.get("contacts") or {}).items():
+        rows.append((f"{name}: impacts (rate)", f"{contact['impacts']} ({rates.get(name, 0.0):.4g} /s)", "-"))
+        rows.append((f"{name}: largest force", f"{contact['max_force_N']:.4g}", "N"))
+    for key, value in stats.items():
+        if key.endswith("_foundation") and isinstance(value, dict):
+            name = key[: -len("_foundation")]
+            rows.append((f"{name}: mean force on the foundation", f"{value['mean_force_N']:.4g}", "N"))
+            rows.append((f"{name}: mean power into the foundation", f"{value['mean_power_W']:.4g}", "W"))
+    transducer = stats.get("transducer")
+    if transducer:
+        rows.append(("transducer: largest rise (period-averaged)", f"{transducer['max_rise_m'] * 1e3:.4g}", "mm"))
+    return rows
+
+
 def print_table(results: dict, log) -> None:
     rows = []
     if "mass_kg" in results:
@@ -265,6 +290,7 @@ def print_table(results: dict, log) -> None:
                                         ("clamped_capacitance_F", "clamped capacitance C_p", 1e9, "nF")):
             if key in circuit:
                 rows.append((label, f"{circuit[key] * scale:.4g}", unit))
+    rows += transient_rows(results.get("transient"))
     if not rows:
         return
     width = max(len(r[0]) for r in rows)

@@ -377,6 +377,17 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
         f"simulated ms)")
     summaries = statistics_from_file(h5_path, cfg) if comm.rank == 0 else None
     results["contacts"], results["statistics"] = comm.bcast(summaries, root=0)
+    results["outputs"] = [h5_path.name]
+    if case.output.plots and comm.rank == 0:      # the FE tier's plots, from the same series
+        from app.transient.history import plot_time_series
+
+        bodies = [name for b, name in enumerate(scene.names["bodies"])
+                  if scene.zfree[b * gdim:(b + 1) * gdim].any()]
+        downforce = np.asarray(cfg.loads.fe_force_N or [0.0])
+        title = f"{Path(case.source).stem} (modal tier), downforce {np.linalg.norm(downforce):.3g} N"
+        results["plots"] = plot_time_series(h5_path, out_dir / "transient_motion.png", out_dir / "transient_force.png",
+                                            scene.drive_point, bodies, scene.order, title=title)
+        results["outputs"] += results["plots"]
     scene.basis.destroy()
     return results
 
