@@ -278,3 +278,39 @@ def _jsonable(obj):
 def write_json_atomic(path: Path, data: dict) -> None:
     """Write JSON via a temporary file and rename, so a killed run never leaves half a file."""
     replace_file(Path(path), json.dumps(_jsonable(data), indent=2).encode())
+
+
+class WaveExport:
+    """A steady harmonic response over one period as an XDMF time series for ParaView (the
+    travelling wave of a motor stator): ``write(vector, t_s)`` takes the full u-phi vector of the
+    field at time t [s] (displacement [m], potential [V]); ``close()`` writes the files as
+    :class:`ModeShapeExport` does."""
+
+    def __init__(self, path: Path, model):
+        self.path = Path(path)
+        self.h5_path = self.path.with_suffix(".h5")
+        self.vertex = VertexFields(model)
+        self.frames: list[tuple[float, np.ndarray, np.ndarray]] = []
+
+    def write(self, vector, t_s: float) -> None:
+        sampled = self.vertex.sample(vector)
+        if sampled is not None:
+            self.frames.append((float(t_s), *sampled))
+
+    def close(self) -> list[str]:
+        names = [self.path.name, self.h5_path.name]
+        if self.vertex.comm.rank != 0:
+            return names
+        datasets = {f"mesh/{k}": v for k, v in self.vertex.mesh_arrays.items()}
+        steps = []
+        for k, (t_s, u, phi) in enumerate(self.frames):
+            datasets[f"frame_{k}/displacement"] = u
+            datasets[f"frame_{k}/potential"] = phi
+            step = mesh_grid(f"t = {t_s * 1e6:.3f} us", self.vertex, self.h5_path.name,
+                             f"{self.h5_path.name}:/frame_{k}")
+            step.insert(0, ET.Element("Time", Value=repr(t_s)))
+            steps.append(step)
+        write_h5_atomic(self.h5_path, datasets, {f"frame_{k}/displacement": {"unit": "m"}
+                                                 for k in range(len(self.frames))})
+        replace_file(self.path, xdmf_document(steps, self.path.stem))
+        return names

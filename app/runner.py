@@ -223,20 +223,18 @@ def write_wave(model, solver, frequency_Hz: float, frames: int, out: Path, summa
     """The steady wave u(t) = Re(x exp(i omega t)) over one period as an XDMF series ('time' in s)."""
     import math
 
-    from app.exports import ModeShapeExport
+    from app.exports import WaveExport
 
     x_re, x_im = solver.full_solution()
-    u_re = model.displacement(x_re).copy()
-    u_im = model.displacement(x_im).copy()
-    u_t = u_re.copy()
+    x_t = x_re.duplicate()
     period = 1.0 / frequency_Hz
-    export = ModeShapeExport(out / "travelling_wave.xdmf", model.mesh)
+    export = WaveExport(out / "travelling_wave.xdmf", model)
     for k in range(frames):
         phase = 2 * math.pi * k / frames
-        u_t.x.array[:] = math.cos(phase) * u_re.x.array - math.sin(phase) * u_im.x.array
-        export.write(u_t, k * period / frames)
-    export.close()
-    summary["outputs"].append("travelling_wave.xdmf")
+        x_t.array_w[:] = math.cos(phase) * x_re.array_r - math.sin(phase) * x_im.array_r
+        export.write(x_t, k * period / frames)
+    x_t.destroy()
+    summary["outputs"] += export.close()
 
 
 def transient_rows(transient: dict | None) -> list[tuple[str, str, str]]:
