@@ -102,14 +102,14 @@ def plot_time_series(h5_path: Path, png_motion: Path, png_force: Path, point: st
         t_ms = f["time_s"][:] * 1e3
         fig, ax = plt.subplots(figsize=(8, 4))
         if point and f"{point}_displacement_m" in f:
-            ax.plot(t_ms, f[f"{point}_displacement_m"][:] * 1e6, label=f"{point} (FE)", lw=0.8)
+            ax.plot(t_ms, f[f"{point}_displacement_m"][:] * 1e3, label=f"transducer {point}", lw=0.8)
         for body in bodies:
             key = f"{body}_position_m"
             if key in f:
                 z = f[key][:, -1]
-                ax.plot(t_ms, (z - z[0]) * 1e6, label=body, lw=0.8)
+                ax.plot(t_ms, (z - z[0]) * 1e3, label=f"{body} (from its start)", lw=0.8)
         ax.set_xlabel("time [ms]")
-        ax.set_ylabel("axial displacement [µm]")
+        ax.set_ylabel("axial displacement [mm]")     # mm as the lumped tier's plots
         if title:
             ax.set_title(title)
         ax.legend()
