@@ -218,25 +218,32 @@ def write_mesh_h5(path: Path, vertex: VertexFields) -> None:
                     {"mesh/geometry": {"unit": "m"}, "mesh/region": {"meaning": "cell group tag of the mesh"}})
 
 
-class ModeShapeExport:
-    """Mode shapes of one electrical state as XDMF for ParaView: one grid per mode with the
-    displacement (mass-normalised shape [1/sqrt(kg)]), the potential and the region tags. The
-    'time' of a mode is its frequency [Hz] and its grid is named ``mode <k>: <f> Hz``, so
-    ParaView's time control steps through the modes and shows their frequencies.
+class _VertexSeriesExport:
+    """Frames of full u-phi vectors sampled at the vertices, one grid each (displacement, potential,
+    region), written by ``close()``: HDF5 first, then the XML, each through a temporary file and a
+    rename. Subclasses name the frames and their time values."""
 
-    ``write(vector, frequency_Hz)`` takes a full u-phi vector; ``close()`` writes the files (HDF5
-    first, then the XML, each through a temporary file and a rename)."""
+    group = "frame"
 
     def __init__(self, path: Path, model):
         self.path = Path(path)
         self.h5_path = self.path.with_suffix(".h5")
         self.vertex = VertexFields(model)
-        self.modes: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self.frames: list[tuple[float, np.ndarray, np.ndarray]] = []
 
-    def write(self, vector, frequency_Hz: float) -> None:
+    def write(self, vector, value: float) -> None:
         sampled = self.vertex.sample(vector)
         if sampled is not None:
-            self.modes.append((float(frequency_Hz), *sampled))
+            self.frames.append((float(value), *sampled))
+
+    def _name(self, k: int, value: float) -> str:
+        raise NotImplementedError
+
+    def _decorate(self, step: ET.Element, value: float) -> None:
+        """Extra attributes of a frame's grid (none by default)."""
+
+    def _attrs(self, value: float) -> dict:
+        return {}
 
     def close(self) -> list[str]:
         """Write the files (rank 0); returns their names."""
@@ -244,21 +251,44 @@ class ModeShapeExport:
         if self.vertex.comm.rank != 0:
             return names
         datasets = {f"mesh/{k}": v for k, v in self.vertex.mesh_arrays.items()}
-        steps = []
-        for k, (f_Hz, u, phi) in enumerate(self.modes):
-            datasets[f"mode_{k + 1}/displacement"] = u
-            datasets[f"mode_{k + 1}/potential"] = phi
-            step = mesh_grid(f"mode {k + 1}: {f_Hz:.2f} Hz", self.vertex, self.h5_path.name,
-                             f"{self.h5_path.name}:/mode_{k + 1}")
-            step.insert(0, ET.Element("Time", Value=repr(f_Hz)))
-            frequency = ET.SubElement(step, "Attribute", Name="frequency_Hz", AttributeType="Scalar", Center="Grid")
-            data_item(frequency, repr(f_Hz), (1,))
+        steps, attrs = [], {}
+        for k, (value, u, phi) in enumerate(self.frames):
+            group = self._group(k)
+            datasets[f"{group}/displacement"] = u
+            datasets[f"{group}/potential"] = phi
+            attrs[f"{group}/displacement"] = self._attrs(value)
+            step = mesh_grid(self._name(k, value), self.vertex, self.h5_path.name, f"{self.h5_path.name}:/{group}")
+            step.insert(0, ET.Element("Time", Value=repr(value)))
+            self._decorate(step, value)
             steps.append(step)
-        attrs = {f"mode_{k + 1}/displacement": {"frequency_Hz": f, "unit": "1/sqrt(kg) (mass-normalised)"}
-                 for k, (f, _, _) in enumerate(self.modes)}
         write_h5_atomic(self.h5_path, datasets, attrs)
         replace_file(self.path, xdmf_document(steps, self.path.stem))
         return names
+
+    def _group(self, k: int) -> str:
+        return f"{self.group}_{k}"
+
+
+class ModeShapeExport(_VertexSeriesExport):
+    """Mode shapes of one electrical state as XDMF for ParaView: one grid per mode with the
+    displacement (mass-normalised shape [1/sqrt(kg)]), the potential and the region tags. The
+    'time' of a mode is its frequency [Hz] and its grid is named ``mode <k>: <f> Hz``, so
+    ParaView's time control steps through the modes and shows their frequencies.
+
+    ``write(vector, frequency_Hz)`` takes a full u-phi vector; ``close()`` writes the files."""
+
+    def _group(self, k: int) -> str:
+        return f"mode_{k + 1}"
+
+    def _name(self, k: int, value: float) -> str:
+        return f"mode {k + 1}: {value:.2f} Hz"
+
+    def _decorate(self, step: ET.Element, value: float) -> None:
+        frequency = ET.SubElement(step, "Attribute", Name="frequency_Hz", AttributeType="Scalar", Center="Grid")
+        data_item(frequency, repr(value), (1,))
+
+    def _attrs(self, value: float) -> dict:
+        return {"frequency_Hz": value, "unit": "1/sqrt(kg) (mass-normalised)"}
 
 
 def _jsonable(obj):
@@ -280,37 +310,13 @@ def write_json_atomic(path: Path, data: dict) -> None:
     replace_file(Path(path), json.dumps(_jsonable(data), indent=2).encode())
 
 
-class WaveExport:
+class WaveExport(_VertexSeriesExport):
     """A steady harmonic response over one period as an XDMF time series for ParaView (the
     travelling wave of a motor stator): ``write(vector, t_s)`` takes the full u-phi vector of the
-    field at time t [s] (displacement [m], potential [V]); ``close()`` writes the files as
-    :class:`ModeShapeExport` does."""
+    field at time t [s] (displacement [m], potential [V])."""
 
-    def __init__(self, path: Path, model):
-        self.path = Path(path)
-        self.h5_path = self.path.with_suffix(".h5")
-        self.vertex = VertexFields(model)
-        self.frames: list[tuple[float, np.ndarray, np.ndarray]] = []
+    def _name(self, k: int, value: float) -> str:
+        return f"t = {value * 1e6:.3f} us"
 
-    def write(self, vector, t_s: float) -> None:
-        sampled = self.vertex.sample(vector)
-        if sampled is not None:
-            self.frames.append((float(t_s), *sampled))
-
-    def close(self) -> list[str]:
-        names = [self.path.name, self.h5_path.name]
-        if self.vertex.comm.rank != 0:
-            return names
-        datasets = {f"mesh/{k}": v for k, v in self.vertex.mesh_arrays.items()}
-        steps = []
-        for k, (t_s, u, phi) in enumerate(self.frames):
-            datasets[f"frame_{k}/displacement"] = u
-            datasets[f"frame_{k}/potential"] = phi
-            step = mesh_grid(f"t = {t_s * 1e6:.3f} us", self.vertex, self.h5_path.name,
-                             f"{self.h5_path.name}:/frame_{k}")
-            step.insert(0, ET.Element("Time", Value=repr(t_s)))
-            steps.append(step)
-        write_h5_atomic(self.h5_path, datasets, {f"frame_{k}/displacement": {"unit": "m"}
-                                                 for k in range(len(self.frames))})
-        replace_file(self.path, xdmf_document(steps, self.path.stem))
-        return names
+    def _attrs(self, value: float) -> dict:
+        return {"unit": "m"}
