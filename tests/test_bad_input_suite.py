@@ -23,6 +23,8 @@ BAR = CASES / "validation" / "pzt4-bar-axisymmetric.toml"
 FE = CASES / "usdc-fe.toml"
 LUMPED = CASES / "usdc-lumped.toml"
 TRANSDUCER = CASES / "usdc-transducer.toml"
+STRIP = CASES / "validation" / "strip-friction-drive.toml"
+_WAVE = "transient.base_motions[0]"
 # the drill scene on the 4 mm test mesh, 0.2 ms: if a bad input slipped through, the run stays short
 FE_TINY = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic_mesh_size_m=0.0025",
            "output.plots=false", "transient.end_time_s=2e-4"]
@@ -106,10 +108,24 @@ SET_INPUTS = [
     (FE, [*FE_TINY, "transient.steps.min_s=1e-6"], "transient.steps.min_s"),
     (FE, [*FE_TINY, "transient.scheme.rho_inf=2"], "transient.scheme.rho_inf"),
     (FE, [*FE_TINY, "transient.checkpoint_interval_steps=-1"], "transient.checkpoint_interval_steps"),
+    # prescribed travelling wave
+    (STRIP, [f'{_WAVE}.facets="nowhere"'], f"{_WAVE}.facets"),
+    (STRIP, [f"{_WAVE}.direction=[0.0, 0.0]"], f"{_WAVE}.direction"),
+    (STRIP, [f"{_WAVE}.normal=[1.0, 0.0]"], f"{_WAVE}.normal"),
+    (STRIP, [f"{_WAVE}.normal=[0.0, 1.0, 0.0]"], f"{_WAVE}.normal"),
+    (STRIP, [f"{_WAVE}.ramp_periods=0"], f"{_WAVE}.ramp_periods"),
+    (STRIP, [f'{_WAVE}.kind="standing_wave"'], f"{_WAVE}.kind"),
+    (STRIP, [f"{_WAVE}.wavelength_m=-0.02"], f"{_WAVE}.wavelength_m"),
+    (STRIP, [f"{_WAVE}.mass_kg=1"], f"{_WAVE}.mass_kg"),
+    (STRIP, ['transient.initial_state="harmonic"'], "transient.initial_state"),
+    (STRIP, ["transient.contacts=[]", 'tier="modal"'], _WAVE),
+    (STRIP, ['supports=[{facets=["bottom"], components=["x"]}]'], f"{_WAVE}.facets"),
 ]
 # --set syntax: the line names --set and the key
 SYNTAX_INPUTS = [(BAR, ["modal.n_modes"], "modal.n_modes"), (BAR, ["modal..n_modes=3"], "modal..n_modes=3"),
-                 (BAR, ["title.sub=3"], "title"), (BAR, ["=3"], "=3")]
+                 (BAR, ["title.sub=3"], "title"), (BAR, ["=3"], "=3"),
+                 (STRIP, ["transient.bodies[3].mass_kg=1"], "transient.bodies[3]"),
+                 (STRIP, ["transient.drive[0].frequency_Hz=1"], "transient.drive[0]")]
 
 # (case, [(old text, new text)], --set overrides, key): edits of the case file itself
 _CONTACTS = "[[transient.contacts]]\nname = \"tip_ball\""

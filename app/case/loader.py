@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -40,8 +41,31 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     return key.split("."), value
 
 
+_INDEXED = re.compile(r"^(?P<name>[^\[\]]+)\[(?P<index>\d+)\]$")
+
+
+def _step(node, part: str, path: str, create: bool):
+    """The child ``part`` of ``node`` (``name`` or ``name[i]``, an entry of an array of tables),
+    created as an empty table if missing and ``create``."""
+    match = _INDEXED.match(part)
+    name = match["name"] if match else part
+    if not isinstance(node, dict):
+        raise CaseError("--set", path, "is not a table")
+    if match is None:
+        if node.get(name) is None and create:
+            node[name] = {}
+        return node.get(name)
+    items, index = node.get(name), int(match["index"])
+    if not isinstance(items, list):
+        raise CaseError("--set", path, f"{name!r} is not an array of tables")
+    if index >= len(items):
+        raise CaseError("--set", path, f"{name!r} has {len(items)} entries (indices from 0)")
+    return items[index]
+
+
 def apply_overrides(data: dict[str, Any], overrides: list[str] | None) -> dict[str, Any]:
-    """Return a copy of ``data`` with each ``dotted.key=value`` set (tables created as needed)."""
+    """Return a copy of ``data`` with each ``dotted.key=value`` set (tables created as needed);
+    ``name[i]`` selects entry i of an array of tables (``transient.bodies[0].mass_kg=0.1``)."""
     import copy
 
     out = copy.deepcopy(data)
@@ -49,11 +73,15 @@ def apply_overrides(data: dict[str, Any], overrides: list[str] | None) -> dict[s
         parts, value = parse_override(text)
         node = out
         for i, part in enumerate(parts[:-1]):
-            nxt = node.get(part)
-            if nxt is None:
-                nxt = node[part] = {}
-            if not isinstance(nxt, dict):
-                raise CaseError("--set", ".".join(parts[: i + 1]), "is not a table")
-            node = nxt
-        node[parts[-1]] = value
+            path = ".".join(parts[: i + 1])
+            node = _step(node, part, path, create=True)
+            if not isinstance(node, dict):
+                raise CaseError("--set", path, "is not a table")
+        last = parts[-1]
+        match = _INDEXED.match(last)
+        if match:
+            _step(node, last, ".".join(parts), create=False)     # checks the array and the index
+            node[match["name"]][int(match["index"])] = value
+        else:
+            node[last] = value
     return out

@@ -275,6 +275,8 @@ def _check_modal_tier(transient, file: str) -> None:
                             "surface contacts are not available in tier 'modal' yet (use tier 'fe')")
         if getattr(contact, "friction", None) is not None:
             raise CaseError(file, f"transient.contacts[{i}].friction", "friction is not available in tier 'modal' yet")
+    if transient.base_motions:
+        raise CaseError(file, "transient.base_motions[0]", "base motions are not available in tier 'modal' yet")
     for i, body in enumerate(transient.bodies):
         if body.rotations:
             raise CaseError(file, f"transient.bodies[{i}].rotations",

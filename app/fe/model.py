@@ -62,6 +62,11 @@ def _tag(names: dict[str, int], ref, file, key, what) -> int:
     raise CaseError(file, key, f"{what} group {ref!r} is not in the mesh (mesh has: {known})")
 
 
+def facet_group_tag(names: dict[str, int], ref, file, key) -> int:
+    """Tag of the facet group ``ref`` (name or tag); CaseError naming ``key`` if the mesh lacks it."""
+    return _tag(names, ref, file, key, "facet")
+
+
 @dataclass
 class Region:
     name: str

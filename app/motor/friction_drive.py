@@ -32,6 +32,30 @@ import numpy as np
 from scipy.optimize import brentq
 
 
+def layer_surface_amplitudes(normal_amplitude_m: float, tangential_amplitude_m: float, wavenumber_per_m: float,
+                             thickness_m: float, poisson: float) -> tuple[float, float]:
+    """(W_s, U_s) of the free face of a thin isotropic layer (plane strain) whose other face carries
+    the wave u_x = U_t sin xi, u_z = W cos xi, quasi-statically, to first order in k h:
+
+    * the free face carries no shear, so d(u_x)/dz = -d(u_z)/dx: U_s = U_t + k h W (the top of a
+      bending plate moves further than its middle);
+    * no normal stress on it in plane strain gives eps_zz = -nu / (1 - nu) eps_xx with
+      eps_xx = k U_t cos xi: W_s = W - nu / (1 - nu) k h U_t.
+
+    The neglected terms are O((k h)^2) relative (6e-4 % for the strip test)."""
+    kh = wavenumber_per_m * thickness_m
+    return (normal_amplitude_m - poisson / (1 - poisson) * kh * tangential_amplitude_m,
+            tangential_amplitude_m + kh * normal_amplitude_m)
+
+
+def layer_winkler(penalty_Pa_per_m: float, thickness_m: float, young_Pa: float, poisson: float) -> float:
+    """Winkler stiffness [Pa/m] of a contact penalty in series with a thin layer pressed through its
+    thickness with its other face held (uniaxial strain: constrained modulus E (1 - nu) / ((1 + nu)
+    (1 - 2 nu)) over h); valid where the contact zone is long against h."""
+    constrained = young_Pa * (1 - poisson) / ((1 + poisson) * (1 - 2 * poisson))
+    return 1.0 / (1.0 / penalty_Pa_per_m + thickness_m / constrained)
+
+
 def contact_integral(theta_c: float) -> float:
     """B(theta_c) = sin theta_c - theta_c cos theta_c (N = 2 k_w W B / k)."""
     return math.sin(theta_c) - theta_c * math.cos(theta_c)

@@ -153,7 +153,7 @@ class SurfaceContact(ForceColumns):
         gap_rate = ufl.dot(relative_velocity, normal)
         pressure = cf.normal_pressure(gap, gap_rate, self.stiffness, self.damping)
         traction = pressure * normal
-        if friction is not None:
+        if friction is not None and friction.mu_dynamic > 0:     # mu = 0: no friction term (UFL zero)
             traction = traction + cf.friction_traction(
                 normal, relative_velocity, pressure, friction.mu_dynamic, friction.static_ratio,
                 friction.decay_s_per_m, friction.shear_cap_Pa, friction.regularisation_speed_m_per_s)

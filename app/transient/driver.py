@@ -39,6 +39,7 @@ from app.transient.fields import FieldSeriesExport
 from app.transient.history import Progress, TimeSeriesExport, plot_time_series
 from app.transient.impacts import statistics_from_file
 from app.transient.interactions import BuildContext, build_interactions
+from app.transient.motions import DirichletData, build_motions
 from app.transient.rigid import RigidBody, RigidSet, constant_rate_motion
 from app.transient.state import TransientState
 from app.transient.stepper import TimeStepper
@@ -118,6 +119,12 @@ class TransientModel:
         self.drive_dofs = np.unique(np.concatenate(driven)).astype(np.int32) if driven else np.zeros(0, np.int32)
         held = [model.support_dofs, model.grounded_dofs, self.drive_dofs]
         held += [model.electrode_dofs[n] for n in model.electrodes_of("ground")]
+        self.motions = build_motions(case, model)
+        for i, motion in enumerate(self.motions):
+            if comm.allreduce(np.intersect1d(motion.dofs, np.concatenate(held)).size) > 0:
+                raise CaseError(file, f"transient.base_motions[{i}].facets",
+                                "shares DOFs with a support, grounded region or electrode")
+        held += [m.dofs for m in self.motions]
         dofs = np.unique(np.concatenate(held)).astype(np.int32)
         self.g = fem.Function(W)
         bc = fem.dirichletbc(self.g, dofs)
@@ -145,7 +152,7 @@ class TransientModel:
                                            for n in model.electrodes_of("voltage")],
                                   cfg.drive.frequency_Hz, cosine=cfg.initial_state == "harmonic")
         self.fe = LinearFE(W, W.sub(0), model.mass, model.stiffness, model.damping(self.damping_frequency_Hz),
-                           bcs=[bc], loads=loads, update_dirichlet=self.drive)
+                           bcs=[bc], loads=loads, update_dirichlet=DirichletData(self.g, self.drive, self.motions))
         self.rigid = RigidSet([self._body(b, gravity) for b in cfg.bodies])
         context = BuildContext(case, model, self.fe, MidpointFields(self.fe), weight, gdim, file, self.rigid)
         interactions = build_interactions(cfg.contacts, context)

@@ -92,14 +92,10 @@ def _vector(section, key: str, value, ctx: BuildContext, prefix: str):
 
 
 def build_surface(section, prefix: str, ctx: BuildContext):
+    from app.fe.model import facet_group_tag
     from app.transient.contact import ObstacleShape, SurfaceContact
 
-    names = ctx.model.mesh_data.facet_names
-    ref = section.facets
-    if not ((isinstance(ref, int) and ref in names.values()) or (isinstance(ref, str) and ref in names)):
-        known = ", ".join(names) or "none"
-        raise CaseError(ctx.file, f"{prefix}.facets", f"facet group {ref!r} is not in the mesh (mesh has: {known})")
-    tag = ref if isinstance(ref, int) else names[ref]
+    tag = facet_group_tag(ctx.model.mesh_data.facet_names, section.facets, ctx.file, f"{prefix}.facets")
     normal = _vector(section, "normal", section.normal, ctx, prefix)
     try:
         shape = (ObstacleShape("plane", normal=tuple(normal)) if section.shape == "plane"

@@ -212,6 +212,30 @@ class PointContactSection:
 ContactSection = SurfaceContactSection | NodeContactSection | PointContactSection
 
 
+@dataclass(frozen=True, kw_only=True)
+class TravellingWaveMotionSection:
+    """Prescribed travelling wave on a facet group: u = r(t) [W cos xi n + U_t sin xi e],
+    xi = 2 pi (x . e) / wavelength - omega t; r(t) ramps from 0 to 1 over ramp_periods
+    (app.transient.motions)."""
+
+    name: str = param(doc="motion name")
+    kind: Literal["travelling_wave"] = param(doc="travelling wave along `direction` (a stator surface)")
+    facets: TagRef = param(doc="facet group whose displacement is prescribed (all components)")
+    normal_amplitude_m: float = param(ge=0, unit="m", doc="W: displacement amplitude along `normal`")
+    tangential_amplitude_m: float = param(
+        ge=0, unit="m", doc="U_t: amplitude along `direction`, a quarter period after the normal one (a crest "
+                            "moves against the wave at omega U_t)")
+    wavelength_m: float = param(gt=0, unit="m", doc="wavelength along `direction`")
+    frequency_Hz: float | None = param(None, gt=0, unit="Hz", doc="wave frequency (default: transient.drive)")
+    direction: list[float] = param(doc="unit vector (mesh axes) along which the wave travels")
+    normal: list[float] = param(doc="unit vector (mesh axes) of the normal displacement, perpendicular to direction")
+    ramp_periods: float = param(
+        2.0, gt=0, doc="the amplitude ramps smoothly from 0 over this many periods (the run starts at rest)")
+
+
+BaseMotionSection = TravellingWaveMotionSection
+
+
 @dataclass(frozen=True)
 class LoadSection:
     gravity_m_per_s2: list[float] | None = param(None, doc="gravity vector on FE and rigid bodies (mesh axes)")
@@ -233,6 +257,8 @@ class TransientSection:
     loads: LoadSection = param(default_factory=LoadSection, doc="see [transient.loads]")
     bodies: list[BodySection] = param(default_factory=list, doc="rigid bodies")
     contacts: list[ContactSection] = param(default_factory=list, doc="penalty contacts")
+    base_motions: list[BaseMotionSection] = param(
+        default_factory=list, doc="prescribed motions of FE facets [[transient.base_motions]]")
     min_flight_rise_m: float = param(
         50e-6, gt=0, unit="m", doc="statistics: a flight of the FE body rises at least this much (as the lumped tier)")
 
@@ -258,6 +284,9 @@ class TransientSection:
                     known = ", ".join(names) or "none"
                     raise CaseError(file, f"{prefix}.contacts[{i}].{key}",
                                     f"unknown rigid body {name!r} (bodies: {known})")
+        if self.base_motions and self.initial_state == "harmonic":
+            raise CaseError(file, f"{prefix}.initial_state",
+                            "base motions start from rest (their amplitude ramps up): use 'rest'")
         contact_names = [c.name for c in self.contacts]
         for i, name in enumerate(contact_names):
             if name in contact_names[:i]:
