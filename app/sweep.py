@@ -41,11 +41,11 @@ PLOT_COLUMNS = (
     "transient.statistics.stem_rock_foundation.mean_force_N",
     "transient.statistics.stem_rock_foundation.mean_power_W",
     "transient.statistics.stem_rock_foundation.impulse_per_impact_mean_N_s",
-    "lumped.statistics.transducer.max_flight_height_m",
+    "lumped.statistics.transducer.max_rise_m",
     "lumped.statistics.transducer.flight_rate_per_s",
-    "lumped.statistics.free_mass.impact_rate_per_s",
-    "lumped.statistics.rock.mean_power_W",
-    "lumped.statistics.rock.impulse_per_impact_mean_N_s",
+    "lumped.statistics.impact_rate_per_s.tip_ball",
+    "lumped.statistics.stem_rock_foundation.mean_power_W",
+    "lumped.statistics.stem_rock_foundation.impulse_per_impact_mean_N_s",
     "lumped.statistics.impact_rate_per_s.stem_rock",
 )
 MAX_PLOTS = 6
