@@ -15,7 +15,7 @@ from app import __version__
 from app.case.schema import Case, load_case
 from app.case.validate import to_dict
 from app.errors import CaseError
-from app.exports import write_json_atomic
+from app.files import write_json_atomic
 from app.mpi_log import PhaseTimer, make_log
 from app.progress import silenced
 from app.tiers import TIERS

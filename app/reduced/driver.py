@@ -255,8 +255,8 @@ def _node_dofs(model, point: np.ndarray) -> tuple[np.ndarray, list[int]]:
 
 def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     """Run the transient analysis of ``case`` in the modal tier into ``out_dir``."""
+    from app.blas import limit_blas_threads
     from app.transient.impacts import statistics_from_file
-    from app.transient.threads import limit_blas_threads
 
     limit_blas_threads()    # the kernel's small products: threads cost more than they give (BENCHMARKS.md)
     if resume:     # refused when the case is loaded (app.runner.load_for_run)

@@ -22,6 +22,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from app import series as S
+from app.compat import is_mixed
 from app.transient.fe import LinearFE, displacement_of
 from app.transient.interactions import ForceColumns, friction_force, pad3, velocity_map
 from forms import contact as cf
@@ -410,8 +411,7 @@ class SurfaceContact(ForceColumns):
 
 
 def displacement_of_test(test, fe: LinearFE):
-    element = fe.space.ufl_element()
-    if isinstance(element, ufl.MixedElement) and not isinstance(element, ufl.VectorElement):
+    if is_mixed(fe.space):
         return ufl.split(test)[0]
     return test
 

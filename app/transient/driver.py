@@ -22,6 +22,7 @@ import ufl
 from dolfinx import fem
 
 from app import series as S
+from app.compat import petsc_vector
 from app.errors import CaseError
 from app.killpoint import kill_point
 from app.progress import SimulatedTimeProgress as Progress
@@ -254,7 +255,7 @@ class TransientModel:
         out = []
         for vec in (solver.x_full_re, solver.x_full_im):
             f = fem.Function(model.W)
-            f.vector.array_w[:] = vec.array_r
+            petsc_vector(f).array_w[:] = vec.array_r
             f.x.scatter_forward()
             out.append(f.x.array.copy())
         at_point = point.displacement_m[self.drive_point] if self.drive_point else 0.0
