@@ -268,5 +268,18 @@ def replot(result_dir: str | Path, write: bool = True) -> list[str]:
     written = frequency_domain_outputs(result_dir, results, True, case.get("title", ""))
     for tier_results in (results.get("transient"), results.get("lumped")):     # FE/modal, lumped
         if tier_results:
+            if "plot" not in tier_results and case.get("transient"):
+                tier_results = {**tier_results, "plot": _plot_spec_of_case(case)}
             written += time_series_outputs(result_dir, tier_results)
     return written
+
+
+def _plot_spec_of_case(case: dict) -> dict:
+    """What to plot for a transient result written before results["plot"] existed: from its case."""
+    section = case["transient"]
+    bodies = [b["name"] for b in section.get("bodies", [])
+              if not b.get("fixed") and (b.get("free_axes") is None or any(b["free_axes"]))]
+    downforce = (section.get("loads") or {}).get("fe_force_N") or [0.0]
+    return {"point": (section.get("drive") or {}).get("point"), "bodies": bodies,
+            "contacts": [c["name"] for c in section.get("contacts", [])],
+            "title": f"{Path(case.get('source', 'case')).stem}, downforce {float(np.linalg.norm(downforce)):.3g} N"}
