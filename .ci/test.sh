@@ -5,6 +5,6 @@ cd "$(dirname "$0")/.."
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
 export MPLBACKEND=Agg
 PY=.venv/bin/python
-if [ -x .venv/bin/ruff ]; then .venv/bin/ruff check app forms geometry tests bench; fi
+if [ -x .venv/bin/ruff ]; then .venv/bin/ruff check app forms geometry tests bench demos; fi
 $PY -m pytest -q --color=no --with-mpi -m "not slow" tests "$@"
 mpirun -n 2 -x OPENBLAS_NUM_THREADS=1 $PY -m pytest -q --color=no --with-mpi -m "mpi and not slow" -p no:cacheprovider tests

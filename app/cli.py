@@ -99,7 +99,7 @@ def _browse(args, rank: int) -> int:
 
     written = replot(args.dir, write=rank == 0)
     if rank == 0:
-        print(f"{args.dir}: " + (", ".join(written) if written else "nothing to plot (a lumped run plots as it runs)"))
+        print(f"{args.dir}: " + (", ".join(written) if written else "nothing to plot"))
     return 0
 
 

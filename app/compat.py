@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-import dolfinx
 import ufl
 from dolfinx import fem
 from dolfinx.io import gmshio
-
-DOLFINX_VERSION = dolfinx.__version__
 
 
 def model_to_mesh(model, comm, rank: int, gdim: int):
@@ -29,3 +26,38 @@ def vector_space(mesh, family: str, degree: int):
 
 def scalar_space(mesh, family: str, degree: int):
     return fem.FunctionSpace(mesh, (family, degree))
+
+
+def petsc_vector(function: fem.Function):
+    """The PETSc Vec of a Function's values (owned + ghosts); ``Function.x.petsc_vec`` from 0.8."""
+    return function.vector
+
+
+def is_mixed(space) -> bool:
+    """True for a mixed space (u-phi), False for a plain vector or scalar space; from 0.7 the
+    elements are basix.ufl elements (``space.element.num_sub_elements`` / ``blocked``)."""
+    element = space.ufl_element()
+    return isinstance(element, ufl.MixedElement) and not isinstance(element, ufl.VectorElement)
+
+
+def cell_geometry_nodes(mesh):
+    """(n_cells, nodes per cell) geometry node indices of the local cells (owned first); the
+    geometry dofmap is an AdjacencyList in 0.5-0.6 and a 2-D array from 0.7."""
+    dofmap = mesh.geometry.dofmap
+    return dofmap.array.reshape(-1, dofmap.offsets[1])
+
+
+def cell_candidates(mesh, points):
+    """Per point (n x 3), the local cells whose bounding box holds it, as an AdjacencyList
+    (``geometry.bb_tree`` / ``compute_collisions_points`` from 0.7)."""
+    from dolfinx import geometry
+
+    tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
+    return geometry.compute_collisions(tree, points)
+
+
+def colliding_cells(mesh, points):
+    """Per point (n x 3), the local cells that contain it (AdjacencyList)."""
+    from dolfinx import geometry
+
+    return geometry.compute_colliding_cells(mesh, cell_candidates(mesh, points), points)

@@ -13,16 +13,14 @@ and the XML is replaced atomically (write a temporary file, rename) after the da
 
 from __future__ import annotations
 
-import json
-import math
-import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 from dolfinx import fem
 
-from app.compat import scalar_space, vector_space
+from app.compat import cell_geometry_nodes, scalar_space, vector_space
+from app.files import replace_file, write_h5_atomic
 
 # dolfinx cell name -> (XDMF topology type, vertices, vertex permutation dolfinx -> XDMF/VTK order)
 _XDMF_CELLS = {
@@ -55,7 +53,7 @@ class VertexFields:
         self.topology_type, nodes_per_cell, permutation = _XDMF_CELLS[cell_name]
         n_owned = mesh.topology.index_map(tdim).size_local
         geometry = mesh.geometry
-        cell_nodes = np.asarray(geometry.dofmap.array, dtype=np.int64).reshape(-1, nodes_per_cell)[:n_owned]
+        cell_nodes = np.asarray(cell_geometry_nodes(mesh), dtype=np.int64)[:n_owned]
         self.V1 = vector_space(mesh, "Lagrange", 1)
         self.S1 = scalar_space(mesh, "Lagrange", 1)
         self.u1 = fem.Function(self.V1)
@@ -187,35 +185,10 @@ def step_bytes(step: ET.Element) -> bytes:
     return ("   " + ET.tostring(step, encoding="unicode") + "\n").encode()
 
 
-def replace_file(path: Path, data: bytes, sync: bool = False) -> None:
-    """Write ``data`` to ``path`` through a temporary file and a rename (a killed process leaves the
-    old or the new file, never a mix). ``sync``: fsync before the rename (survives power loss)."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        if sync:
-            fh.flush()
-            os.fsync(fh.fileno())
-    os.replace(tmp, path)
-
-
-def write_h5_atomic(path: Path, datasets: dict[str, np.ndarray], attrs: dict[str, dict] | None = None) -> None:
-    """An HDF5 file of ``datasets`` (name -> array) written under a temporary name, closed, renamed."""
-    import h5py
-
-    tmp = path.with_name(path.name + ".tmp")
-    with h5py.File(tmp, "w") as f:
-        for name, values in datasets.items():
-            ds = f.create_dataset(name, data=values)
-            for key, value in (attrs or {}).get(name, {}).items():
-                ds.attrs[key] = value
-    os.replace(tmp, path)
-
-
 def write_mesh_h5(path: Path, vertex: VertexFields) -> None:
     arrays = vertex.mesh_arrays
     write_h5_atomic(path, {f"mesh/{k}": v for k, v in arrays.items()},
-                    {"mesh/geometry": {"unit": "m"}, "mesh/region": {"meaning": "cell group tag of the mesh"}})
+                    {"mesh/geometry": {"units": "m"}, "mesh/region": {"meaning": "cell group tag of the mesh"}})
 
 
 class _VertexSeriesExport:
@@ -288,26 +261,7 @@ class ModeShapeExport(_VertexSeriesExport):
         data_item(frequency, repr(value), (1,))
 
     def _attrs(self, value: float) -> dict:
-        return {"frequency_Hz": value, "unit": "1/sqrt(kg) (mass-normalised)"}
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, complex):
-        return {"re": obj.real, "im": obj.imag}
-    return obj
-
-
-def write_json_atomic(path: Path, data: dict) -> None:
-    """Write JSON via a temporary file and rename, so a killed run never leaves half a file."""
-    replace_file(Path(path), json.dumps(_jsonable(data), indent=2).encode())
+        return {"frequency_Hz": value, "units": "1/sqrt(kg) (mass-normalised)"}
 
 
 class WaveExport(_VertexSeriesExport):
@@ -319,4 +273,4 @@ class WaveExport(_VertexSeriesExport):
         return f"t = {value * 1e6:.3f} us"
 
     def _attrs(self, value: float) -> dict:
-        return {"unit": "m"}
+        return {"units": "m"}

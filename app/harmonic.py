@@ -18,6 +18,7 @@ import numpy as np
 from dolfinx import fem
 from petsc4py import PETSc
 
+from app.compat import petsc_vector
 from app.errors import NumericalFailure
 from app.fe.constraints import ConstraintSet
 from app.fe.model import FEModel
@@ -66,7 +67,7 @@ class HarmonicSolver:
         for name, phasor in self.phasors.items():
             values.x.array[model.electrode_dofs[name]] = phasor.real
             values_im.x.array[model.electrode_dofs[name]] = phasor.imag
-        x_drive, x_drive_im = values.vector.copy(), values_im.vector.copy()
+        x_drive, x_drive_im = petsc_vector(values).copy(), petsc_vector(values_im).copy()
         self.floating_dofs = {}
         n_owned = model.W.dofmap.index_map.size_local
         for name in model.electrodes_of("floating"):

@@ -15,8 +15,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from dolfinx import geometry
 from mpi4py import MPI
+
+from app.compat import cell_candidates, cell_geometry_nodes
 
 SKIP_FRACTION = 0.05
 
@@ -29,8 +30,8 @@ class PointSet:
         pts = np.zeros((points.shape[0], 3))
         pts[:, : points.shape[1]] = points
         self.points = pts
-        tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
-        candidates = geometry.compute_collisions(tree, pts)
+        candidates = cell_candidates(mesh, pts)
+        self._cell_nodes = cell_geometry_nodes(mesh)
         n_owned = mesh.topology.index_map(mesh.topology.dim).size_local
         size = mesh.comm.size
         first = np.full(len(pts), -1, dtype=np.int32)
@@ -50,7 +51,7 @@ class PointSet:
     def _contains(self, cell: int, point: np.ndarray) -> bool:
         """Barycentric test on the affine tetrahedron. dolfinx 0.5's compute_colliding_cells (GJK with an
         absolute tolerance) misses interior points of millimetre-sized cells in SI units."""
-        nodes = self.mesh.geometry.x[self.mesh.geometry.dofmap.links(cell)[:4]]
+        nodes = self.mesh.geometry.x[self._cell_nodes[cell, :4]]
         jacobian = (nodes[1:] - nodes[0]).T
         lam = np.linalg.solve(jacobian, point - nodes[0])
         return bool(lam.min() >= -1e-10 and lam.sum() <= 1 + 1e-10)

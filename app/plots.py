@@ -165,9 +165,91 @@ def frequency_domain_outputs(out: Path, results: dict, plots: bool = True, title
     return written
 
 
+MOTION_AXIS = "axial displacement [mm]"
+FORCE_AXIS = "contact force [N]"
+TIME_AXIS = "time [ms]"
+
+
+def time_series_curves(data: dict[str, np.ndarray], point: str | None, bodies: list[str],
+                       contacts: list[str]) -> dict[str, list[tuple[str, np.ndarray]]]:
+    """The curves of the time-series plots of every tier, from a time series under the names of
+    app/series.py: ``motion``: (label, mm) of the drive point's displacement and of each body's
+    vertical rise from its start; ``force``: (label, N) of each contact's force magnitude."""
+    from app import series as S
+
+    motion = []
+    if point and S.point_displacement(point) in data:
+        motion.append((f"transducer {point}", data[S.point_displacement(point)] * 1e3))
+    for body in bodies:
+        if S.body_position(body) in data:
+            z = data[S.body_position(body)][:, -1]
+            motion.append((f"{body} (from its start)", (z - z[0]) * 1e3))
+    force = [(contact, np.linalg.norm(data[S.contact_force(contact)], axis=1))
+             for contact in contacts if S.contact_force(contact) in data]
+    return {"motion": motion, "force": force}
+
+
+def plot_time_series(h5_path: Path, out_dir: Path, point: str | None, bodies: list[str], contacts: list[str],
+                     title: str = "") -> list[str]:
+    """The time-series plots of every tier (:func:`time_series_curves`): the motion (Fig. 7/9/12-like)
+    and the contact forces (Fig. 5-like: one panel per contact), both titled ``title``. Returns the
+    file names written into ``out_dir``."""
+    from app import series as S
+
+    out_dir = Path(out_dir)
+    data = S.read_time_series(h5_path)
+    if S.TIME not in data:
+        return []
+    t_ms = data[S.TIME] * 1e3
+    curves = time_series_curves(data, point, bodies, contacts)
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for i, (label, values) in enumerate(curves["motion"]):
+        ax.plot(t_ms, values, ":" if i == 0 and point else "-", lw=0.8, label=label)
+    ax.set_xlabel(TIME_AXIS)
+    ax.set_ylabel(MOTION_AXIS)
+    ax.set_title(f"{title}: displacements" if title else "displacements")
+    ax.legend(loc="upper right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out_dir / S.MOTION_PLOT, dpi=120)
+    plt.close(fig)
+    written = [S.MOTION_PLOT]
+    if curves["force"]:
+        n = len(curves["force"])
+        fig, axes = plt.subplots(n, 1, figsize=(8, 1.2 + 1.8 * n), sharex=True, squeeze=False)
+        for ax, (label, values) in zip(axes[:, 0], curves["force"]):
+            ax.plot(t_ms, values, lw=0.8)
+            ax.set_ylabel(f"{label} [N]")
+            ax.grid(alpha=0.3)
+        axes[-1, 0].set_xlabel(TIME_AXIS)
+        axes[0, 0].set_title(f"{title}: {FORCE_AXIS}" if title else FORCE_AXIS)
+        fig.tight_layout()
+        fig.savefig(out_dir / S.FORCE_PLOT, dpi=120)
+        plt.close(fig)
+        written.append(S.FORCE_PLOT)
+    return written
+
+
+def time_series_outputs(out_dir: Path, results: dict) -> list[str]:
+    """The time-series plots of a tier's results (``results["plot"]`` says what to draw, written by the
+    tier's driver: drive point, bodies, contacts, title) and its scene report's plots."""
+    spec = results.get("plot")
+    series = Path(out_dir) / results["time_series"] if results.get("time_series") else None
+    if not spec or series is None or not series.is_file():
+        return []
+    written = plot_time_series(series, out_dir, spec.get("point"), spec.get("bodies", []), spec.get("contacts", []),
+                               spec.get("title", ""))
+    if results.get("scene"):
+        from app.scenes import scene_report
+
+        written += scene_report(results["scene"]).plots(results.get("statistics") or {}, Path(out_dir),
+                                                        spec.get("title", ""))
+    return written
+
+
 def replot(result_dir: str | Path, write: bool = True) -> list[str]:
     """``piezodyn plot DIR``: the tables and plots of an existing result directory, from its summary.json
-    (modal and harmonic) and its time series (transient FE), without solving anything again."""
+    (modal and harmonic) and its time series (every tier), without solving anything again."""
     import json
 
     from app.errors import CaseError
@@ -184,17 +266,20 @@ def replot(result_dir: str | Path, write: bool = True) -> list[str]:
     if not write:
         return []
     written = frequency_domain_outputs(result_dir, results, True, case.get("title", ""))
-    transient = results.get("transient")
-    series = result_dir / transient["time_series"] if transient and transient.get("time_series") else None
-    if series is not None and series.is_file():
-        from app.transient.history import plot_time_series
-
-        section = case.get("transient") or {}
-        bodies = [b["name"] for b in section.get("bodies", [])
-                  if not b.get("fixed") and (b.get("free_axes") is None or any(b["free_axes"]))]
-        contacts = [c["name"] for c in section.get("contacts", [])]
-        downforce = (section.get("loads") or {}).get("fe_force_N") or [0.0]
-        title = f"{Path(case.get('source', 'case')).stem}, downforce {float(np.linalg.norm(downforce)):.3g} N"
-        written += plot_time_series(series, result_dir / "transient_motion.png", result_dir / "transient_force.png",
-                                    (section.get("drive") or {}).get("point"), bodies, contacts, title=title)
+    for tier_results in (results.get("transient"), results.get("lumped")):     # FE/modal, lumped
+        if tier_results:
+            if "plot" not in tier_results and case.get("transient"):
+                tier_results = {**tier_results, "plot": _plot_spec_of_case(case)}
+            written += time_series_outputs(result_dir, tier_results)
     return written
+
+
+def _plot_spec_of_case(case: dict) -> dict:
+    """What to plot for a transient result written before results["plot"] existed: from its case."""
+    section = case["transient"]
+    bodies = [b["name"] for b in section.get("bodies", [])
+              if not b.get("fixed") and (b.get("free_axes") is None or any(b["free_axes"]))]
+    downforce = (section.get("loads") or {}).get("fe_force_N") or [0.0]
+    return {"point": (section.get("drive") or {}).get("point"), "bodies": bodies,
+            "contacts": [c["name"] for c in section.get("contacts", [])],
+            "title": f"{Path(case.get('source', 'case')).stem}, downforce {float(np.linalg.norm(downforce)):.3g} N"}

@@ -15,7 +15,7 @@ from app import __version__
 from app.case.schema import Case, load_case
 from app.case.validate import to_dict
 from app.errors import CaseError
-from app.exports import write_json_atomic
+from app.files import write_json_atomic
 from app.mpi_log import PhaseTimer, make_log
 from app.progress import silenced
 from app.tiers import TIERS
@@ -115,10 +115,8 @@ def run_lumped(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dic
     from app.lumped import driver
 
     with timer.phase("lumped"):
-        summary["results"]["lumped"] = driver.run(case.lumped, out, comm, log)
-    files = summary["results"]["lumped"].get("files", {})
-    summary["outputs"] += [files["time_series"]] if "time_series" in files else []
-    summary["outputs"] += list(files.get("plots", []))
+        summary["results"]["lumped"] = driver.run(case.lumped, out, comm, log, Path(case.source).stem)
+    summary["outputs"] += summary["results"]["lumped"].pop("outputs", [])
 
 
 def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, resume: bool) -> None:
@@ -256,9 +254,10 @@ def transient_rows(transient: dict | None) -> list[tuple[str, str, str]]:
             name = key[: -len("_foundation")]
             rows.append((f"{name}: mean force on the foundation", f"{value['mean_force_N']:.4g}", "N"))
             rows.append((f"{name}: mean power into the foundation", f"{value['mean_power_W']:.4g}", "W"))
-    transducer = stats.get("transducer")
-    if transducer:
-        rows.append(("transducer: largest rise (period-averaged)", f"{transducer['max_rise_m'] * 1e3:.4g}", "mm"))
+    if transient.get("scene"):
+        from app.scenes import scene_report
+
+        rows += scene_report(transient["scene"]).table_rows(stats)
     return rows
 
 

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from app.case.loader import parse_override
 from app.errors import CaseError, NumericalFailure
+from app.files import write_json_atomic
 
 TAG_PROGRESS = 11
 
@@ -41,11 +42,11 @@ PLOT_COLUMNS = (
     "transient.statistics.stem_rock_foundation.mean_force_N",
     "transient.statistics.stem_rock_foundation.mean_power_W",
     "transient.statistics.stem_rock_foundation.impulse_per_impact_mean_N_s",
-    "lumped.statistics.transducer.max_flight_height_m",
+    "lumped.statistics.transducer.max_rise_m",
     "lumped.statistics.transducer.flight_rate_per_s",
-    "lumped.statistics.free_mass.impact_rate_per_s",
-    "lumped.statistics.rock.mean_power_W",
-    "lumped.statistics.rock.impulse_per_impact_mean_N_s",
+    "lumped.statistics.impact_rate_per_s.tip_ball",
+    "lumped.statistics.stem_rock_foundation.mean_power_W",
+    "lumped.statistics.stem_rock_foundation.impulse_per_impact_mean_N_s",
     "lumped.statistics.impact_rate_per_s.stem_rock",
 )
 MAX_PLOTS = 6
@@ -258,8 +259,8 @@ def write_table(rows: list[dict], keys: list[str], out_dir: Path, case_path: str
         writer.writerow(columns)
         for row in rows:
             writer.writerow([_csv(row.get(c, "")) for c in columns])
-    (out_dir / "sweep.json").write_text(json.dumps(
-        {"case": case_path, "title": title, "parameters": keys, "columns": columns, "rows": rows}, indent=1))
+    write_json_atomic(out_dir / "sweep.json", {"case": case_path, "title": title, "parameters": keys,
+                                               "columns": columns, "rows": rows}, indent=1)
     ok = [r for r in rows if "_failed" not in r]
     if ok:
         write_sweep_plots(ok, keys, out_dir, title)

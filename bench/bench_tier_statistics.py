@@ -27,13 +27,13 @@ import tempfile
 import time
 from pathlib import Path
 
-import h5py
 import numpy as np
 from scipy import stats as sps
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from app import series as S  # noqa: E402
 from app.case.schema import load_case  # noqa: E402
 from app.transient.impacts import run_statistics  # noqa: E402
 
@@ -54,22 +54,22 @@ def _force_set(force_N: float) -> str:
 
 def batch_statistics(h5_path: Path, force_N: float, batches: int, skip_s: float) -> dict[str, tuple]:
     """{statistic: (mean, half-width of the 95 % interval)} over equal windows of the run."""
-    cfg = load_case(CASE, [_force_set(force_N)]).transient
-    with h5py.File(h5_path, "r") as f:
-        data = {name: f[name][:] for name in f}
-    t = data["time_s"]
+    case = load_case(CASE, [_force_set(force_N)])
+    cfg = case.transient
+    data = S.read_time_series(h5_path)
+    t = data[S.TIME]
     edges = np.linspace(skip_s, t[-1], batches + 1)
     values = {key: [] for key in [*KEYS, RISE]}
-    tip = data[f"{cfg.drive.point}_displacement_m"]
+    tip = data[S.point_displacement(cfg.drive.point)]
     start = float(np.mean(tip[t <= t[0] + 1.0 / cfg.drive.frequency_Hz]))
     for lo, hi in zip(edges[:-1], edges[1:]):
         rows = (t > lo) & (t <= hi)
         window = {name: array[rows] for name, array in data.items()}
-        s = run_statistics(window, cfg)
+        s = run_statistics(window, cfg, case.scene)
         for key, get in KEYS.items():
             values[key].append(get(s))
-        dt = window["dt_s"]
-        mean_tip = float(np.sum(window[f"{cfg.drive.point}_displacement_m"] * dt) / np.sum(dt))
+        dt = window[S.STEP]
+        mean_tip = float(np.sum(window[S.point_displacement(cfg.drive.point)] * dt) / np.sum(dt))
         values[RISE].append(1e3 * (mean_tip - start))
     t_crit = sps.t.ppf(0.975, batches - 1)
     return {key: (float(np.mean(v)), float(t_crit * np.std(v, ddof=1) / np.sqrt(batches))) for key, v in
@@ -97,7 +97,7 @@ def main() -> None:
             wall = time.perf_counter() - start
             per_ms = json.loads((out / "summary.json").read_text())["results"]["transient"]["wall_s_per_simulated_ms"]
             rows.append((force, f"modal ({args.seconds:g} s, {wall:.0f} s wall, {per_ms:.3f} s/ms)",
-                         batch_statistics(out / "transient.h5", force, args.batches, args.skip_ms * 1e-3)))
+                         batch_statistics(out / S.TIME_SERIES_FILE, force, args.batches, args.skip_ms * 1e-3)))
             if force in fe_dirs:
                 summary = json.loads((fe_dirs[force] / "summary.json").read_text())["results"]["transient"]
                 fe_h5 = fe_dirs[force] / summary["time_series"]

@@ -4,9 +4,10 @@ and the lumped model of the same scene (cases/usdc-lumped-fe-scene.toml), at 0/3
 The FE runs are long (minutes per 200 ms), so they are read from their output directories (run
 them first, e.g. ``piezodyn run cases/usdc-fe.toml --out /tmp/drill_3N --set
 'transient.loads.fe_force_N=[0.0,-3.0]'``); the lumped runs are done here, in the same process.
-Both tiers report the same statistics (app/transient/impacts.py, app/lumped/stats.py); the table
-gives each tier's value and the lumped tier's deviation from the FE tier. The motion is chaotic, so
-the deviations are those of statistics over the window, not of trajectories.
+Both tiers report the same statistics under the same keys (app/series.py, app/transient/impacts.py,
+app/lumped/stats.py, app/scenes/percussion_drill.py), read by one function (``row``) for both; the
+table gives each tier's value and the lumped tier's deviation from the FE tier. The motion is
+chaotic, so the deviations are those of statistics over the window, not of trajectories.
 
     /work/main/.venv/bin/python bench/bench_tiers.py --fe-dir 0=/tmp/drill_0N --fe-dir 3=/tmp/drill_3N ...
         [--plot-dir DIR]
@@ -29,46 +30,37 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from app import series as S  # noqa: E402
 from app.case.schema import load_case  # noqa: E402
 from app.lumped.driver import compute  # noqa: E402
-from app.transient.impacts import statistics_from_file  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def fe_row(directory: Path, force_N: float) -> dict:
-    summary = json.loads((directory / "summary.json").read_text())
-    tr = summary["results"]["transient"]
-    stats = tr.get("statistics")
-    if not stats:      # runs written before the statistics existed: same numbers from the series
-        case = load_case(ROOT / "cases" / "usdc-fe.toml", [f"transient.loads.fe_force_N=[0.0,{-force_N!r}]"])
-        _, stats = statistics_from_file(directory / tr["time_series"], case.transient)
+def row(results: dict) -> dict:
+    """One table row from a tier's results (summary.json ``results.transient`` of an FE run, or the
+    lumped tier's results): every tier reports under the same keys (app/series.py), so no mapping."""
+    stats = results["statistics"]
+    rates = stats["impact_rate_per_s"]
     rock = stats["stem_rock_foundation"]
-    return {"wall_s_per_ms": tr["wall_s_per_simulated_ms"], "simulated_ms": tr["simulated_time_s"] * 1e3,
-            "cutbacks": tr["cutbacks"],
-            "tip_ball_per_s": stats["impact_rate_per_s"]["tip_ball"],
-            "ball_stem_per_s": stats["impact_rate_per_s"]["ball_stem"],
-            "stem_rock_per_s": stats["impact_rate_per_s"]["stem_rock"],
+    return {"wall_s_per_ms": results["wall_s_per_simulated_ms"], "simulated_ms": results["simulated_time_s"] * 1e3,
+            "cutbacks": results["cutbacks"],
+            "tip_ball_per_s": rates["tip_ball"], "ball_stem_per_s": rates["ball_stem"],
+            "stem_rock_per_s": rates["stem_rock"],
             "rock_power_W": rock["mean_power_W"], "rock_force_N": rock["mean_force_N"],
             "rock_impulse_N_s": rock["impulse_per_impact_mean_N_s"],
             "max_rise_mm": stats["transducer"]["max_rise_m"] * 1e3,
             "flights_per_s": stats["transducer"]["flight_rate_per_s"]}
 
 
+def fe_row(directory: Path) -> dict:
+    return row(json.loads((directory / "summary.json").read_text())["results"]["transient"])
+
+
 def lumped_row(force_N: float, duration_s: float) -> dict:
     case = load_case(ROOT / "cases" / "usdc-lumped-fe-scene.toml",
                      [f"lumped.downforce_N={force_N!r}", f"lumped.duration_s={duration_s!r}"])
-    results, _ = compute(case.lumped)
-    stats = results["statistics"]
-    rates = stats["impact_rate_per_s"]
-    return {"wall_s_per_ms": results["solver"]["wall_s_per_simulated_ms"], "simulated_ms": duration_s * 1e3,
-            "cutbacks": 0,
-            "tip_ball_per_s": rates["tip_ball"], "ball_stem_per_s": rates["ball_stem"],
-            "stem_rock_per_s": rates["stem_rock"],
-            "rock_power_W": stats["rock"]["mean_power_W"], "rock_force_N": stats["rock"]["mean_force_N"],
-            "rock_impulse_N_s": stats["rock"]["impulse_per_impact_mean_N_s"],
-            "max_rise_mm": (stats["transducer"]["max_flight_height_m"] - case.lumped.initial.transducer_z_m) * 1e3,
-            "flights_per_s": stats["transducer"]["flight_rate_per_s"]}
+    return row(compute(case.lumped)[0])
 
 
 COLUMNS = [("wall_s_per_ms", "wall s / sim. ms", "{:.3g}"), ("tip_ball_per_s", "tip-ball impacts/s", "{:.0f}"),
@@ -89,19 +81,19 @@ def plot_figures(fe_dirs: dict[float, Path], out: Path) -> list[Path]:
     forces = sorted(fe_dirs)
     fig9, axes9 = plt.subplots(len(forces), 1, figsize=(8, 2.4 * len(forces)), sharex=True, squeeze=False)
     fig5, axes5 = plt.subplots(len(forces), 1, figsize=(8, 1.8 * len(forces)), sharex=True, squeeze=False)
-    for row, force in enumerate(forces):
-        with h5py.File(fe_dirs[force] / "transient.h5", "r") as f:
-            t_ms = f["time_s"][:] * 1e3
-            ax = axes9[row, 0]
-            ax.plot(t_ms, f["tip_displacement_m"][:] * 1e3, ":", lw=0.8, label="transducer tip")
+    for row_index, force in enumerate(forces):
+        with h5py.File(fe_dirs[force] / S.TIME_SERIES_FILE, "r") as f:
+            t_ms = f[S.TIME][:] * 1e3
+            ax = axes9[row_index, 0]
+            ax.plot(t_ms, f[S.point_displacement("tip")][:] * 1e3, ":", lw=0.8, label="transducer tip")
             for body, style in (("ball", "-"), ("stem", "--")):
-                z = f[f"{body}_position_m"][:, -1]
-                ax.plot(t_ms, (z - z[0]) * 1e3, style, lw=0.8, label={"ball": "free mass", "stem": "drill stem"}[body])
+                z = f[S.body_position(body)][:, -1]
+                ax.plot(t_ms, (z - z[0]) * 1e3, style, lw=0.8, label=f"{body} (from its start)")
             ax.set_ylabel("disp. [mm]")
             ax.set_title(f"{force:g} N downforce", fontsize=9)
-            axes5[row, 0].plot(t_ms, np.linalg.norm(f["stem_rock_force_N"][:], axis=1), lw=0.6)
-            axes5[row, 0].set_ylabel("force [N]")
-            axes5[row, 0].set_title(f"{force:g} N downforce", fontsize=9)
+            axes5[row_index, 0].plot(t_ms, np.linalg.norm(f[S.contact_force("stem_rock")][:], axis=1), lw=0.6)
+            axes5[row_index, 0].set_ylabel("force [N]")
+            axes5[row_index, 0].set_title(f"{force:g} N downforce", fontsize=9)
     axes9[0, 0].legend(fontsize=8, loc="upper right")
     axes9[-1, 0].set_xlabel("time [ms]")
     axes5[-1, 0].set_xlabel("time [ms]")
@@ -130,12 +122,12 @@ def main():
     print("| downforce | tier | " + " | ".join(c[1] for c in COLUMNS) + " |")
     print("|---|---|" + "---|" * len(COLUMNS))
 
-    def cells_of(row):
-        return [fmt.format(row[key] * (1e3 if key == "rock_impulse_N_s" else 1)) for key, _, fmt in COLUMNS]
+    def cells_of(values):
+        return [fmt.format(values[key] * (1e3 if key == "rock_impulse_N_s" else 1)) for key, _, fmt in COLUMNS]
 
     for force in forces:
         lumped = lumped_row(force, args.duration_s)
-        fe_runs = [fe_row(d, force) for d in fe_dirs.get(force, [])]
+        fe_runs = [fe_row(d) for d in fe_dirs.get(force, [])]
         for fe in fe_runs:
             tier = f"FE ({fe['simulated_ms']:.0f} ms, {fe['cutbacks']} cut-backs)"
             print(f"| {force:g} N | {tier} | " + " | ".join(cells_of(fe)) + " |")

@@ -2,7 +2,7 @@
 
 (a) this implementation: K_eff factorised once per dt, one back-substitution per step, Newton on
     the contact forces and rigid DOFs only (app/transient/coupled.py);
-(b) naive dolfinx loop: Newton on all FE + rigid DOFs (app/transient/fullspace.py) with M and K
+(b) naive dolfinx loop: Newton on all FE + rigid DOFs (demos/demo_fullspace.py) with M and K
     re-assembled from their forms and K_eff built and re-factorised at every Newton iteration;
 (c) floor: a linear Newmark step with a pre-factorised K_eff (two mat-vecs for the right-hand side
     and one back-substitution) for every step (a) took; also the bare back-substitution alone.
@@ -30,8 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.transient.coupled import CoupledSystem  # noqa: E402
 from app.transient.fe import EffectiveOperator  # noqa: E402
-from app.transient.fullspace import FullSpaceSystem  # noqa: E402
-from app.transient.scenes import RodImpact, build_rod_impact, rod_step_sizes, run_scene  # noqa: E402
+from app.transient.stepper import run_scene  # noqa: E402
+from demos.demo_fullspace import FullSpaceSystem  # noqa: E402
+from demos.demo_rod_impact import RodImpact, build_rod_impact, rod_step_sizes  # noqa: E402
 from forms.newmark import TimeScheme  # noqa: E402
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import gmsh
 from mpi4py import MPI
 
+from app.compat import cell_geometry_nodes
 from app.errors import CaseError
 from geometry.meshdata import GmshSession, MeshData, from_gmsh_model
 
@@ -40,7 +41,7 @@ def export_meshio(mesh_data: MeshData, path: Path) -> None:
 
     mesh = mesh_data.mesh
     tdim = mesh.topology.dim
-    cells = mesh.geometry.dofmap.array.reshape(-1, mesh.geometry.dofmap.offsets[1])
+    cells = cell_geometry_nodes(mesh)
     cell_type = {2: "triangle", 3: "tetra"}[tdim]
     if cells.shape[1] == 6:
         cell_type += "6"

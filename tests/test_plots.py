@@ -120,3 +120,11 @@ def test_transient_result_replots_its_time_series(tmp_path):
     replot = run_cli("plot", out)
     assert replot.returncode == 0, replot.stderr
     assert (out / "transient_motion.png").stat().st_size > 0 and (out / "transient_force.png").stat().st_size > 0
+    # a result written before summaries recorded what to plot (results.transient.plot): from its case
+    del summary["results"]["transient"]["plot"]
+    (out / "summary.json").write_text(json.dumps(summary))
+    for name in ("transient_motion.png", "transient_force.png"):
+        (out / name).unlink()
+    replot = run_cli("plot", out)
+    assert replot.returncode == 0, replot.stderr
+    assert (out / "transient_motion.png").stat().st_size > 0 and (out / "transient_force.png").stat().st_size > 0

@@ -42,7 +42,7 @@ def test_lumped_sweep_writes_table_summaries_and_readable_plot(tmp_path):
     assert [r["lumped.downforce_N"] for r in rows] == [0, 9]
     table = _table(tmp_path / "sweep.csv")
     assert len(table) == 2 and table[1]["lumped.downforce_N"] == "9"
-    assert "lumped.statistics.rock.mean_power_W" in table[0]
+    assert "lumped.statistics.stem_rock_foundation.mean_power_W" in table[0]
     assert not [c for c in table[0] if "wall" in c]  # the table does not depend on the machine
     for i in range(2):
         summary = json.loads((tmp_path / f"point_{i:04d}" / "summary.json").read_text())

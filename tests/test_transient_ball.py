@@ -10,37 +10,10 @@ import pytest
 from mpi4py import MPI
 
 from app.transient.control import StepSizes
-from app.transient.scenes import (
-    BallDrop,
-    ball_drop_closed_form,
-    ball_step_sizes,
-    build_ball_drop,
-    run_scene,
-    vibrating_block_with_ball,
-)
+from app.transient.stepper import run_scene
+from demos.demo_ball_drop import BallDrop, ball_drop_closed_form, ball_step_sizes, build_ball_drop, measured_impact
+from demos.demo_vibrating_block import vibrating_block_with_ball
 from forms.newmark import TimeScheme
-
-
-def measured_impact(ball: BallDrop, records):
-    """(contact duration [s], restitution) of the first impact: contact starts where the penetration
-    crosses zero and ends where the unclipped Kelvin-Voigt force k delta + c delta' does (both located
-    by linear interpolation between steps), as in the closed form."""
-    t = np.array([r["time_s"] for r in records])
-    z = np.array([r["position_m"][1] for r in records])
-    v = np.array([r["velocity_m_per_s"][1] for r in records])
-    penetration = ball.diameter_m / 2 - z
-    kv_force = ball.stiffness_N_per_m * penetration - ball.damping_N_s_per_m * v
-
-    def crossing(q, i):     # zero of q between records i-1 and i
-        return t[i - 1] + (t[i] - t[i - 1]) * q[i - 1] / (q[i - 1] - q[i])
-
-    start = int(np.argmax(penetration > 0))
-    end = start + int(np.argmax(kv_force[start:] < 0))
-    t_in, t_out = crossing(penetration, start), crossing(kv_force, end)
-    g = ball.gravity_m_per_s2
-    v_in = v[start - 1] - g * (t_in - t[start - 1])
-    v_out = v[end - 1] + (v[end] - v[end - 1]) * (t_out - t[end - 1]) / (t[end] - t[end - 1])
-    return t_out - t_in, -v_out / v_in
 
 
 @pytest.mark.parametrize("stiffness_factor", [1.0, 1000.0])

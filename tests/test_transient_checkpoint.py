@@ -19,10 +19,9 @@ END_S = 2e-4
 
 
 def read_series(path: Path) -> dict[str, np.ndarray]:
-    import h5py
+    from app.series import read_time_series
 
-    with h5py.File(path, "r") as f:
-        return {name: f[name][:] for name in f}
+    return read_time_series(path)
 
 
 def xdmf_times(out: Path) -> list[float]:
@@ -322,5 +321,5 @@ def test_summary_outputs_list_every_file_written(one_go, tmp_path):
     lumped = Path(MPI.COMM_WORLD.bcast(str(tmp_path), root=0)) / "lumped"
     result = run_case_quiet("usdc-lumped.toml", lumped, "lumped.duration_s=0.02")
     if MPI.COMM_WORLD.rank == 0:
-        assert "time_series.h5" in result["outputs"] and "summary.json" in result["outputs"]
+        assert "transient.h5" in result["outputs"] and "summary.json" in result["outputs"]
         assert sorted(result["outputs"]) == sorted(_files_under(lumped))

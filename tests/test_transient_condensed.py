@@ -1,5 +1,5 @@
 """The condensed step (Newton on contact forces + rigid DOFs, app/transient/coupled.py) against the
-same step iterated on all FE + rigid unknowns (app/transient/fullspace.py): same time steps, same
+same step iterated on all FE + rigid unknowns (demos/demo_fullspace.py): same time steps, same
 contact forces and motions to solver tolerance, and a converged condensed step leaves no residual
 in the uncondensed equations."""
 
@@ -11,8 +11,10 @@ from mpi4py import MPI
 
 from app.transient.control import StepSizes
 from app.transient.coupled import CoupledSystem
-from app.transient.fullspace import FullSpaceSystem
-from app.transient.scenes import RodImpact, build_rod_impact, rod_step_sizes, run_scene, vibrating_block_with_ball
+from app.transient.stepper import run_scene
+from demos.demo_fullspace import FullSpaceSystem
+from demos.demo_rod_impact import RodImpact, build_rod_impact, rod_step_sizes
+from demos.demo_vibrating_block import vibrating_block_with_ball
 from forms.newmark import TimeScheme
 
 

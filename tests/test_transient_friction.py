@@ -12,7 +12,8 @@ import pytest
 from mpi4py import MPI
 
 from app.transient.control import StepSizes
-from app.transient.scenes import FrictionBlock, build_friction_block, run_scene
+from app.transient.stepper import run_scene
+from demos.demo_friction_block import FrictionBlock, build_friction_block
 from forms.newmark import TimeScheme
 
 BASE = FrictionBlock()

@@ -22,8 +22,8 @@ from app.transient.contact import Friction, PointContact
 from app.transient.control import StepSizes
 from app.transient.coupled import CoupledSystem
 from app.transient.rigid import RigidBody, RigidSet, constant_rate_motion, fixed_body
-from app.transient.scenes import run_scene
 from app.transient.state import TransientState
+from app.transient.stepper import run_scene
 from forms.newmark import TimeScheme
 
 MASS_KG, RADIUS_M, NORMAL_N = 1.0, 0.05, 10.0

@@ -17,8 +17,9 @@ from app.transient.control import StepSizes
 from app.transient.coupled import CoupledSystem
 from app.transient.fe import LinearFE
 from app.transient.rigid import RigidBody, RigidSet
-from app.transient.scenes import STEEL_DENSITY_kg_per_m3, run_scene
 from app.transient.state import TransientState
+from app.transient.stepper import run_scene
+from demos.demo_rod_impact import STEEL_DENSITY_kg_per_m3
 from forms.dynamics import mass
 from forms.newmark import TimeScheme
 from forms.piezo import elastic_stiffness

@@ -7,22 +7,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from app.transient.scenes import RodImpact, build_rod_impact, rod_step_sizes, run_scene
+from app.transient.stepper import run_scene
+from demos.demo_rod_impact import RodImpact, build_rod_impact, contact_pulse, rod_step_sizes
 from forms.newmark import TimeScheme
-
-
-def contact_pulse(records, name="rod_wall"):
-    """(duration [s], impulse-mean force [N], median force over the pulse [N], peak [N])."""
-    t = np.array([0.0] + [r["time_s"] for r in records])
-    f = np.array([0.0] + [r["contact_force_N"][name][0] for r in records])    # rod on the wall (+x)
-    on = np.flatnonzero(f > 0)
-    assert on.size > 5, "no contact happened"
-    first, last = on[0], on[-1]
-    outer = t[last + 1] - t[first - 1]
-    inner = t[last] - t[first]
-    duration = 0.5 * (outer + inner)
-    impulse = float(np.trapz(f, t))
-    return duration, impulse / duration, float(np.median(f[first:last + 1])), float(f.max())
 
 
 def run_rod(rod: RodImpact, comm=MPI.COMM_WORLD, scheme=None, **kwargs):

@@ -185,6 +185,8 @@ class Case:
     tier: Literal["fe", "modal", "lumped"] = param(
         "fe", doc="model tier: full FE, modal-reduced FE (transient) or lumped")
     title: str = param("", doc="free text shown in the log")
+    scene: str | None = param(
+        None, doc="scene report with its own statistics and plots (app/scenes/): percussion-drill")
     analyses: list[Analysis] | None = param(
         None, doc="analyses to run: modal, harmonic, circuit, transient (tier fe; default modal) or lumped")
     geometry: GeometrySection | None = param(None, doc="mesh source (tier fe)")
@@ -204,6 +206,12 @@ class Case:
     source: str = param("", doc="set by the loader: path of the case file")
 
     def check(self, file, prefix):
+        from app.scenes import SCENES
+
+        if self.scene is not None and self.scene not in SCENES:
+            raise CaseError(file, "scene", f"unknown scene {self.scene!r} (scenes: {', '.join(SCENES)})")
+        if self.tier == "lumped" and self.scene not in (None, "percussion-drill"):
+            raise CaseError(file, "scene", "the lumped tier is the percussion drill model: scene = 'percussion-drill'")
         if self.tier in ("fe", "modal"):
             if self.geometry is None:
                 raise CaseError(file, "geometry", f"required for tier = {self.tier!r}")

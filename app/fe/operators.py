@@ -9,6 +9,7 @@ from dolfinx import fem
 from dolfinx.fem.petsc import assemble_matrix
 from petsc4py import PETSc
 
+from app.compat import petsc_vector
 from app.fe.constraints import ConstraintSet
 from app.fe.model import FEModel
 
@@ -72,7 +73,7 @@ def indicator(model: FEModel, electrode_names: list[str]) -> PETSc.Vec:
     chi = fem.Function(model.W)
     for name in electrode_names:
         chi.x.array[model.electrode_dofs[name]] = 1.0
-    return chi.vector.copy()
+    return petsc_vector(chi).copy()
 
 
 def charge(K: PETSc.Mat, x: PETSc.Vec, chi: PETSc.Vec) -> float:

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from dolfinx import geometry
 from mpi4py import MPI
+
+from app.compat import colliding_cells
 
 
 class PointProbe:
@@ -12,10 +13,7 @@ class PointProbe:
         self.mesh = mesh
         self.point = np.zeros(3)
         self.point[: point.size] = point
-        tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
-        candidates = geometry.compute_collisions(tree, self.point.reshape(1, 3))
-        cells = geometry.compute_colliding_cells(mesh, candidates, self.point.reshape(1, 3))
-        local = cells.links(0)
+        local = colliding_cells(mesh, self.point.reshape(1, 3)).links(0)
         n_owned = mesh.topology.index_map(mesh.topology.dim).size_local
         owned = [c for c in local if c < n_owned]
         # exactly one rank evaluates: the lowest rank that owns a colliding cell

@@ -158,7 +158,7 @@ class SolverSection:
 @dataclass(frozen=True)
 class LumpedOutputSection:
     output_interval_s: float = param(1e-5, gt=0, unit="s", doc="time-series sample interval")
-    write_time_series: bool = param(True, doc="write time_series.h5")
+    write_time_series: bool = param(True, doc="write the time series transient.h5 (and its plots)")
     plots: bool = param(True, doc="write PNG plots (Fig. 12 and Fig. 5 style)")
     min_flight_rise_m: float = param(
         50e-6,

@@ -20,9 +20,12 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from app import series as S
 from app.errors import CaseError, NumericalFailure
 from app.reduced import kernel as kr
 from app.reduced.craig_bampton import ReducedBasis, harmonic_response, reduce_model
+from app.series import TimeSeriesWriter
+from app.transient.driver import plot_spec
 
 ROWS_PER_CHUNK = 20000
 
@@ -250,45 +253,10 @@ def _node_dofs(model, point: np.ndarray) -> tuple[np.ndarray, list[int]]:
     return np.asarray(x_node, dtype=float), out
 
 
-class BlockTimeSeries:
-    """The FE tier's ``transient.h5`` layout (one row per accepted step, a ``unit`` attribute per
-    dataset), appended in blocks of rows by rank 0."""
-
-    def __init__(self, path: Path, units: dict[str, str], comm):
-        self.path, self.units, self.active = Path(path), units, comm.rank == 0
-        self.rows = 0
-        self._file = None
-
-    def write_block(self, columns: dict[str, np.ndarray]) -> None:
-        if not self.active:
-            return
-        import h5py
-
-        if self._file is None:
-            self._file = h5py.File(self.path, "w")
-            for name, values in columns.items():
-                shape = values.shape[1:]
-                ds = self._file.create_dataset(name, shape=(0, *shape), maxshape=(None, *shape), dtype="f8",
-                                               chunks=(4096, *shape))
-                ds.attrs["unit"] = self.units.get(name, "")
-        n = next(iter(columns.values())).shape[0]
-        for name, values in columns.items():
-            ds = self._file[name]
-            ds.resize(self.rows + n, axis=0)
-            ds[self.rows:] = values
-        self.rows += n
-        self._file.flush()
-
-    def close(self) -> None:
-        if self._file is not None:
-            self._file.close()
-            self._file = None
-
-
 def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     """Run the transient analysis of ``case`` in the modal tier into ``out_dir``."""
+    from app.blas import limit_blas_threads
     from app.transient.impacts import statistics_from_file
-    from app.transient.threads import limit_blas_threads
 
     limit_blas_threads()    # the kernel's small products: threads cost more than they give (BENCHMARKS.md)
     if resume:     # refused when the case is loaded (app.runner.load_for_run)
@@ -308,16 +276,14 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     buffers = [np.zeros(cap), np.zeros(cap), np.zeros((cap, len(scene.sample_names))),
                np.zeros((cap, scene.prescribed.size)), np.zeros((cap, z.size)), np.zeros((cap, z.size)),
                np.zeros((cap, n_contacts)), np.zeros((cap, n_contacts), np.bool_)]
-    units = {"time_s": "s", "dt_s": "s", "drive_voltage_V": "V"}
-    units.update({f"{n}_displacement_m": "m" for n in scene.sample_names})
+    units = {S.TIME: "s", S.STEP: "s", S.DRIVE: "V"}
+    units.update({S.point_displacement(n): "m" for n in scene.sample_names})
     for name in scene.names["bodies"]:
-        units[f"{name}_position_m"] = "m"
-        units[f"{name}_velocity_m_per_s"] = "m/s"
+        units.update(S.body_columns(name))
     for name in scene.order:
-        units[f"{name}_force_N"] = "N (on the rigid body / upper body)"
-        units[f"{name}_closed"] = "1 = closed"
-    h5_path = out_dir / "transient.h5"
-    series = BlockTimeSeries(h5_path, units, comm)
+        units.update(S.contact_columns(name))
+    h5_path = out_dir / S.TIME_SERIES_FILE
+    series = TimeSeriesWriter(h5_path, units, comm)
     s = cfg.scheme.scheme()
     st = cfg.steps
     omega = 2 * math.pi * cfg.drive.frequency_Hz
@@ -341,16 +307,16 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     while True:
         code, rows = kr.run(*arguments(cfg.end_time_s))
         if rows:
-            block = {"time_s": buffers[0][:rows], "dt_s": buffers[1][:rows],
-                     "drive_voltage_V": buffers[3][:rows, 0] if scene.prescribed.size else np.zeros(rows)}
+            block = {S.TIME: buffers[0][:rows], S.STEP: buffers[1][:rows],
+                     S.DRIVE: buffers[3][:rows, 0] if scene.prescribed.size else np.zeros(rows)}
             for i, name in enumerate(scene.sample_names):
-                block[f"{name}_displacement_m"] = buffers[2][:rows, i]
+                block[S.point_displacement(name)] = buffers[2][:rows, i]
             for b, name in enumerate(scene.names["bodies"]):
-                block[f"{name}_position_m"] = buffers[4][:rows, b * gdim:(b + 1) * gdim]
-                block[f"{name}_velocity_m_per_s"] = buffers[5][:rows, b * gdim:(b + 1) * gdim]
+                block[S.body_position(name)] = buffers[4][:rows, b * gdim:(b + 1) * gdim]
+                block[S.body_velocity(name)] = buffers[5][:rows, b * gdim:(b + 1) * gdim]
             for i, name in enumerate(scene.order):
-                block[f"{name}_force_N"] = buffers[6][:rows, i:i + 1] * directions[i][None, :]
-                block[f"{name}_closed"] = buffers[7][:rows, i].astype(float)
+                block[S.contact_force(name)] = buffers[6][:rows, i:i + 1] * directions[i][None, :]
+                block[S.contact_closed(name)] = buffers[7][:rows, i].astype(float)
             series.write_block(block)
         if code == kr.STEP_FAILED:
             series.close()
@@ -375,18 +341,16 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     log(f"transient (modal tier): {results['steps']} steps, {results['newton_iterations']} Newton iterations, "
         f"{results['cutbacks']} cut-backs, {wall:.2f} s wall ({results['wall_s_per_simulated_ms']:.4f} s per "
         f"simulated ms)")
-    summaries = statistics_from_file(h5_path, cfg) if comm.rank == 0 else None
+    summaries = statistics_from_file(h5_path, case) if comm.rank == 0 else None
     results["contacts"], results["statistics"] = comm.bcast(summaries, root=0)
     results["outputs"] = [h5_path.name]
+    bodies = [name for b, name in enumerate(scene.names["bodies"]) if scene.zfree[b * gdim:(b + 1) * gdim].any()]
+    results["scene"] = case.scene
+    results["plot"] = plot_spec(case, scene.drive_point, bodies, scene.order, tier=" (modal tier)")
     if case.output.plots and comm.rank == 0:      # the FE tier's plots, from the same series
-        from app.transient.history import plot_time_series
+        from app.plots import time_series_outputs
 
-        bodies = [name for b, name in enumerate(scene.names["bodies"])
-                  if scene.zfree[b * gdim:(b + 1) * gdim].any()]
-        downforce = np.asarray(cfg.loads.fe_force_N or [0.0])
-        title = f"{Path(case.source).stem} (modal tier), downforce {np.linalg.norm(downforce):.3g} N"
-        results["plots"] = plot_time_series(h5_path, out_dir / "transient_motion.png", out_dir / "transient_force.png",
-                                            scene.drive_point, bodies, scene.order, title=title)
+        results["plots"] = time_series_outputs(out_dir, results)
         results["outputs"] += results["plots"]
     scene.basis.destroy()
     return results

@@ -6,10 +6,10 @@ Layers (each small, each testable alone):
 - ``fe``        the linear FE part: M, C, K, loads, Dirichlet drives, factorised K_eff per dt
 - ``contact``   penalty contacts: FE surface vs rigid body (UFL), rigid vs rigid (Kelvin-Voigt)
 - ``coupled``   one step: FE condensed onto the contact DOFs, Newton (PETSc SNES) on contact forces + rigid DOFs
-- ``fullspace`` the same step iterated on all FE + rigid unknowns (reference for tests and bench/)
-- ``impacts``   impact statistics of a run from its time series (the lumped tier's terms)
+- ``impacts``   generic statistics of a run from its time series (the keys of every tier;
+                scene-specific ones: app/scenes/)
 - ``control``   dt by contact state (open / closed / changing), growth and cut-back
 - ``stepper``   the time loop (update loads, solve, check reason, export, shift, adapt dt)
-- ``history``   HDF5 time series, progress bar, checkpoints
+- ``checkpoint`` checkpoints for ``--resume``; ``fields`` XDMF fields (time series: app/series.py)
 - ``schema``/``driver``  the ``[transient]`` case section and the runner entry point
 """

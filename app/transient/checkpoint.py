@@ -24,13 +24,13 @@ starts it again from t = 0 instead of refusing.
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from app.errors import CaseError
+from app.files import atomic_write, json_bytes, jsonable, write_json_atomic
 from app.killpoint import kill_point
 from app.transient.state import TransientState
 
@@ -94,11 +94,11 @@ class CheckpointWriter:
         seq = self.seq + 1
         if self.comm.rank == 0:
             path = self._state_file(seq)
-            _atomic_write(path, lambda fh: np.savez(fh, z=state.z, zd=state.zd, zdd=state.zdd, **fields))
+            atomic_write(path, lambda fh: np.savez(fh, z=state.z, zd=state.zd, zdd=state.zdd, **fields), sync=True)
             kill_point("checkpoint_state")
             meta = {"format": FORMAT, "seq": seq, "t_s": state.t, "mpi_size": self.comm.size, "rows": rows,
                     "voltage_V": self.voltage_V, "stepper": stepper, "case": self.case_digest}
-            _atomic_write(self.dir / POINTER, lambda fh: _write_json(fh, meta))
+            atomic_write(self.dir / POINTER, lambda fh: _write_json(fh, meta), sync=True)
             old = self._state_file(self.seq)
             if self.seq and old.exists():
                 old.unlink()
@@ -108,7 +108,7 @@ class CheckpointWriter:
 
 
 def _write_json(fh, meta: dict) -> None:
-    data = json.dumps(meta, indent=1).encode()
+    data = json_bytes(meta, indent=1)
     half = len(data) // 2
     fh.write(data[:half])
     fh.flush()
@@ -123,7 +123,7 @@ def mark_started(out_dir: Path, comm, digest: dict) -> None:
         directory.mkdir(parents=True, exist_ok=True)
         meta = {"format": FORMAT, "case": digest}
         # the record first: killed in between, the directory still holds a consistent older run
-        _atomic_write(directory / MARKER, lambda fh: fh.write(json.dumps(meta, indent=1).encode()))
+        write_json_atomic(directory / MARKER, meta, sync=True, indent=1)
         for old in [directory / POINTER, *directory.glob("state-*.npz*")]:
             old.unlink(missing_ok=True)
     comm.barrier()
@@ -142,15 +142,6 @@ def _read_json(path: Path) -> tuple[dict | None, str | None]:
     if not isinstance(meta, dict):
         return None, "is not a JSON object"
     return meta, None
-
-
-def _atomic_write(path: Path, write) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        write(fh)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
 
 
 class CellLayout:
@@ -199,7 +190,7 @@ def case_digest(case) -> dict:
     except the end time, the checkpoint interval and the output options)."""
     from app.case.validate import to_dict
 
-    data = json.loads(json.dumps(to_dict(case), default=str))
+    data = json.loads(json.dumps(jsonable(to_dict(case)), default=str))   # as the records store it
     data.pop("output", None)
     data.pop("source", None)
     transient = data.get("transient", {})

@@ -21,6 +21,8 @@ from dolfinx.fem.petsc import assemble_matrix, assemble_vector, create_matrix, c
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from app import series as S
+from app.compat import is_mixed
 from app.transient.fe import LinearFE, displacement_of
 from app.transient.interactions import ForceColumns, friction_force, pad3, velocity_map
 from forms import contact as cf
@@ -346,14 +348,14 @@ class SurfaceContact(ForceColumns):
     def columns(self) -> dict[str, str]:
         out = super().columns()
         if self.rotation_axes.size:
-            out[f"{self.name}_torque_N_m"] = "N m (on the rigid body, about its rotation axes)"
+            out[S.contact_torque(self.name)] = "N m (on the rigid body, about its rotation axes)"
         return out
 
     def row(self, force_N, closed: bool) -> dict:
         gdim = self.fe.gdim
         out = super().row(force_N[:gdim], closed)
         if self.rotation_axes.size:
-            out[f"{self.name}_torque_N_m"] = force_N[gdim:]
+            out[S.contact_torque(self.name)] = force_N[gdim:]
         return out
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:
@@ -409,8 +411,7 @@ class SurfaceContact(ForceColumns):
 
 
 def displacement_of_test(test, fe: LinearFE):
-    element = fe.space.ufl_element()
-    if isinstance(element, ufl.MixedElement) and not isinstance(element, ufl.VectorElement):
+    if is_mixed(fe.space):
         return ufl.split(test)[0]
     return test
 

@@ -19,7 +19,7 @@ E (rc_S - g), so |(F_g, F_z)| is the norm of the full residual and the tolerance
 meant for the full system. A contact iteration costs an n x s product, no back-substitution, no
 mat-vec and no refactorisation. SNES (prefix ``transient_``) drives the iteration (line search,
 converged reason) through a shell Jacobian and a shell preconditioner holding the dense LU.
-:mod:`app.transient.fullspace` keeps the same step as a Newton iteration on all n + m unknowns,
+`demos/demo_fullspace.py` keeps the same step as a Newton iteration on all n + m unknowns,
 the reference the tests and ``bench/`` compare against.
 
 The right-hand side avoids the u_n / (beta dt^2)-sized terms of the textbook form: with the
@@ -39,10 +39,11 @@ import scipy.linalg
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from app.blas import limit_blas_threads
+from app.compat import petsc_vector
 from app.transient.fe import EffectiveOperatorCache, LinearFE
 from app.transient.rigid import RigidSet
 from app.transient.state import TransientState
-from app.transient.threads import limit_blas_threads
 from forms.newmark import (
     TimeScheme,
     acceleration,
@@ -77,7 +78,7 @@ class CoupledSystem:
     def __init__(self, comm, scheme: TimeScheme, fe: LinearFE | None, rigid: RigidSet, interactions=(),
                  relative_force_tolerance: float = 1e-10):
         """``interactions``: objects of the :class:`app.transient.interactions.Interaction` protocol."""
-        limit_blas_threads()    # MPI ranks are the parallelism (see app.transient.threads)
+        limit_blas_threads()    # MPI ranks are the parallelism (see app.blas)
         self.comm, self.scheme, self.fe, self.rigid = comm, scheme, fe, rigid
         self.interactions = list(interactions)
         names = [c.name for c in self.interactions]
@@ -337,7 +338,7 @@ class CoupledSystem:
         same_fe = fe_key is not None and fe_key == self._fe_key
         self._fe_key = fe_key
         if self.fe is not None and not same_fe:
-            self._u1.vector.array_w[:] = self._u_pred.array_r + du
+            petsc_vector(self._u1).array_w[:] = self._u_pred.array_r + du
             self._u1.x.scatter_forward()
             u1 = self._u1.x.array
             self.a1 = acceleration(u1, st.u, st.v, st.a, dt, s)
@@ -485,7 +486,7 @@ class CoupledSystem:
         self._evaluated = self._fe_key = None   # the shared mid-point fields may hold other values by now
         self._evaluate(self.X)
         r = self._r
-        self._du.array_w[:] = self._u1.vector.array_r - self._u_pred.array_r
+        self._du.array_w[:] = petsc_vector(self._u1).array_r - self._u_pred.array_r
         self.op.full.mult(self._du, r)
         r.axpy(1.0, self._r0)
         _, _, r_z = self._contact_terms(r)
@@ -501,7 +502,7 @@ class CoupledSystem:
     @property
     def solution_vector(self) -> PETSc.Vec:
         """u_{n+1} of the last solved step (FE space layout), for probes and field output."""
-        return self._u1.vector
+        return petsc_vector(self._u1)
 
     @property
     def solution_array(self) -> np.ndarray:

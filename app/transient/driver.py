@@ -21,8 +21,12 @@ import numpy as np
 import ufl
 from dolfinx import fem
 
+from app import series as S
+from app.compat import petsc_vector
 from app.errors import CaseError
 from app.killpoint import kill_point
+from app.progress import SimulatedTimeProgress as Progress
+from app.series import TimeSeriesWriter
 from app.transient.checkpoint import (
     POINTER,
     CellLayout,
@@ -36,7 +40,6 @@ from app.transient.control import StepController, StepSizes
 from app.transient.coupled import CoupledSystem
 from app.transient.fe import LinearFE
 from app.transient.fields import FieldSeriesExport
-from app.transient.history import Progress, TimeSeriesExport, plot_time_series
 from app.transient.impacts import statistics_from_file
 from app.transient.interactions import BuildContext, build_interactions
 from app.transient.motions import DirichletData, build_motions
@@ -259,7 +262,7 @@ class TransientModel:
         out = []
         for vec in (solver.x_full_re, solver.x_full_im):
             f = fem.Function(model.W)
-            f.vector.array_w[:] = vec.array_r
+            petsc_vector(f).array_w[:] = vec.array_r
             f.x.scatter_forward()
             out.append(f.x.array.copy())
         at_point = point.displacement_m[self.drive_point] if self.drive_point else 0.0
@@ -302,21 +305,28 @@ class PointSampler:
 
 
 def _units(tm: TransientModel, case) -> dict[str, str]:
-    units = {"time_s": "s", "dt_s": "s", "drive_voltage_V": "V"}
+    units = {S.TIME: "s", S.STEP: "s", S.DRIVE: "V"}
     for name in case.points:
-        units[f"{name}_displacement_m"] = "m"
+        units[S.point_displacement(name)] = "m"
     if len(tm.drive.electrodes) > 1:
         for name, *_ in tm.drive.electrodes:
-            units[f"{name}_voltage_V"] = "V"
+            units[S.electrode_voltage(name)] = "V"
     for b in tm.rigid.bodies:
-        units[f"{b.name}_position_m"] = "m"
-        units[f"{b.name}_velocity_m_per_s"] = "m/s"
+        units.update(S.body_columns(b.name))
         if b.rotation_axes:
-            units[f"{b.name}_angle_rad"] = "rad (" + ", ".join(b.rotation_axes) + ")"
-            units[f"{b.name}_angular_velocity_rad_per_s"] = "rad/s (" + ", ".join(b.rotation_axes) + ")"
+            units[S.body_angle(b.name)] = "rad (" + ", ".join(b.rotation_axes) + ")"
+            units[S.body_angular_velocity(b.name)] = "rad/s (" + ", ".join(b.rotation_axes) + ")"
     for c in tm.system.interactions:
         units.update(c.columns())
     return units
+
+
+def plot_spec(case, point: str | None, bodies: list[str], contacts: list[str], tier: str = "") -> dict:
+    """What the time-series plots of a transient run show (``results["plot"]``, read again by
+    ``piezodyn plot DIR``): drive point, free bodies, contacts and the title (case, downforce)."""
+    downforce = float(np.linalg.norm(np.asarray(case.transient.loads.fe_force_N or [0.0])))
+    title = f"{Path(case.source).stem}{tier}, downforce {downforce:.3g} N"
+    return {"point": point, "bodies": bodies, "contacts": contacts, "title": title}
 
 
 def build(case, comm, log) -> TransientModel:
@@ -355,8 +365,8 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     t_start = state.t
     log(f"transient: {cfg.initial_state} start, drive {voltage:.4g} V at {cfg.drive.frequency_Hz:.2f} Hz, "
         f"{len(tm.rigid.bodies)} rigid bodies, {len(cfg.contacts)} contacts, {cfg.end_time_s * 1e3:.4g} ms")
-    h5_path = out_dir / "transient.h5"
-    series = TimeSeriesExport(h5_path, _units(tm, case), comm,
+    h5_path = out_dir / S.TIME_SERIES_FILE
+    series = TimeSeriesWriter(h5_path, _units(tm, case), comm,
                               resume_rows=resumed.rows if resumed is not None else None)
     system, model = tm.system, tm.model
     contact_names = system.contact_names
@@ -377,20 +387,20 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     def on_step(rec):
         if fields is not None:
             fields.write(rec["time_s"], rec["position_m"])
-        row = {"time_s": rec["time_s"], "dt_s": rec["dt_s"], "drive_voltage_V": tm.drive.voltage_V(rec["time_s"])}
+        row = {S.TIME: rec["time_s"], S.STEP: rec["dt_s"], S.DRIVE: tm.drive.voltage_V(rec["time_s"])}
         if multi_phase:
             for name, value in tm.drive.electrode_voltages_V(rec["time_s"]).items():
-                row[f"{name}_voltage_V"] = value
+                row[S.electrode_voltage(name)] = value
         for name, value in sampler.values(system.solution_array).items():
-            row[f"{name}_displacement_m"] = value
+            row[S.point_displacement(name)] = value
         for b in tm.rigid.bodies:
             sl = tm.rigid.dofs(b.name)
-            row[f"{b.name}_position_m"] = rec["position_m"][sl]
-            row[f"{b.name}_velocity_m_per_s"] = rec["velocity_m_per_s"][sl]
+            row[S.body_position(b.name)] = rec["position_m"][sl]
+            row[S.body_velocity(b.name)] = rec["velocity_m_per_s"][sl]
             if b.rotation_axes:
                 rot = tm.rigid.rotation_dofs(b.name)
-                row[f"{b.name}_angle_rad"] = rec["position_m"][rot]
-                row[f"{b.name}_angular_velocity_rad_per_s"] = rec["velocity_m_per_s"][rot]
+                row[S.body_angle(b.name)] = rec["position_m"][rot]
+                row[S.body_angular_velocity(b.name)] = rec["velocity_m_per_s"][rot]
         for j, c in enumerate(interactions):
             row.update(c.row(rec["contact_force_N"][c.name], bool(rec["contact_closed"][j])))
         series.write(row)
@@ -426,14 +436,15 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     log(f"transient: {results['steps']} steps, {results['newton_iterations']} Newton iterations, "
         f"{results['cutbacks']} cut-backs, {results['factorisations']} factorisations, {wall:.1f} s wall")
     # Contact summary and statistics from the whole time series (a resumed run's too), rank 0.
-    summaries = statistics_from_file(h5_path, case.transient) if comm.rank == 0 else None
+    summaries = statistics_from_file(h5_path, case) if comm.rank == 0 else None
     results["contacts"], results["statistics"] = comm.bcast(summaries, root=0)
+    results["scene"] = case.scene
+    results["plot"] = plot_spec(case, tm.drive_point, [b.name for b in tm.rigid.bodies if b.free_axes_mask.any()],
+                                contact_names)
     if case.output.plots and comm.rank == 0:
-        bodies = [b.name for b in tm.rigid.bodies if b.free_axes_mask.any()]
-        downforce = np.asarray(cfg.loads.fe_force_N or [0.0])
-        title = f"{Path(case.source).stem}, downforce {np.linalg.norm(downforce):.3g} N"
-        results["plots"] = plot_time_series(h5_path, out_dir / "transient_motion.png", out_dir / "transient_force.png",
-                                            tm.drive_point, bodies, contact_names, title=title)
+        from app.plots import time_series_outputs
+
+        results["plots"] = time_series_outputs(out_dir, results)
     results["outputs"] = [h5_path.name, *checkpoint.files(), *(fields.files() if fields is not None else []),
                           *results.get("plots", [])]
     system.destroy()
@@ -443,7 +454,7 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
 class _SeriesCheckpoint:
     """The checkpoint writer as the stepper sees it: the row count comes from the time series."""
 
-    def __init__(self, writer: CheckpointWriter, series: TimeSeriesExport):
+    def __init__(self, writer: CheckpointWriter, series: TimeSeriesWriter):
         self.writer, self.series = writer, series
 
     def due(self, steps: int) -> bool:

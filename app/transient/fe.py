@@ -19,6 +19,7 @@ from dolfinx import fem
 from dolfinx.fem.petsc import assemble_matrix, assemble_vector, set_bc
 from petsc4py import PETSc
 
+from app.compat import is_mixed, petsc_vector
 from forms.newmark import TimeScheme, effective_weights
 
 KEFF_PREFIX = "transient_keff_"
@@ -74,7 +75,7 @@ class LinearFE:
         return all_dofs[all_dofs < self.n_owned].astype(np.int32)
 
     def new_vector(self) -> PETSc.Vec:
-        return fem.Function(self.space).vector.copy()
+        return petsc_vector(fem.Function(self.space)).copy()
 
     def load_N(self, t: float, out: PETSc.Vec) -> None:
         """out <- F(t) (owned entries; ghosts not updated)."""
@@ -99,7 +100,7 @@ class LinearFE:
             f = fem.Function(self.space)
             _, dofs = self.displacement_space.sub(k).collapse()
             f.x.array[np.asarray(dofs)] = 1.0
-            out.append(f.vector.copy())
+            out.append(petsc_vector(f).copy())
         return out
 
     def facet_displacement_dofs(self, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -277,7 +278,6 @@ class EffectiveOperatorCache:
 
 def displacement_of(function):
     """The displacement part of a FE Function (first sub-function of a mixed space, else itself)."""
-    element = function.function_space.ufl_element()
-    if isinstance(element, ufl.MixedElement) and not isinstance(element, ufl.VectorElement):
+    if is_mixed(function.function_space):
         return ufl.split(function)[0]
     return function

@@ -28,12 +28,11 @@ from app.exports import (
     VertexFields,
     mesh_grid,
     point_grid,
-    replace_file,
     step_bytes,
-    write_h5_atomic,
     write_mesh_h5,
     xdmf_document,
 )
+from app.files import replace_file, write_h5_atomic
 from app.killpoint import kill_point
 
 
@@ -88,7 +87,7 @@ class FieldSeriesExport:
             k = len(self.steps)
             name = f"step_{k:06d}.h5"
             write_h5_atomic(self.dir / name, {"displacement": u, "potential": phi},
-                            {"displacement": {"unit": "m", "time_s": t}, "potential": {"unit": "V", "time_s": t}})
+                            {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t}})
             kill_point("fields_data")                   # the step file exists, the XML does not name it yet
             step = ET.Element("Grid", Name=f"t = {t:.9g} s", GridType="Collection", CollectionType="Spatial")
             ET.SubElement(step, "Time", Value=repr(float(t)))

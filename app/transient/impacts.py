@@ -1,14 +1,11 @@
-"""Impact statistics of a transient run, read from its HDF5 time series, in the terms the lumped tier
-reports (app/lumped/stats.py), so the two tiers can be compared line by line.
+"""Generic statistics of a transient run (FE and modal tiers), read from its HDF5 time series, under
+the keys the lumped tier reports too (app/lumped/stats.py), so the tiers compare line by line.
+What belongs to one scene (the drill's transducer flights) is in its report (app/scenes/).
 
 - every contact: impacts (open -> closed transitions) and their rate per second;
 - a contact whose lower body is fixed (the rock foundation): impulse per impact, mean force, and
   the mean power delivered into it, P = (1/T) integral f d(delta) (f the contact force, delta the
   penetration), which over closed intervals is the energy the foundation absorbs;
-- the FE body (the transducer): its rigid motion, taken as the drive point's displacement averaged
-  over one drive period (the vibration averages out); its largest rise above the start; and its
-  flights: intervals with every FE contact open in which that average rises by at least
-  ``min_rise_m`` (the lumped tier's threshold: flights one could film);
 - every free rigid body: its largest rise above its start and its RMS velocity.
 """
 
@@ -17,6 +14,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
+from app import series as S
+from app.series import read_time_series
 
 
 def closed_intervals(closed: np.ndarray) -> list[tuple[int, int]]:
@@ -41,58 +41,54 @@ def period_average(t_s: np.ndarray, x: np.ndarray, period_s: float, samples_per_
     return centre, mean
 
 
-def statistics_from_file(h5_path: Path, cfg) -> tuple[dict, dict]:
-    """(:func:`contact_summary`, :func:`run_statistics`) of the time series in ``h5_path``
-    (rank 0 only)."""
-    import h5py
-
-    with h5py.File(h5_path, "r") as f:
-        data = {name: f[name][:] for name in f}
-    return contact_summary(data, [c.name for c in cfg.contacts]), run_statistics(data, cfg)
+def statistics_from_file(h5_path: Path, case) -> tuple[dict, dict]:
+    """(:func:`contact_summary`, :func:`run_statistics`) of the time series in ``h5_path`` of a run of
+    ``case`` (rank 0 only)."""
+    data = read_time_series(h5_path)
+    cfg = case.transient
+    return contact_summary(data, [c.name for c in cfg.contacts]), run_statistics(data, cfg, case.scene)
 
 
 def contact_summary(data: dict[str, np.ndarray], names: list[str]) -> dict:
     """Per contact: impacts (open -> closed transitions; closed at the first step is no impact, as
     in :func:`run_statistics`), largest force [N], impulse sum |f| dt [N s] and time closed [s]."""
-    if "time_s" not in data or not data["time_s"].size:
+    if S.TIME not in data or not data[S.TIME].size:
         return {}
-    dt = data["dt_s"]
+    dt = data[S.STEP]
     out = {}
     for name in names:
-        force = np.linalg.norm(data[f"{name}_force_N"], axis=1)
-        closed = data[f"{name}_closed"]
+        force = np.linalg.norm(data[S.contact_force(name)], axis=1)
+        closed = data[S.contact_closed(name)]
         impacts = int(np.sum(np.diff((closed > 0).astype(np.int8)) == 1))
         out[name] = {"impacts": impacts, "max_force_N": float(force.max()), "impulse_N_s": float(np.sum(force * dt)),
                      "closed_time_s": float(np.sum(dt * (closed > 0)))}
     return out
 
 
-def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
+def run_statistics(data: dict[str, np.ndarray], cfg, scene: str | None = None) -> dict:
     """Statistics of a transient run: ``data`` holds the time series by name (one row per step,
-    the keys of transient.h5), ``cfg`` is the case's [transient] section."""
-    if "time_s" not in data or data["time_s"].shape[0] < 2:
+    app/series.py names), ``cfg`` is the case's [transient] section, ``scene`` the case's scene
+    report (app/scenes/), whose statistics are added."""
+    if S.TIME not in data or data[S.TIME].shape[0] < 2:
         return {}
-    t = data["time_s"]
-    dt = data["dt_s"] if "dt_s" in data else np.diff(t, prepend=t[0])
+    t = data[S.TIME]
+    dt = data[S.STEP] if S.STEP in data else np.diff(t, prepend=t[0])
     duration = float(t[-1] - t[0])
     stats: dict = {"simulated_time_s": duration}
     fixed = {b.name for b in cfg.bodies if b.fixed}
     counts, rates = {}, {}
-    fe_closed = np.zeros(t.size, dtype=bool)
     for c in cfg.contacts:
-        closed = data[f"{c.name}_closed"]
+        closed = data[S.contact_closed(c.name)]
         intervals = closed_intervals(closed)
         impacts = sum(1 for a, _ in intervals if a > 0)     # closed from the first step: no impact
         counts[c.name] = impacts
         rates[c.name] = impacts / duration
-        if c.kind in ("surface", "node"):
-            fe_closed |= closed > 0
         if c.kind == "point" and c.lower in fixed:
-            force = np.linalg.norm(data[f"{c.name}_force_N"], axis=1)
+            force = np.linalg.norm(data[S.contact_force(c.name)], axis=1)
             normal = np.asarray(c.direction, dtype=float) / np.linalg.norm(c.direction)
             # The recorded force acts at the step's generalised mid-point; the work it does is
             # f . d(delta) per step (the scheme's own energy pairing), with d(delta) = -n . dz.
-            penetration_step = -np.diff(data[f"{c.upper}_position_m"] @ normal, prepend=np.nan)
+            penetration_step = -np.diff(data[S.body_position(c.upper)] @ normal, prepend=np.nan)
             penetration_step[0] = 0.0
             # per impact: both means divide by the impact count (a closure from the start is none)
             impulses = [float(np.sum(force[a:b + 1] * dt[a:b + 1])) for a, b in intervals if a > 0]
@@ -108,40 +104,17 @@ def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
     stats["impact_count"] = counts
     stats["impact_rate_per_s"] = rates
 
-    point = cfg.drive.point if f"{cfg.drive.point}_displacement_m" in data else None
-    if point is not None:
-        period = 1.0 / cfg.drive.frequency_Hz
-        tip = data[f"{point}_displacement_m"]
-        t_mean, z_mean = period_average(t, tip, period)
-        z_start = z_mean[0]
-        flights, apexes = [], []
-        open_rows = closed_intervals(~fe_closed) if fe_closed.any() else []
-        for a, b in open_rows:
-            if a == 0:
-                continue      # open from the start: no take-off
-            inside = (t_mean >= t[a]) & (t_mean <= t[b])
-            if not inside.any():
-                continue
-            rise = float(z_mean[inside].max() - np.interp(t[a], t_mean, z_mean))
-            if rise >= cfg.min_flight_rise_m:
-                flights.append(t[b] - t[a])
-                apexes.append(float(z_mean[inside].max() - z_start))
-        stats["transducer"] = {
-            "max_rise_m": float(z_mean.max() - z_start),
-            "mean_displacement_m": float(np.mean(z_mean - z_start)),
-            "flight_count": len(flights),
-            "flight_rate_per_s": len(flights) / duration,
-            "flight_duration_mean_s": float(np.mean(flights)) if flights else 0.0,
-            "flight_apex_max_m": float(np.max(apexes)) if apexes else 0.0,
-            "min_flight_rise_m": cfg.min_flight_rise_m,
-        }
     bodies = {}
     for b in cfg.bodies:
-        if b.fixed or f"{b.name}_position_m" not in data:
+        if b.fixed or S.body_position(b.name) not in data:
             continue
-        z = data[f"{b.name}_position_m"][:, -1]
-        v = data[f"{b.name}_velocity_m_per_s"][:, -1]
+        z = data[S.body_position(b.name)][:, -1]
+        v = data[S.body_velocity(b.name)][:, -1]
         bodies[b.name] = {"max_rise_m": float(z.max() - z[0]),
                           "rms_velocity_m_per_s": float(np.sqrt(np.trapz(v**2, t) / duration))}
     stats["bodies"] = bodies
+    if scene is not None:
+        from app.scenes import scene_report
+
+        stats.update(scene_report(scene).statistics(data, cfg))
     return stats

@@ -24,6 +24,7 @@ from typing import Protocol
 
 import numpy as np
 
+from app import series as S
 from app.errors import CaseError
 
 
@@ -65,10 +66,10 @@ class ForceColumns:
     name: str
 
     def columns(self) -> dict[str, str]:
-        return {f"{self.name}_force_N": "N (on the rigid body / upper body)", f"{self.name}_closed": "1 = closed"}
+        return S.contact_columns(self.name)
 
     def row(self, force_N, closed: bool) -> dict:
-        return {f"{self.name}_force_N": force_N, f"{self.name}_closed": float(closed)}
+        return {S.contact_force(self.name): force_N, S.contact_closed(self.name): float(closed)}
 
 
 @dataclass

@@ -1,0 +1,148 @@
+"""Report of the percussion drill (``scene = "percussion-drill"``; the lumped tier always): the
+transducer's rigid rise and its flights, in the same keys for every tier (``statistics.transducer``).
+
+- ``max_rise_m``: largest rise of the transducer's rigid motion above its start;
+- ``mean_displacement_m``: mean of that motion above its start;
+- flights: intervals in which the transducer touches nothing below it and rises at least
+  ``min_flight_rise_m`` (50 µm: flights one could film; the 20 kHz hammering of the tip on the ball
+  opens the contact for tens of microseconds with rises of nanometres to micrometres):
+  ``flight_count``, ``flight_rate_per_s``, ``flight_duration_mean_s``, ``flight_apex_max_m`` (apex
+  above the start), ``min_flight_rise_m``.
+
+The tiers measure the rigid motion differently: the FE and modal tiers average the drive point's
+displacement over one drive period (the vibration averages out), the lumped tier has the rigid
+coordinate z and the exact take-off velocity of every flight (apex z + z'^2 / 2a). The lumped tier
+adds the flight-duration spread and histogram (``flight_durations.png``) and the rise per half run.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from app import series as S
+from app.transient.impacts import closed_intervals, period_average
+
+
+def statistics(data: dict[str, np.ndarray], cfg) -> dict:
+    """``{"transducer": ...}`` of an FE/modal run from its time series (empty without the drive
+    point's displacement): the rigid motion is the drive point's displacement averaged over a drive
+    period; the transducer is in flight while every FE contact (node, surface) is open."""
+    t = data.get(S.TIME)
+    point = S.point_displacement(cfg.drive.point)
+    if t is None or t.shape[0] < 2 or point not in data:
+        return {}
+    duration = float(t[-1] - t[0])
+    fe_closed = np.zeros(t.size, dtype=bool)
+    for c in cfg.contacts:
+        if c.kind in ("surface", "node"):
+            fe_closed |= data[S.contact_closed(c.name)] > 0
+    t_mean, z_mean = period_average(t, data[point], 1.0 / cfg.drive.frequency_Hz)
+    z_start = z_mean[0]
+    flights, apexes = [], []
+    for a, b in closed_intervals(~fe_closed) if fe_closed.any() else []:
+        if a == 0:
+            continue      # open from the start: no take-off
+        inside = (t_mean >= t[a]) & (t_mean <= t[b])
+        if not inside.any():
+            continue
+        rise = float(z_mean[inside].max() - np.interp(t[a], t_mean, z_mean))
+        if rise >= cfg.min_flight_rise_m:
+            flights.append(t[b] - t[a])
+            apexes.append(float(z_mean[inside].max() - z_start))
+    return {"transducer": {
+        "max_rise_m": float(z_mean.max() - z_start),
+        "mean_displacement_m": float(np.mean(z_mean - z_start)),
+        "flight_count": len(flights),
+        "flight_rate_per_s": len(flights) / duration,
+        "flight_duration_mean_s": float(np.mean(flights)) if flights else 0.0,
+        "flight_apex_max_m": float(np.max(apexes)) if apexes else 0.0,
+        "min_flight_rise_m": cfg.min_flight_rise_m,
+    }}
+
+
+def lumped_statistics(result, min_rise_m: float, bins: int) -> dict:
+    """``{"transducer": ...}`` of a lumped run (app.lumped.simulate.SimulationResult): flights are the
+    tip/free-mass open intervals in which z rises at least ``min_rise_m``. While that contact is open
+    the rigid coordinate moves on z'' = -(g + F_a / m_t), so the rise of a flight is
+    max(z', 0)^2 / (2 a) at take-off and its apex z + rise (exact, not sampled)."""
+    from app.lumped import kernel as K
+    from app.lumped.model import IZ
+    from app.lumped.stats import open_intervals
+
+    p = result.parameters
+    accel = p.gravity_m_per_s2 + p.downforce_N / p.transducer_mass_kg
+    z0 = float(result.initial_y[IZ])
+    intervals = open_intervals(result.events, 0, bool(result.samples_mode[0] & 1), result.duration_s)
+    durations, apexes, starts, censored = [], [], [], 0
+    for start, end, row, ends_at_end in intervals:
+        if row < 0 or accel <= 0:
+            continue  # open from the start: no take-off
+        z_takeoff, zd_takeoff = result.events[row, K.EV_Z], result.events[row, K.EV_ZDOT]
+        rise = max(zd_takeoff, 0.0) ** 2 / (2.0 * accel)
+        if rise < min_rise_m:
+            continue
+        if ends_at_end:
+            censored += 1
+            continue
+        durations.append(end - start)
+        apexes.append(z_takeoff + rise - z0)
+        starts.append(start)
+    durations, apexes, starts = np.asarray(durations), np.asarray(apexes), np.asarray(starts)
+    counts, edges = (
+        np.histogram(durations, bins=bins) if len(durations) else (np.zeros(bins, int), np.zeros(bins + 1))
+    )
+    duration = result.duration_s
+    half = 0.5 * duration
+    t, z = result.samples_t_s, result.samples_y[:, IZ]
+    apex_max = float(apexes.max()) if len(apexes) else 0.0
+    return {"transducer": {
+        "max_rise_m": float(max(np.max(z) - z0, apex_max)),
+        "max_rise_first_half_m": float(np.max(z[t < half]) - z0),
+        "max_rise_second_half_m": float(np.max(z[t >= half]) - z0),
+        "mean_displacement_m": float(np.mean(z) - z0),
+        "flight_count": int(len(durations)),
+        "flight_rate_per_s": len(durations) / duration,
+        "flight_duration_mean_s": float(durations.mean()) if len(durations) else 0.0,
+        "flight_duration_std_s": float(durations.std()) if len(durations) else 0.0,
+        "flight_duration_cv": float(durations.std() / durations.mean()) if len(durations) > 1 else 0.0,
+        "flight_duration_histogram": {"bin_edges_s": edges.tolist(), "counts": counts.tolist()},
+        "flight_apex_mean_m": float(apexes.mean()) if len(apexes) else 0.0,
+        "flight_apex_max_m": apex_max,
+        "flight_count_first_half": int(np.sum(starts < half)) if len(starts) else 0,
+        "flight_count_second_half": int(np.sum(starts >= half)) if len(starts) else 0,
+        "flights_still_open_at_end": censored,
+        "min_flight_rise_m": min_rise_m,
+    }}
+
+
+def table_rows(stats: dict) -> list[tuple[str, str, str]]:
+    transducer = stats.get("transducer")
+    if not transducer:
+        return []
+    return [("transducer: largest rise", f"{transducer['max_rise_m'] * 1e3:.4g}", "mm"),
+            ("transducer: flights (rate)",
+             f"{transducer['flight_count']} ({transducer['flight_rate_per_s']:.4g} /s)", "-")]
+
+
+def plots(stats: dict, out_dir: Path, title: str) -> list[str]:
+    """``flight_durations.png`` when the statistics hold a flight-duration histogram (lumped tier)."""
+    hist = (stats.get("transducer") or {}).get("flight_duration_histogram")
+    if not hist or not sum(hist["counts"]):
+        return []
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    edges = np.asarray(hist["bin_edges_s"]) * 1e3
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.bar(edges[:-1], hist["counts"], width=np.diff(edges), align="edge", edgecolor="k")
+    ax.set_xlabel("flight duration [ms]")
+    ax.set_ylabel("count")
+    ax.set_title(f"{title}: transducer flights" if title else "transducer flights")
+    fig.tight_layout()
+    fig.savefig(Path(out_dir) / "flight_durations.png", dpi=120)
+    plt.close(fig)
+    return ["flight_durations.png"]

@@ -1,0 +1,193 @@
+"""The output convention of every tier (``lumped``, ``fe``, ``modal``): one time-series file name, one
+name per quantity, one ``units`` attribute, and the one HDF5 writer that applies them.
+
+A quantity has the same dataset name, shape convention and unit in every tier, so a reader (the
+plots, the statistics, ``bench/bench_tiers.py``, ``piezodyn plot DIR``) never maps names:
+
+===================================  =======  ==========================================================
+dataset                              unit     meaning (one row per accepted step or output sample)
+===================================  =======  ==========================================================
+``time_s``                           s        time of the row
+``dt_s``                             s        time since the previous row (0 on a first row at t = 0)
+``drive_voltage_V``                  V        drive U(t) of the first driven electrode
+``<electrode>_voltage_V``            V        each electrode of a multi-phase drive
+``<point>_displacement_m``           m        named point's displacement component (``tip``: the tip)
+``<body>_position_m``                m        rigid body's coordinates (n_rows x axes); a reference
+                                              point of the body, so read it relative to its start
+``<body>_velocity_m_per_s``          m/s      rigid body's velocity (n_rows x axes)
+``<body>_angle_rad``                 rad      rotations of a rigid body about its named axes
+``<body>_angular_velocity_rad_per_s`` rad/s   their rates
+``<contact>_force_N``                N        force of the contact on its rigid body (node and surface
+                                              contacts) or on its upper body (rigid-rigid links),
+                                              n_rows x axes, upward positive
+``<contact>_closed``                 1        1 while the contact is closed
+``<contact>_torque_N_m``             N m      torque of a contact on a rotating body
+===================================  =======  ==========================================================
+
+Every dataset carries the attribute :data:`UNITS`. The summary's statistics use the same names in
+every tier (``app/transient/impacts.py`` for the generic ones, the scene report of
+``app/scenes/`` for those of one scene).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+TIME_SERIES_FILE = "transient.h5"
+UNITS = "units"
+DESCRIPTION = "description"
+TIME = "time_s"
+STEP = "dt_s"
+DRIVE = "drive_voltage_V"
+MOTION_PLOT = "transient_motion.png"
+FORCE_PLOT = "transient_force.png"
+
+
+def point_displacement(point: str) -> str:
+    return f"{point}_displacement_m"
+
+
+def electrode_voltage(electrode: str) -> str:
+    return f"{electrode}_voltage_V"
+
+
+def body_position(body: str) -> str:
+    return f"{body}_position_m"
+
+
+def body_velocity(body: str) -> str:
+    return f"{body}_velocity_m_per_s"
+
+
+def body_angle(body: str) -> str:
+    return f"{body}_angle_rad"
+
+
+def body_angular_velocity(body: str) -> str:
+    return f"{body}_angular_velocity_rad_per_s"
+
+
+def contact_force(contact: str) -> str:
+    return f"{contact}_force_N"
+
+
+def contact_closed(contact: str) -> str:
+    return f"{contact}_closed"
+
+
+def contact_torque(contact: str) -> str:
+    return f"{contact}_torque_N_m"
+
+
+def contact_columns(contact: str) -> dict[str, str]:
+    """Units of the columns every contact writes (what they mean: the table above)."""
+    return {contact_force(contact): "N", contact_closed(contact): "1"}
+
+
+def body_columns(body: str) -> dict[str, str]:
+    return {body_position(body): "m", body_velocity(body): "m/s"}
+
+
+class TimeSeriesWriter:
+    """The one HDF5 time-series writer (h5py, rank 0 only; the rows are replicated on every rank).
+
+    ``write(row)`` buffers one row (a dict name -> scalar or 1-D array) and appends blocks of
+    ``block_rows`` rows; ``write_block(columns)`` appends many rows at once (n_rows x ...). The
+    datasets are resizable and chunked and the file is flushed after every block, so a run that is
+    killed leaves a readable file up to the last flush. ``units`` (and optionally ``descriptions``)
+    map each name to its unit; ``attrs`` are file attributes; ``resume_rows`` continues an existing
+    file after its first rows (a resumed run: rows written after the checkpoint are dropped)."""
+
+    def __init__(self, path: Path, units: dict[str, str], comm=None, block_rows: int = 2000,
+                 resume_rows: int | None = None, descriptions: dict[str, str] | None = None,
+                 attrs: dict[str, str] | None = None):
+        self.path = Path(path)
+        self.units = dict(units)
+        self.descriptions = dict(descriptions or {})
+        self.attrs = dict(attrs or {})
+        self.block_rows = block_rows
+        self.active = comm is None or comm.rank == 0
+        self._rows: list[dict] = []
+        self._file = None
+        self.rows_written = 0
+        if resume_rows is not None and self.active:
+            self._reopen(resume_rows)
+
+    def _reopen(self, rows: int) -> None:
+        if rows == 0 and not self.path.exists():
+            return
+        import h5py
+
+        self._file = h5py.File(self.path, "a")
+        for name in self._file:
+            ds = self._file[name]
+            if ds.shape[0] < rows:
+                raise ValueError(f"{self.path}: {name} has {ds.shape[0]} rows, the checkpoint needs {rows}")
+            ds.resize(rows, axis=0)
+        self.rows_written = rows
+        self._file.flush()
+
+    def _create(self, shapes: dict[str, tuple]) -> None:
+        import h5py
+
+        if self._file is None:
+            self._file = h5py.File(self.path, "w")
+            for key, value in self.attrs.items():
+                self._file.attrs[key] = value
+        for name, shape in shapes.items():
+            ds = self._file.create_dataset(name, shape=(0, *shape), maxshape=(None, *shape), dtype="f8",
+                                           chunks=(min(self.block_rows, 4096), *shape))
+            ds.attrs[UNITS] = self.units.get(name, "")
+            if name in self.descriptions:
+                ds.attrs[DESCRIPTION] = self.descriptions[name]
+
+    def write(self, row: dict) -> None:
+        if not self.active:
+            return
+        self._rows.append(row)
+        if len(self._rows) >= self.block_rows:
+            self.flush()
+
+    def flush(self) -> None:
+        if not self.active or not self._rows:
+            return
+        rows, self._rows = self._rows, []
+        self.write_block({name: np.array([r[name] for r in rows], dtype=float) for name in rows[0]})
+
+    def write_block(self, columns: dict[str, np.ndarray]) -> None:
+        if not self.active:
+            return
+        if self._file is None or not len(self._file):
+            self._create({name: np.shape(values)[1:] for name, values in columns.items()})
+        n = len(next(iter(columns.values())))
+        for name, values in columns.items():
+            ds = self._file[name]
+            ds.resize(self.rows_written + n, axis=0)
+            ds[self.rows_written:] = values
+        self.rows_written += n
+        self._file.flush()
+
+    def add_table(self, name: str, data: np.ndarray, units: str, **attrs: str) -> None:
+        """A dataset that is not a time column (e.g. the lumped tier's event table), written once."""
+        if not self.active:
+            return
+        ds = self._file.create_dataset(name, data=data)
+        ds.attrs[UNITS] = units
+        for key, value in attrs.items():
+            ds.attrs[key] = value
+
+    def close(self) -> None:
+        self.flush()
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+
+def read_time_series(path: Path) -> dict[str, np.ndarray]:
+    """Every dataset of a time-series file, by name."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        return {name: f[name][:] for name in f}
