@@ -22,6 +22,8 @@ dataset                              unit     meaning (one row per accepted step
                                               n_rows x axes, upward positive
 ``<contact>_closed``                 1        1 while the contact is closed
 ``<contact>_torque_N_m``             N m      torque of a contact on a rotating body
+``<contact>_dissipated_J``           J        energy the contact's damping and friction have dissipated
+                                              since t = 0 (FE tier)
 ===================================  =======  ==========================================================
 
 Every dataset carries the attribute :data:`UNITS`. The summary's statistics use the same names in
@@ -79,6 +81,10 @@ def contact_closed(contact: str) -> str:
 
 def contact_torque(contact: str) -> str:
     return f"{contact}_torque_N_m"
+
+
+def contact_dissipated(contact: str) -> str:
+    return f"{contact}_dissipated_J"
 
 
 def contact_columns(contact: str) -> dict[str, str]:

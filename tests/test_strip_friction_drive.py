@@ -53,7 +53,8 @@ def reference():
     depth = case.geometry.thickness_m
     normal_N = 2 * k_w * w_s * fd.contact_integral(theta_c) / k * depth    # one wavelength
     return dict(surface_speed=omega * u_s, theta_c=theta_c, normal_N=normal_N, mu=contact.friction.mu_dynamic,
-                period_s=1 / tr.drive.frequency_Hz)
+                period_s=1 / tr.drive.frequency_Hz, winkler=k_w, amplitude=w_s,
+                length_m=wave.wavelength_m * depth)        # wave length times depth [m^2]
 
 
 REF = reference()
@@ -61,7 +62,8 @@ REF = reference()
 
 def mean_forces(tmp_path, name: str, speed_ratio: float, overrides=()) -> tuple[float, float, dict]:
     """(normal force N, drive force F (along the drive direction -x), run results) on the slider,
-    averaged over the last periods, slider speed V = speed_ratio * omega U_s."""
+    averaged over the last periods, slider speed V = speed_ratio * omega U_s; the results get the
+    mean power the contact dissipated over those periods, ``dissipated_W``."""
     comm = MPI.COMM_WORLD
     folder = comm.bcast(tmp_path / name if comm.rank == 0 else None, root=0)
     speed = speed_ratio * REF["surface_speed"]
@@ -69,9 +71,11 @@ def mean_forces(tmp_path, name: str, speed_ratio: float, overrides=()) -> tuple[
     results = run(case, folder, comm, lambda *args: None)
     with h5py.File(folder / "transient.h5", "r") as f:
         t, force = f["time_s"][()], f["strip_slider_force_N"][()]
+        dissipated = f["strip_slider_dissipated_J"][()]
     start = case.transient.end_time_s - MEASURED_PERIODS * REF["period_s"]
     window = t >= start - 1e-12
     tw = t[window]
+    results["dissipated_W"] = (dissipated[-1] - dissipated[window][0]) / (tw[-1] - tw[0])
 
     def mean(y):
         return np.trapz(y[window], tw) / (tw[-1] - tw[0])
@@ -92,6 +96,11 @@ def test_mean_drive_force_follows_the_friction_drive_law(tmp_path):
               f"F / (mu N) = {measured[-1]:+.4f} (law {law:+.4f})")
         assert normal == pytest.approx(REF["normal_N"], rel=0.05)
         assert abs(measured[-1] - law) <= 0.05
+        # the friction power the contact reports (its dissipated energy) against the law's
+        law_power = REF["length_m"] * fd.dissipated_power_per_length(
+            r * REF["surface_speed"], REF["surface_speed"], REF["theta_c"], REF["mu"], REF["winkler"], REF["amplitude"])
+        print(f"    dissipated {results['dissipated_W']:.5f} W (law {law_power:.5f} W)")
+        assert results["dissipated_W"] == pytest.approx(law_power, rel=0.05)
     # stall and beyond the surface speed: the whole contact slides one way, |F| = mu N
     assert measured[0] == pytest.approx(1.0, abs=1e-3) and measured[-1] == pytest.approx(-1.0, abs=1e-3)
     # no-load speed: where the mean force changes sign. Between the bracketing speeds the FE curve is

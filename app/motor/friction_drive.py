@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.integrate import quad
 from scipy.optimize import brentq
 
 
@@ -99,3 +100,17 @@ def speed_for_force(force_ratio_value: float, surface_speed_m_per_s: float, thet
     target = 0.5 * (force_ratio_value + 1.0) * contact_integral(theta_c)
     phi = brentq(lambda p: math.sin(p) - p * math.cos(theta_c) - target, 0.0, theta_c, xtol=1e-15)
     return surface_speed_m_per_s * math.cos(phi)
+
+
+def dissipated_power_per_length(speed_m_per_s: float, surface_speed_m_per_s: float, theta_c: float, mu: float,
+                                winkler_Pa_per_m: float, amplitude_m: float) -> float:
+    """Mean power dissipated by friction per unit length of the wave and unit depth [W/m^2]: the
+    average over a wavelength of mu p |s|, p = k_w W (cos xi - cos theta_c) on the crests and
+    s = omega U_t cos xi - V the surface's speed relative to the slider."""
+    def integrand(xi):
+        return (math.cos(xi) - math.cos(theta_c)) * abs(surface_speed_m_per_s * math.cos(xi) - speed_m_per_s)
+
+    ratio = speed_m_per_s / surface_speed_m_per_s
+    stick = [math.acos(ratio)] if -1.0 < ratio < 1.0 and math.acos(ratio) < theta_c else []
+    integral = 2 * quad(integrand, 0.0, theta_c, points=stick or None, epsabs=0.0, epsrel=1e-12)[0]
+    return mu * winkler_Pa_per_m * amplitude_m * integral / (2 * math.pi)

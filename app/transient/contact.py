@@ -155,10 +155,15 @@ class SurfaceContact(ForceColumns):
         gap_rate = ufl.dot(relative_velocity, normal)
         pressure = cf.normal_pressure(gap, gap_rate, self.stiffness, self.damping)
         traction = pressure * normal
+        # dissipated power per area: damping (p minus its elastic part, times the penetration rate:
+        # c rate^2, or the elastic energy lost while the clipped pressure is zero) + friction
+        power = (pressure - self.stiffness * cf.macaulay(-gap)) * (-gap_rate)
         if friction is not None and friction.mu_dynamic > 0:     # mu = 0: no friction term (UFL zero)
-            traction = traction + cf.friction_traction(
+            friction_traction = cf.friction_traction(
                 normal, relative_velocity, pressure, friction.mu_dynamic, friction.static_ratio,
                 friction.decay_s_per_m, friction.shear_cap_Pa, friction.regularisation_speed_m_per_s)
+            traction = traction + friction_traction
+            power = power - ufl.dot(friction_traction, relative_velocity)
         test = ufl.TestFunction(fe.space)
         trial = ufl.TrialFunction(fe.space)
         residual = cf.contact_residual(traction, displacement_of_test(test, fe), ds, weight)
@@ -171,6 +176,7 @@ class SurfaceContact(ForceColumns):
             self._rotation_forms(traction, omega, lever, test, ds, weight, fe)
         penetration = cf.macaulay(-gap)
         self.energy_form = fem.form(0.5 * self.stiffness * penetration**2 * weight * ds)
+        self.dissipation_form = fem.form(power * weight * ds)
         self.area_in_contact_form = fem.form(cf.heaviside(-gap) * weight * ds)
         self.residual_vector = create_vector(self.residual_form)
         self.tangent_matrix = create_matrix(self.tangent_form)
@@ -409,6 +415,11 @@ class SurfaceContact(ForceColumns):
         self.set_body_state(state.z[sl], state.zd[sl])
         return self.elastic_energy_J()
 
+    def dissipation_power_W(self, system) -> float:
+        """Power dissipated by damping and friction [W] at the evaluated iterate (the fields and the
+        body state of the last evaluation)."""
+        return self._scalar(self.dissipation_form)
+
 
 def displacement_of_test(test, fe: LinearFE):
     if is_mixed(fe.space):
@@ -489,15 +500,21 @@ class PointContact(ForceColumns):
         lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
         return self.penetration(z[lo], z[up], zd[lo], zd[up])
 
+    def _slip_map(self, rigid, z) -> np.ndarray:
+        """P: (lower, upper) coordinate rates -> velocity of the upper body's contact point relative
+        to the lower body's (3-vector)."""
+        n3 = pad3(self.normal)
+        r_up = -self.contact_offset_m * n3
+        r_lo = pad3(z[rigid.dofs(self.upper)] - z[rigid.dofs(self.lower)]) + r_up
+        return np.hstack([-velocity_map(rigid, self.lower, r_lo), velocity_map(rigid, self.upper, r_up)])
+
     def _general_terms(self, system, tangent: bool):
         """(generalised force on (lower, upper) [N, N m], force on upper [N], tangent or None)."""
         rigid = system.rigid
         z, zd = system.z_mid, system.zd_mid
         f, k_f, c_f = self.force(*self._state(rigid, z, zd))
         n3 = pad3(self.normal)
-        r_up = -self.contact_offset_m * n3
-        r_lo = pad3(z[rigid.dofs(self.upper)] - z[rigid.dofs(self.lower)]) + r_up
-        P = np.hstack([-velocity_map(rigid, self.lower, r_lo), velocity_map(rigid, self.upper, r_up)])
+        P = self._slip_map(rigid, z)
         F = f * n3
         dF_ds, dF_dN = np.zeros((3, 3)), np.zeros(3)
         if self.friction is not None and f > 0.0:
@@ -544,6 +561,20 @@ class PointContact(ForceColumns):
 
     def stored_energy_J(self, system, state) -> float:
         return self.elastic_energy_J(self._state(system.rigid, state.z, state.zd)[0])
+
+    def dissipation_power_W(self, system) -> float:
+        """Power dissipated by the damper and friction [W] at the evaluated iterate."""
+        rigid, z, zd = system.rigid, system.z_mid, system.zd_mid
+        delta, rate = self._state(rigid, z, zd)
+        f, _, _ = self.force(delta, rate)
+        if delta <= 0.0:
+            return 0.0
+        power = (f - self.stiffness_N_per_m * delta) * rate
+        if self.friction is not None and f > 0.0:
+            n3 = pad3(self.normal)
+            slip = (np.eye(3) - np.outer(n3, n3)) @ (self._slip_map(rigid, z) @ zd[self._pair])
+            power -= float(friction_force(slip, f, self.friction)[0] @ slip)
+        return float(power)
 
 
 class NodeContact(ForceColumns):
@@ -664,20 +695,26 @@ class NodeContact(ForceColumns):
         sl = system.rigid.dofs(self.body)
         return self.force(*self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl]))
 
+    def _slip_map(self, system) -> tuple[np.ndarray, np.ndarray]:
+        """(P, rates): P maps the rates xi' = (node velocity (gdim), body coordinate rates) at the
+        evaluated iterate to the node's velocity relative to the sphere's surface point R n."""
+        rigid, gdim = system.rigid, self.fe.gdim
+        P = np.hstack([np.eye(3)[:, :gdim], -velocity_map(rigid, self.body, self.radius_m * pad3(self.normal))])
+        rates = np.concatenate([self._node_values(system.v_mid), system.zd_mid[rigid.all_dofs(self.body)]])
+        return P, rates
+
     def _friction_terms(self, system, tangent: bool):
         """With friction, in the unknowns xi = (node displacement (gdim), body coordinates): the
         force F on the node [N], the generalised forces P^T F and, with ``tangent``, the block
         d(-P^T F)/d xi_{n+1}; P maps xi rates to the slip velocity v_node - (v_body + omega x R n)."""
-        rigid, gdim = system.rigid, self.fe.gdim
-        body = rigid.all_dofs(self.body)
+        gdim = self.fe.gdim
         f, k_f, c_f = self._force_at_iterate(system)
         n3 = pad3(self.normal)
-        P = np.hstack([np.eye(3)[:, :gdim], -velocity_map(rigid, self.body, self.radius_m * n3)])
+        P, rates = self._slip_map(system)
         F = f * n3
         dF_ds, dF_dN = np.zeros((3, 3)), np.zeros(3)
         if f > 0.0:
             tangential = np.eye(3) - np.outer(n3, n3)
-            rates = np.concatenate([self._node_values(system.v_mid), system.zd_mid[body]])
             F_t, dF_ds, dF_dN = friction_force(tangential @ (P @ rates), f, self.friction)
             F = F + F_t
             dF_ds = dF_ds @ tangential
@@ -736,3 +773,18 @@ class NodeContact(ForceColumns):
     def stored_energy_J(self, system, state) -> float:
         sl = system.rigid.dofs(self.body)
         return self.elastic_energy_J(self.penetration(state.u, state.v, state.z[sl], state.zd[sl])[0])
+
+    def dissipation_power_W(self, system) -> float:
+        """Power dissipated by the damper and friction [W] at the evaluated iterate."""
+        sl = system.rigid.dofs(self.body)
+        delta, rate = self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl])
+        if delta <= 0.0:
+            return 0.0
+        f, _, _ = self.force(delta, rate)
+        power = (f - self.stiffness * delta * math.sqrt(delta)) * rate
+        if self.friction is not None and f > 0.0:
+            n3 = pad3(self.normal)
+            P, rates = self._slip_map(system)
+            slip = (np.eye(3) - np.outer(n3, n3)) @ (P @ rates)
+            power -= float(friction_force(slip, f, self.friction)[0] @ slip)
+        return float(power)

@@ -188,6 +188,7 @@ class CoupledSystem:
         # Forces now, at the converged mid-point fields: other users of the shared fields (the
         # contact monitor, energy account) overwrite them with end-of-step values afterwards.
         self.last_forces_N = self.contact_forces_N()
+        self.last_dissipation_W = {c.name: c.dissipation_power_W(self) for c in self.interactions}
         return reason, self._new_state()
 
     def _contact_free_step(self, atol: float):

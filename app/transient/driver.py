@@ -318,6 +318,7 @@ def _units(tm: TransientModel, case) -> dict[str, str]:
             units[S.body_angular_velocity(b.name)] = "rad/s (" + ", ".join(b.rotation_axes) + ")"
     for c in tm.system.interactions:
         units.update(c.columns())
+        units[S.contact_dissipated(c.name)] = "J (damping and friction, since t = 0)"
     return units
 
 
@@ -403,6 +404,7 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                 row[S.body_angular_velocity(b.name)] = rec["velocity_m_per_s"][rot]
         for j, c in enumerate(interactions):
             row.update(c.row(rec["contact_force_N"][c.name], bool(rec["contact_closed"][j])))
+            row[S.contact_dissipated(c.name)] = rec["dissipated_J"][c.name]
         series.write(row)
         kill_point("step")
 

@@ -52,6 +52,10 @@ class Interaction(Protocol):
     def stored_energy_J(self, system, state) -> float:
         """Elastic penalty energy [J] at ``state`` (the shared fields hold state.u)."""
 
+    def dissipation_power_W(self, system) -> float:
+        """Power [W] the interaction dissipates (damping, friction) at the evaluated iterate: the
+        stepper integrates it into the interaction's dissipated energy."""
+
     def columns(self) -> dict[str, str]:
         """Time-series column names and units."""
 

@@ -109,11 +109,17 @@ class TimeStepper:
         self.progress = progress
         self.stats = RunStatistics()
         self.changed = False                # did the last accepted step change the contact set?
+        # energy each interaction has dissipated since t = 0 [J]: its damping and friction power,
+        # evaluated where the scheme evaluates forces (the step's generalised mid-point), integrated
+        # by the trapezoidal rule between accepted steps (the first step: its own power)
+        self.dissipated_J = {c.name: 0.0 for c in system.interactions}
+        self.dissipation_W: dict[str, float] = {}
         self._factorisations_before = 0     # factorisations of the run before a resume
 
     def record(self, state: TransientState, dt: float, forces: dict, status) -> dict:
         rec = {"time_s": state.t, "dt_s": dt, "position_m": state.z.copy(), "velocity_m_per_s": state.zd.copy(),
-               "contact_force_N": forces, "contact_closed": np.array(status.closed, dtype=np.int8)}
+               "contact_force_N": forces, "contact_closed": np.array(status.closed, dtype=np.int8),
+               "dissipated_J": dict(self.dissipated_J)}
         if self.energy is not None:
             rec["energy_J"] = self.energy.energy_J(state)
             rec["external_work_J"] = self.energy.work_J
@@ -128,6 +134,7 @@ class TimeStepper:
                 "newton_iterations": self.system.total_iterations,
                 "linear_steps": self.system.linear_steps,
                 "factorisations": self._factorisations(),
+                "dissipated_J": dict(self.dissipated_J), "dissipation_W": dict(self.dissipation_W),
                 "statistics": {k: v for k, v in stats.as_dict().items() if k not in _DERIVED},
                 "failure_reasons": {str(k): v for k, v in stats.failure_reasons.items()}}
 
@@ -138,6 +145,8 @@ class TimeStepper:
         self.system.total_iterations = int(snap["newton_iterations"])
         self.system.linear_steps = int(snap.get("linear_steps", 0))
         self._factorisations_before = int(snap["factorisations"])
+        self.dissipated_J.update({k: float(v) for k, v in snap.get("dissipated_J", {}).items()})
+        self.dissipation_W = {k: float(v) for k, v in snap.get("dissipation_W", {}).items()}
         for key, value in snap["statistics"].items():
             setattr(stats, key, value)
         stats.failure_reasons = {int(k): v for k, v in snap["failure_reasons"].items()}
@@ -178,6 +187,9 @@ class TimeStepper:
                     continue
                 break
             forces = self.system.last_forces_N
+            for name, power in self.system.last_dissipation_W.items():
+                self.dissipated_J[name] += 0.5 * dt_try * (self.dissipation_W.get(name, power) + power)
+            self.dissipation_W = dict(self.system.last_dissipation_W)
             if self.energy is not None:
                 self.energy.add_work(state, new_state)
             rec = self.record(new_state, dt_try, forces, new_status)
