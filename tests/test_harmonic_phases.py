@@ -2,8 +2,8 @@
 phases to solver tolerance, reversal of the wave when B's phase is flipped, the travelling-wave
 quality at F(1,4), and the sensor (floating electrode) voltage.
 
-The stator tests are marked slow (~3 min on the shared 2-core machine: 9 block-LU solves of the
-2x2 real system). With the nominal drive (B 200 V at exactly 90 deg) min/max of the normal
+The stator tests are marked slow (~1.5 min on the coarse mesh: 9 block-LU solves of the 2x2 real
+system; the case-mesh test ~2 min and ~6 GB). With the nominal drive (B 200 V at exactly 90 deg) min/max of the normal
 amplitude is 0.79 on this mesh: the pair split and the single phases' spatial offset leave a
 backward n = 4 part of ~12 % (docs/motor-stator.md, diagnosis). The case balances B
 (harmonic.wave.balance = "B", as a two-phase driver does) and the issue's >= 0.9 is asserted for
