@@ -219,11 +219,13 @@ def circle_phasors(model: FEModel, solver: HarmonicSolver, cfg) -> tuple[np.ndar
     return u_re + 1j * u_im, theta
 
 
-def wave_measures(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: float) -> dict:
-    """Travelling-wave measures (app.modeid.travelling_wave) of the solver's last solution."""
+def wave_measures(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: float,
+                  circle: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
+    """Travelling-wave measures (app.modeid.travelling_wave) of the solver's last solution (or of
+    ``circle``, its circle_phasors when already sampled)."""
     from app.modeid import travelling_wave
 
-    u, theta = circle_phasors(model, solver, cfg)
+    u, theta = circle or circle_phasors(model, solver, cfg)
     return travelling_wave(u, theta, tuple(cfg.normal_rz), cfg.order, frequency_Hz, cfg.circle_radius_m)
 
 
@@ -238,8 +240,9 @@ def balanced_wave(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: flo
     nominal = dict(solver.phasors)
     name = cfg.balance
     solver.solve(frequency_Hz)
-    nominal_wave = wave_measures(model, solver, cfg, frequency_Hz)
-    u_all, _ = circle_phasors(model, solver, cfg)
+    circle = circle_phasors(model, solver, cfg)
+    nominal_wave = wave_measures(model, solver, cfg, frequency_Hz, circle)
+    u_all = circle[0]
     solver.set_phasors({k: (v if k == name else 0j) for k, v in nominal.items()})
     solver.solve(frequency_Hz)
     u_trimmed, _ = circle_phasors(model, solver, cfg)
