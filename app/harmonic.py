@@ -58,16 +58,9 @@ class HarmonicSolver:
         driven = model.electrodes_of("voltage")
         if not driven:
             raise NumericalFailure("harmonic analysis needs an electrode of kind 'voltage'")
-        self.phasors = drive_phasors(model, voltage_V) if phasors is None else phasors
         self.constraints: ConstraintSet = electrical_state(model, "driven")
         self.chi = indicator(model, driven)
         self.chi_e = {name: indicator(model, [name]) for name in driven}
-        values = fem.Function(model.W)  # assigned, not summed: DOFs shared by electrodes count once
-        values_im = fem.Function(model.W)
-        for name, phasor in self.phasors.items():
-            values.x.array[model.electrode_dofs[name]] = phasor.real
-            values_im.x.array[model.electrode_dofs[name]] = phasor.imag
-        x_drive, x_drive_im = petsc_vector(values).copy(), petsc_vector(values_im).copy()
         self.floating_dofs = {}
         n_owned = model.W.dofmap.index_map.size_local
         for name in model.electrodes_of("floating"):
@@ -78,10 +71,6 @@ class HarmonicSolver:
         self.C_r = self.constraints.reduce(ops.C) if ops.C is not None else self.M_r.duplicate()
         if ops.C is None:
             self.C_r.zeroEntries()
-        self.x_drive_r = self.constraints.reduce_vector(x_drive)
-        x_drive_im_r = self.constraints.reduce_vector(x_drive_im)
-        x_drive.destroy()
-        x_drive_im.destroy()
         self.A = self.K_r.duplicate(copy=True)
         self.Cp = self.C_r.duplicate(copy=True)
         self.Cm = self.C_r.duplicate(copy=True)
@@ -99,15 +88,25 @@ class HarmonicSolver:
         self.ksp.setFromOptions()
         self.b, self.y = self.B.createVecs()[::-1]
         self.x_bc = self.b.duplicate()
-        self.x_bc.zeroEntries()
-        self.x_bc.array[: self.n_local] = self.x_drive_r.array_r
-        self.x_bc.array[self.n_local:] = x_drive_im_r.array_r
-        x_drive_im_r.destroy()
+        self.set_phasors(drive_phasors(model, voltage_V) if phasors is None else phasors)
         self.rows = self._block_rows()
         self.x_full_re = ops.K.createVecRight()
         self.x_full_im = ops.K.createVecRight()
         self.y_re = self.K_r.createVecRight()
         self.y_im = self.K_r.createVecRight()
+
+    def set_phasors(self, phasors: dict[str, complex]) -> None:
+        """Drive phasor [V] of every driven electrode for the following solves."""
+        self.phasors = dict(phasors)
+        model = self.model
+        self.x_bc.zeroEntries()
+        for half, part in ((slice(None, self.n_local), "real"), (slice(self.n_local, None), "imag")):
+            values = fem.Function(model.W)  # assigned, not summed: DOFs shared by electrodes count once
+            for name, phasor in self.phasors.items():
+                values.x.array[model.electrode_dofs[name]] = getattr(phasor, part)
+            reduced = self.constraints.reduce_vector(petsc_vector(values))
+            self.x_bc.array[half] = reduced.array_r
+            reduced.destroy()
 
     def _block_rows(self) -> np.ndarray:
         rows = self.constraints.dirichlet_rows() - self.K_r.getOwnershipRange()[0]
@@ -156,7 +155,7 @@ class HarmonicSolver:
 
     def destroy(self):
         for obj in (self.K_r, self.M_r, self.C_r, self.A, self.Cp, self.Cm, self.nest, self.B, self.ksp,
-                    self.b, self.y, self.x_bc, self.x_drive_r, self.chi, self.x_full_re, self.x_full_im,
+                    self.b, self.y, self.x_bc, self.chi, self.x_full_re, self.x_full_im,
                     self.y_re, self.y_im, *self.chi_e.values()):
             obj.destroy()
 
@@ -205,9 +204,9 @@ def frequency_grid(model: FEModel, f_r: float | None, f_a: float | None) -> np.n
     return np.unique(np.concatenate([grid, extra]))
 
 
-def wave_measures(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: float) -> dict:
-    """Travelling-wave measures (app.modeid.travelling_wave) of the solver's last solution."""
-    from app.modeid import PointSet, circle_points, cylindrical, travelling_wave
+def circle_phasors(model: FEModel, solver: HarmonicSolver, cfg) -> tuple[np.ndarray, np.ndarray]:
+    """(u_cyl phasors (n_points, 3) [m], theta) of the solver's last solution round harmonic.wave's circle."""
+    from app.modeid import PointSet, circle_points, cylindrical
 
     points, theta = circle_points(cfg.circle_radius_m, cfg.circle_height_m, cfg.n_points)
     probe = PointSet(model.mesh, points)
@@ -218,8 +217,51 @@ def wave_measures(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: flo
     x_re, x_im = solver.full_solution()
     u_re = cylindrical(probe(model.displacement(x_re)), theta)
     u_im = cylindrical(probe(model.displacement(x_im)), theta)
-    return travelling_wave(u_re + 1j * u_im, theta, tuple(cfg.normal_rz), cfg.order, frequency_Hz,
-                           cfg.circle_radius_m)
+    return u_re + 1j * u_im, theta
+
+
+def wave_measures(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: float,
+                  circle: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
+    """Travelling-wave measures (app.modeid.travelling_wave) of the solver's last solution (or of
+    ``circle``, its circle_phasors when already sampled)."""
+    from app.modeid import travelling_wave
+
+    u, theta = circle or circle_phasors(model, solver, cfg)
+    return travelling_wave(u, theta, tuple(cfg.normal_rz), cfg.order, frequency_Hz, cfg.circle_radius_m)
+
+
+def balanced_wave(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: float) -> tuple[HarmonicPoint, dict]:
+    """Solve at ``frequency_Hz`` with the solver's drive, then with harmonic.wave.balance's electrode
+    trimmed (amplitude and phase) so that the order-n part of the normal displacement travelling
+    against the wave vanishes; the solver keeps the trimmed drive. By superposition one extra solve
+    (the trimmed electrode alone) gives the trim. Returns the trimmed point and wave measures, the
+    latter with ``balance`` (the trimmed phasor) and ``nominal`` (the untrimmed drive's measures)."""
+    from app.modeid import balance_factor, normal_component
+
+    nominal = dict(solver.phasors)
+    name = cfg.balance
+    solver.solve(frequency_Hz)
+    circle = circle_phasors(model, solver, cfg)
+    nominal_wave = wave_measures(model, solver, cfg, frequency_Hz, circle)
+    u_all = circle[0]
+    solver.set_phasors({k: (v if k == name else 0j) for k, v in nominal.items()})
+    solver.solve(frequency_Hz)
+    u_trimmed, _ = circle_phasors(model, solver, cfg)
+    w_all, w_trimmed = (normal_component(u, tuple(cfg.normal_rz)) for u in (u_all, u_trimmed))
+    try:
+        factor = balance_factor(w_all - w_trimmed, w_trimmed, cfg.order)
+    except ValueError:
+        raise NumericalFailure(f"harmonic.wave.balance: electrode {name!r} does not drive order {cfg.order} "
+                               f"at {frequency_Hz} Hz") from None
+    trimmed = nominal[name] * factor
+    solver.set_phasors({**nominal, name: trimmed})
+    point = solver.solve(frequency_Hz)
+    wave = wave_measures(model, solver, cfg, frequency_Hz)
+    wave["balance"] = {"electrode": name, "amplitude_V": abs(trimmed), "phase_deg": math.degrees(np.angle(trimmed)),
+                       "nominal_amplitude_V": abs(nominal[name]),
+                       "nominal_phase_deg": math.degrees(np.angle(nominal[name]))}
+    wave["nominal"] = nominal_wave
+    return point, wave
 
 
 def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float | None, log,
@@ -265,8 +307,11 @@ def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float |
                                            if amp > 0 else None)
         if cfg.wave is not None:
             wave_f = cfg.wave.frequency_Hz or wave_frequency_Hz or f_r or result.peak_Hz
-            result.wave_point = solver.solve(wave_f)
-            result.wave = wave_measures(model, solver, cfg.wave, wave_f)
+            if cfg.wave.balance is not None:
+                result.wave_point, result.wave = balanced_wave(model, solver, cfg.wave, wave_f)
+            else:
+                result.wave_point = solver.solve(wave_f)
+                result.wave = wave_measures(model, solver, cfg.wave, wave_f)
             if wave_writer is not None:
                 wave_writer(model, solver, wave_f)
         log(f"harmonic: {len(grid)} frequencies + {len(cache)} refinement solves, |Y| peak at "
@@ -316,10 +361,16 @@ def wave_lines(wave: dict | None) -> list[str]:
     """Terminal lines of the travelling-wave measures."""
     if not wave:
         return []
-    lines = [f"travelling wave at {wave['frequency_Hz']:.1f} Hz: min/max {wave['travelling_wave_ratio']:.3f}, "
-             f"towards {wave['direction']}, {wave['wave_speed_m_per_s']:.1f} m/s",
-             f"contact ellipse: normal {wave['ellipse_normal_amplitude_m'] * 1e6:.3f} um, tangential "
-             f"{wave['ellipse_tangential_amplitude_m'] * 1e6:.3f} um, phase {wave['ellipse_phase_deg']:.1f} deg"]
+    lines = []
+    if "balance" in wave:
+        b, nominal = wave["balance"], wave["nominal"]
+        lines.append(f"nominal drive: min/max {nominal['travelling_wave_ratio']:.3f}; balanced: {b['electrode']} at "
+                     f"{b['amplitude_V']:.4g} V, {b['phase_deg']:.2f} deg (nominal {b['nominal_amplitude_V']:.4g} V, "
+                     f"{b['nominal_phase_deg']:.2f} deg)")
+    lines += [f"travelling wave at {wave['frequency_Hz']:.1f} Hz: min/max {wave['travelling_wave_ratio']:.3f}, "
+              f"towards {wave['direction']}, {wave['wave_speed_m_per_s']:.1f} m/s",
+              f"contact ellipse: normal {wave['ellipse_normal_amplitude_m'] * 1e6:.3f} um, tangential "
+              f"{wave['ellipse_tangential_amplitude_m'] * 1e6:.3f} um, phase {wave['ellipse_phase_deg']:.1f} deg"]
     for name, y in wave["electrode_admittance_magnitude_S"].items():
         lines.append(f"  |Y_{name}| = {y * 1e3:.4g} mS")
     for name, v in wave["floating_voltage_amplitude_V"].items():

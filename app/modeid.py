@@ -20,6 +20,7 @@ from mpi4py import MPI
 from app.compat import cell_candidates, cell_geometry_nodes
 
 SKIP_FRACTION = 0.05
+SPECTRUM_ORDERS = 16  # orders reported round the wave's circle: 0..16 covers n = 4's neighbours 0, 8, 12, 16
 
 
 class PointSet:
@@ -168,19 +169,52 @@ def pair_partners(frequencies_Hz: list[float], orders: list[ModeOrder]) -> None:
             a.split_Hz = frequencies_Hz[best] - frequencies_Hz[i]
 
 
+def normal_component(u_cyl_phasor: np.ndarray, normal_rz: tuple[float, float]) -> np.ndarray:
+    """w = u_r n_r + u_z n_z along the unit outward normal (n_r, n_z) of the surface in the (r, z) plane."""
+    nr, nz = normal_rz
+    return (u_cyl_phasor[:, 0] * nr + u_cyl_phasor[:, 2] * nz) / math.hypot(nr, nz)
+
+
+def travelling_parts(w: np.ndarray, n: int) -> tuple[complex, complex]:
+    """(towards +theta, towards -theta) complex amplitudes of order n of phasors w round the circle:
+    Re(c exp(i(omega t - n theta))) travels towards +theta, i.e. the coefficient of exp(-i n theta)."""
+    c = harmonics(w)
+    return complex(c[-n % len(w)]), complex(c[n % len(w)])
+
+
+def order_spectrum(w: np.ndarray, n_max: int) -> dict:
+    """Amplitudes [m] of orders n = 0..n_max of w, split into the parts travelling towards +theta and
+    -theta (n = 0, the breathing part, is reported as towards +theta with -theta zero). A pure
+    travelling wave of order n has one non-zero entry; a standing one two equal entries."""
+    n_max = min(n_max, len(w) // 2 - 1)
+    parts = [travelling_parts(w, n) for n in range(n_max + 1)]
+    return {"n": list(range(n_max + 1)),
+            "towards_plus_theta_m": [abs(p) for p, _ in parts],
+            "towards_minus_theta_m": [0.0] + [abs(m) for _, m in parts[1:]]}
+
+
+def balance_factor(w_fixed: np.ndarray, w_trimmed: np.ndarray, n: int) -> complex:
+    """Factor s on the trimmed phase's drive such that w_fixed + s w_trimmed has no order-n part
+    travelling against the wave of the nominal drive w_fixed + w_trimmed (a driver's amplitude and
+    phase balance of a two-phase motor). Raises ValueError when the trimmed phase has no such part."""
+    plus, minus = travelling_parts(w_fixed + w_trimmed, n)
+    against = 1 if abs(plus) >= abs(minus) else 0  # index of the unwanted part in travelling_parts
+    fixed, trimmed = travelling_parts(w_fixed, n)[against], travelling_parts(w_trimmed, n)[against]
+    if trimmed == 0:
+        raise ValueError("the trimmed phase does not excite the unwanted part")
+    return -fixed / trimmed
+
+
 def travelling_wave(u_cyl_phasor: np.ndarray, theta: np.ndarray, normal_rz: tuple[float, float], n: int,
                     frequency_Hz: float, radius_m: float) -> dict:
     """Measures of a steady wave from complex displacement phasors (n_points, 3) round a circle.
 
     Normal displacement w = u_r n_r + u_z n_z (outward normal of the surface in the (r, z) plane);
     tangential = u_theta. A component c_{-n} exp(-i n theta) of w travels towards +theta."""
-    nr, nz = normal_rz
-    norm = math.hypot(nr, nz)
-    w = (u_cyl_phasor[:, 0] * nr + u_cyl_phasor[:, 2] * nz) / norm
+    w = normal_component(u_cyl_phasor, normal_rz)
     t = u_cyl_phasor[:, 1]
     amp_w, amp_t = np.abs(w), np.abs(t)
-    c = harmonics(w)
-    forward, backward = abs(c[-n % len(w)]), abs(c[n % len(w)])
+    forward, backward = (abs(p) for p in travelling_parts(w, n))
     omega = 2 * math.pi * frequency_Hz
     ratio = float(amp_w.min() / amp_w.max()) if amp_w.max() > 0 else 0.0
     phase = np.angle(t * np.conj(w))  # tangential relative to normal, per point
@@ -197,4 +231,5 @@ def travelling_wave(u_cyl_phasor: np.ndarray, theta: np.ndarray, normal_rz: tupl
         "ellipse_normal_amplitude_m": float(amp_w.mean()),
         "ellipse_tangential_amplitude_m": float(amp_t.mean()),
         "ellipse_phase_deg": float(math.degrees(np.angle(np.exp(1j * phase).mean()))),
+        "orders": order_spectrum(w, SPECTRUM_ORDERS),
     }

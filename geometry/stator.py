@@ -48,6 +48,12 @@ class StatorParameters:
     phase_shift_deg: float = param(22.5, doc="B strips' offset from A (a quarter wavelength for n = 4)")
     sensor_centre_deg: float = param(56.25)
     sensor_width_deg: float = param(9.0, gt=0)
+    sensor2_centre_deg: float | None = param(
+        None, doc="a second sensor strip 'sensor2' of the same width (22.5 deg from the first: the two read the "
+                  "n = 4 wave in quadrature, and as floating electrodes they stiffen both modes of the pair alike)")
+    guard_width_deg: float | None = param(
+        None, gt=0, lt=22.5, doc="guard strips (facet group 'guard', for grounding) of this width centred on the "
+                                 "22.5 deg pitch where no A/B strip or the sensor is; default: none (bare wall)")
     electrode_margin_m: float = param(0.0005, ge=0, doc="axial gap between outer strips and tube ends")
     mesh_size_m: float = param(0.0012, gt=0, doc="element size away from the tip")
     tip_mesh_size_m: float = param(0.0005, gt=0, doc="element size at the wedge tip")
@@ -95,6 +101,23 @@ class StatorParameters:
             out[f"B{k}"] = (centre + self.phase_shift_deg - half, centre + self.phase_shift_deg + half)
         out["sensor"] = (self.sensor_centre_deg - 0.5 * self.sensor_width_deg,
                          self.sensor_centre_deg + 0.5 * self.sensor_width_deg)
+        if self.sensor2_centre_deg is not None:
+            out["sensor2"] = (self.sensor2_centre_deg - 0.5 * self.sensor_width_deg,
+                              self.sensor2_centre_deg + 0.5 * self.sensor_width_deg)
+        return out
+
+    def guards(self) -> list[tuple[float, float]]:
+        """Angular extents [deg] of the guard strips: on the 22.5 deg pitch of the A/B strips, the
+        places no strip covers (the sensor's included)."""
+        if self.guard_width_deg is None:
+            return []
+        half = 0.5 * self.guard_width_deg
+        taken = list(self.strips().values())
+        out = []
+        for k in range(16):
+            arc = (22.5 * k - half, 22.5 * k + half)
+            if not any(_arcs_overlap(arc, other) for other in taken):
+                out.append(arc)
         return out
 
 
@@ -157,6 +180,10 @@ def _in_arc(theta_deg: float, arc: tuple[float, float]) -> bool:
     return (theta_deg - lo) % 360.0 < (hi - lo)
 
 
+def _arcs_overlap(a: tuple[float, float], b: tuple[float, float]) -> bool:
+    return _in_arc(b[0], a) or _in_arc(a[0], b)
+
+
 def _add_groups(dim: int, groups: dict[str, list[int]]) -> None:
     for tag, (name, ids) in enumerate(groups.items(), start=1):
         if ids:
@@ -195,7 +222,7 @@ def _stator_model(p: StatorParameters) -> None:
     gmsh.model.occ.synchronize()
     surfaces = [t for _, t in gmsh.model.getEntities(2)]
     cuts = [0.0]
-    for lo, hi in p.strips().values():
+    for lo, hi in [*p.strips().values(), *p.guards()]:
         cuts += [lo, hi]
     volumes = _revolve(surfaces, cuts)
 
@@ -204,7 +231,8 @@ def _stator_model(p: StatorParameters) -> None:
         z = gmsh.model.occ.getCenterOfMass(3, v)[2]
         cells["base" if z < z_b else "tube" if z < z_t else "wedge"].append(v)
     strips = p.strips()
-    facets = {name: [] for name in ["inner", *strips, "contact", "tip", "bottom"]}
+    guards = p.guards()
+    facets = {name: [] for name in ["inner", *strips, "guard", "contact", "tip", "bottom"]}
     tol = 1e-6 * r_o
     for _, f in gmsh.model.getBoundary(volumes, combined=True, oriented=False):
         r, theta, z = _face_sample(f)
@@ -215,7 +243,7 @@ def _stator_model(p: StatorParameters) -> None:
         elif abs(r - r_i) < tol and z_b < z < z_t:
             facets["inner"].append(f)
         elif abs(r - r_o) < tol and z_b + m < z < z_t - m:
-            for name, arc in strips.items():
+            for name, arc in [*strips.items(), *(("guard", arc) for arc in guards)]:
                 if _in_arc(theta, arc):
                     facets[name].append(f)
         elif z_lo < z < z_hi and abs(r - r_face(z)) < 1e-3 * r_o:

@@ -135,6 +135,10 @@ class TravellingWaveSection:
     n_points: int = param(64, ge=8)
     frequency_Hz: float | None = param(None, gt=0, doc="default: the modal working mode, else the |Y| peak")
     animation_frames: int = param(24, ge=0, doc="XDMF frames over one period (0: none)")
+    balance: str | None = param(
+        None, doc="driven electrode whose amplitude and phase are trimmed so that the order-n part travelling "
+                  "against the wave vanishes (a two-phase driver's balance); the measures, the exported wave and "
+                  "the wave's admittances are then the balanced drive's, the nominal drive's measures are kept too")
 
     def check(self, file, prefix):
         if len(self.normal_rz) != 2 or not any(self.normal_rz):
@@ -250,6 +254,12 @@ class Case:
             for section in needs.get(analysis, ()):
                 if getattr(self, section) is None:
                     raise CaseError(file, section, f"section required by analysis {analysis!r}")
+        balance = self.harmonic.wave.balance if self.harmonic and self.harmonic.wave else None
+        if balance is not None:
+            voltage = [name for name, e in self.electrodes.items() if e.kind == "voltage"]
+            if balance not in voltage or len(voltage) < 2:
+                raise CaseError(file, "harmonic.wave.balance", "needs one of two or more electrodes of kind "
+                                                               f"'voltage' (they are: {', '.join(voltage)})")
         if self.harmonic and self.harmonic.target and self.harmonic.target.point not in self.points:
             raise CaseError(file, "harmonic.target.point", f"unknown point {self.harmonic.target.point!r}")
         if self.circuit and self.circuit.point not in self.points:
