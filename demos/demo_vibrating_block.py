@@ -41,6 +41,21 @@ STEEL_YOUNG_Pa = 200e9
 END_S = 4e-3
 
 
+def elastic_block(comm, nx: int, ny: int, young_Pa: float = STEEL_YOUNG_Pa, width_m: float = 10e-3,
+                  height_m: float = 5e-3):
+    """A steel block [0, width] x [0, height] in plane strain, nx x ny linear quadrilaterals ->
+    (V, mass form, stiffness form, the base facets y = 0) for a :class:`LinearFE`."""
+    msh = mesh.create_rectangle(comm, [np.array([0.0, 0.0]), np.array([width_m, height_m])], [nx, ny],
+                                cell_type=mesh.CellType.quadrilateral, ghost_mode=mesh.GhostMode.shared_facet)
+    V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
+    u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
+    dx = ufl.dx(domain=msh)
+    c = fem.Constant(msh, isotropic_stiffness(young_Pa, 0.3))
+    rho = fem.Constant(msh, STEEL_DENSITY_kg_per_m3)
+    base = mesh.locate_entities_boundary(msh, msh.topology.dim - 1, lambda x: np.isclose(x[1], 0.0))
+    return V, mass(u, w, rho, dx), elastic_stiffness(u, w, c, "plane_strain", dx), base
+
+
 def vibrating_block_with_ball(comm, scheme: TimeScheme, amplitude_m: float = 5e-6, frequency_Hz: float = 2000.0,
                               ball_diameter_m: float = 8e-3, contact_stiffness_Pa_per_m: float = 1e13,
                               elements: int = 4, ball_velocity_m_per_s=(0.0, 0.0), ball_gap_m: float = -1e-7,
@@ -49,15 +64,9 @@ def vibrating_block_with_ball(comm, scheme: TimeScheme, amplitude_m: float = 5e-
     (cylinder per metre of thickness, mass of an 8 mm steel ball per mm) resting on its top face:
     the ball chatters when the table acceleration exceeds g. -> (system, state)."""
     width, height = 10e-3, 5e-3
-    msh = mesh.create_rectangle(comm, [np.array([0.0, 0.0]), np.array([width, height])], [2 * elements, elements],
-                                cell_type=mesh.CellType.quadrilateral, ghost_mode=mesh.GhostMode.shared_facet)
-    V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
-    u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-    dx = ufl.dx(domain=msh)
-    c = fem.Constant(msh, isotropic_stiffness(STEEL_YOUNG_Pa, 0.3))
-    rho = fem.Constant(msh, STEEL_DENSITY_kg_per_m3)
+    V, mass_form, stiffness_form, base = elastic_block(comm, 2 * elements, elements, width_m=width, height_m=height)
+    msh = V.mesh
     fdim = msh.topology.dim - 1
-    base = mesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[1], 0.0))
     top = mesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[1], height))
     shake = fem.Function(V)
     omega = 2 * math.pi * frequency_Hz
@@ -67,8 +76,7 @@ def vibrating_block_with_ball(comm, scheme: TimeScheme, amplitude_m: float = 5e-
                                                np.full(x.shape[1], amplitude_m * math.sin(omega * t))]))
 
     bc = fem.dirichletbc(shake, fem.locate_dofs_topological(V, fdim, base))
-    fe = LinearFE(V, V, mass(u, w, rho, dx), elastic_stiffness(u, w, c, "plane_strain", dx), bcs=[bc],
-                  update_dirichlet=update_dirichlet)
+    fe = LinearFE(V, V, mass_form, stiffness_form, bcs=[bc], update_dirichlet=update_dirichlet)
     tags = mesh.meshtags(msh, fdim, np.sort(top), np.full(top.size, 1, dtype=np.int32))
     radius = ball_diameter_m / 2
     ball_mass = STEEL_DENSITY_kg_per_m3 * math.pi / 6 * ball_diameter_m**3 / 1e-3

@@ -7,8 +7,7 @@ import math
 
 import numpy as np
 import pytest
-import ufl
-from dolfinx import fem, mesh
+from dolfinx import fem
 from mpi4py import MPI
 from scipy.special import beta
 
@@ -19,11 +18,8 @@ from app.transient.fe import LinearFE
 from app.transient.rigid import RigidBody, RigidSet
 from app.transient.state import TransientState
 from app.transient.stepper import run_scene
-from demos.demo_rod_impact import STEEL_DENSITY_kg_per_m3
-from forms.dynamics import mass
+from demos.demo_vibrating_block import elastic_block
 from forms.newmark import TimeScheme
-from forms.piezo import elastic_stiffness
-from forms.voigt import isotropic_stiffness
 
 HERTZ_N_PER_M1_5 = 1e9
 BALL_KG = 2e-3
@@ -38,17 +34,10 @@ def hertz_impact(m, k, v):
 
 def block_with_node_contact(comm, young_Pa):
     width, height = 10e-3, 5e-3
-    msh = mesh.create_rectangle(comm, [np.array([0.0, 0.0]), np.array([width, height])], [4, 2],
-                                cell_type=mesh.CellType.quadrilateral, ghost_mode=mesh.GhostMode.shared_facet)
-    V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
-    u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-    dx = ufl.dx(domain=msh)
-    c = fem.Constant(msh, isotropic_stiffness(young_Pa, 0.3))
-    rho = fem.Constant(msh, STEEL_DENSITY_kg_per_m3)
-    base = mesh.locate_entities_boundary(msh, 1, lambda x: np.isclose(x[1], 0.0))
+    V, mass_form, stiffness_form, base = elastic_block(comm, 4, 2, young_Pa, width, height)
     zero = fem.Function(V)
     bc = fem.dirichletbc(zero, fem.locate_dofs_topological(V, 1, base))
-    fe = LinearFE(V, V, mass(u, w, rho, dx), elastic_stiffness(u, w, c, "plane_strain", dx), bcs=[bc])
+    fe = LinearFE(V, V, mass_form, stiffness_form, bcs=[bc])
     radius = 4e-3
     ball = RigidBody("ball", BALL_KG, [width / 2, height + radius + 1e-7], [0.0, -SPEED_M_PER_S], [0.0, 0.0],
                      prescribed_axes=(True, False))

@@ -566,9 +566,9 @@ class PointContact(ForceColumns):
         """Power dissipated by the damper and friction [W] at the evaluated iterate."""
         rigid, z, zd = system.rigid, system.z_mid, system.zd_mid
         delta, rate = self._state(rigid, z, zd)
-        f, _, _ = self.force(delta, rate)
         if delta <= 0.0:
             return 0.0
+        f, _, _ = self.force(delta, rate)
         power = (f - self.stiffness_N_per_m * delta) * rate
         if self.friction is not None and f > 0.0:
             n3 = pad3(self.normal)

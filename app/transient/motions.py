@@ -67,7 +67,7 @@ class TravellingWaveMotion:
                                      + self.tangential_amplitude_m * np.sin(xi) * self._e_comp)
 
 
-def _unit(section, key: str, value, gdim: int, file: str, prefix: str) -> np.ndarray:
+def _unit(key: str, value, gdim: int, file: str, prefix: str) -> np.ndarray:
     v = np.asarray(value, dtype=float)
     if v.size != gdim:
         raise CaseError(file, f"{prefix}.{key}", f"needs {gdim} components (mesh axes)")
@@ -103,8 +103,8 @@ def build_travelling_wave(section, prefix: str, ctx) -> TravellingWaveMotion:
     tag = facet_group_tag(model.mesh_data.facet_names, section.facets, file, f"{prefix}.facets")
     md = model.mesh_data
     facets = md.facet_tags.indices[md.facet_tags.values == tag]
-    direction = _unit(section, "direction", section.direction, gdim, file, prefix)
-    normal = _unit(section, "normal", section.normal, gdim, file, prefix)
+    direction = _unit("direction", section.direction, gdim, file, prefix)
+    normal = _unit("normal", section.normal, gdim, file, prefix)
     if abs(float(direction @ normal)) > 1e-9:
         raise CaseError(file, f"{prefix}.normal", "must be perpendicular to direction")
     frequency = section.frequency_Hz or ctx.case.transient.drive.frequency_Hz
