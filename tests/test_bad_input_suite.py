@@ -348,6 +348,9 @@ MPI_INPUTS = {
     "unknown key": lambda d, f: (["validate", BAR, "--set", "modal.n_mode=3"], [BAR.name, "modal.n_mode"]),
     "unknown drive point (mesh)": lambda d, f: (["validate", FE, *_sets([*FE_TINY, 'transient.drive.point="x"'])],
                                                 [FE.name, "transient.drive.point"]),
+    "base motion on a missing facet group (mesh)": lambda d, f: (
+        ["run", STRIP, "--out", d / "strip", "--set", 'transient.base_motions[0].facets="nowhere"'],
+        [STRIP.name, "transient.base_motions[0].facets"]),
     "resume a file": lambda d, f: (["run", FE, "--resume", f, *_sets(FE_TINY)], ["--resume"]),
     "sweep out is a file": lambda d, f: (["sweep", LUMPED, "--param", "lumped.downforce_N=0,3", "--out", f],
                                          ["--out"]),

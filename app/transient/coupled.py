@@ -67,7 +67,8 @@ SNES_DEFAULTS = {
     # Regularised Coulomb friction turns over within ~1e-11 m of displacement per step where the
     # slip reverses inside a contact (a travelling-wave drive, 0.1 mm/s regularisation): Newton
     # with backtracking gets there in up to ~40 iterations, far cheaper than a cut-back that ends
-    # in the same place (strip test: 418 cut-backs at 20 iterations, none at 60).
+    # in the same place (a steel strip under a slider: 418 cut-backs at 20 iterations, none at 60;
+    # BENCHMARKS.md).
     "snes_max_it": 60,
 }
 
