@@ -66,10 +66,15 @@ class RotationSection:
     rate_rad_per_s: float = param(
         0.0, unit="rad/s", doc="initial (free) or prescribed (constant_rate) angular velocity")
     torque_N_m: float = param(0.0, unit="N m", doc="constant applied torque about the axis (free rotation)")
+    brake_N_m_s_per_rad: float = param(
+        0.0, ge=0, unit="N m s/rad", doc="viscous brake: adds -brake * angular velocity to the applied torque "
+                                         "(free rotation)")
 
     def check(self, file, prefix):
         if self.motion == "free" and not self.inertia_kg_m2 > 0:
             raise CaseError(file, f"{prefix}.inertia_kg_m2", "a free rotation needs a positive inertia")
+        if self.motion != "free" and self.brake_N_m_s_per_rad:
+            raise CaseError(file, f"{prefix}.brake_N_m_s_per_rad", "a brake acts on a free rotation only")
         if self.motion == "fixed" and self.rate_rad_per_s != 0.0:
             raise CaseError(file, f"{prefix}.rate_rad_per_s", "a fixed rotation has no rate (use constant_rate)")
 
@@ -156,11 +161,17 @@ class SurfaceContactSection:
     damping: float = param(0.0, ge=0, unit="Pa s/m", doc="normal viscous pressure per unit gap rate")
     facets: TagRef = param(doc="facet group of the FE surface")
     body: str = param(doc="rigid body the surface touches")
-    shape: Literal["plane", "sphere"] = param("plane", doc="obstacle shape of the body")
+    shape: Literal["plane", "sphere", "cone"] = param("plane", doc="obstacle shape of the body")
     normal: list[float] | None = param(
         None, doc="plane: outward unit normal, towards the FE body; sphere (optional): unit vector from the centre "
                   "towards the contact zone, the gap is then formed without round-off (large radii)")
-    radius_m: float | None = param(None, gt=0, unit="m", doc="sphere radius")
+    radius_m: float | None = param(
+        None, gt=0, unit="m", doc="sphere radius; cone: radius of the conical face at the body's reference point")
+    axis: list[float] | None = param(
+        None, doc="cone: unit vector along the cone's axis through the body's reference point, in the direction in "
+                  "which its radius grows (a solid cone: the FE surface lies outside it)")
+    half_angle_deg: float | None = param(
+        None, gt=0, lt=90, unit="deg", doc="cone: angle between the conical face and its axis")
     friction: SurfaceFrictionSection | None = param(None, doc="Coulomb friction (none: frictionless)")
 
     def check(self, file, prefix):
@@ -168,6 +179,12 @@ class SurfaceContactSection:
             raise CaseError(file, f"{prefix}.normal", "a plane obstacle needs a normal")
         if self.shape == "sphere" and self.radius_m is None:
             raise CaseError(file, f"{prefix}.radius_m", "a sphere obstacle needs a radius")
+        if self.shape == "cone":
+            for key in ("radius_m", "axis", "half_angle_deg"):
+                if getattr(self, key) is None:
+                    raise CaseError(file, f"{prefix}.{key}", "a cone obstacle needs radius_m, axis and half_angle_deg")
+            if len(self.axis) != 3 or abs(sum(a * a for a in self.axis) - 1.0) > 1e-9:
+                raise CaseError(file, f"{prefix}.axis", "the cone axis must be a unit vector with 3 components")
 
     def bodies(self) -> list[tuple[str, str]]:
         return [("body", self.body)]
