@@ -176,6 +176,9 @@ class ReductionSection:
     cutoff_Hz: float | None = param(None, gt=0, unit="Hz", doc="keep every fixed-interface mode below this frequency")
     cutoff_factor: float = param(
         20.0, gt=1, doc="default cutoff = factor x the transient drive frequency (when neither key is given)")
+    ring_points: int = param(
+        64, ge=8, le=1024, doc="a cone (rotor) contact: band nodes kept as interface, evenly round the contact "
+                               "circle (each carries the band's area / ring_points)")
 
 
 @dataclass(frozen=True)

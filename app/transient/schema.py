@@ -261,6 +261,17 @@ class LoadSection:
 
 
 @dataclass(frozen=True)
+class SteadyStateSection:
+    """Stop a run once a rotor turns steadily: the mean angular velocity over one drive period changes by less
+    than ``relative_tolerance`` over ``window_cycles`` periods (a prescribed spin: the mean friction torque)."""
+
+    body: str = param(doc="rigid body whose first rotation is watched (the rotor)")
+    window_cycles: int = param(20, ge=2, doc="periods over which the cycle mean may change by the tolerance")
+    relative_tolerance: float = param(0.005, gt=0, lt=1, doc="largest relative change of the cycle mean")
+    min_cycles: int = param(40, ge=1, doc="periods always run before the test applies")
+
+
+@dataclass(frozen=True)
 class TransientSection:
     end_time_s: float = param(gt=0, unit="s", doc="simulated time")
     output_interval_s: float = param(gt=0, unit="s", doc="time between field outputs and progress updates")
@@ -276,6 +287,8 @@ class TransientSection:
     contacts: list[ContactSection] = param(default_factory=list, doc="penalty contacts")
     base_motions: list[BaseMotionSection] = param(
         default_factory=list, doc="prescribed motions of FE facets [[transient.base_motions]]")
+    steady_state: SteadyStateSection | None = param(
+        None, doc="see [transient.steady_state]: stop at a rotor's steady state (else at end_time_s)")
     min_flight_rise_m: float = param(
         50e-6, gt=0, unit="m", doc="statistics: a flight of the FE body rises at least this much (as the lumped tier)")
 
@@ -304,6 +317,14 @@ class TransientSection:
         if self.base_motions and self.initial_state == "harmonic":
             raise CaseError(file, f"{prefix}.initial_state",
                             "base motions start from rest (their amplitude ramps up): use 'rest'")
+        if self.steady_state is not None:
+            body = next((b for b in self.bodies if b.name == self.steady_state.body), None)
+            if body is None:
+                raise CaseError(file, f"{prefix}.steady_state.body",
+                                f"unknown rigid body {self.steady_state.body!r} (bodies: {', '.join(names) or 'none'})")
+            if not body.rotations or body.rotations[0].motion == "fixed":
+                raise CaseError(file, f"{prefix}.steady_state.body",
+                                f"body {body.name!r} has no turning rotation to watch")
         contact_names = [c.name for c in self.contacts]
         for i, name in enumerate(contact_names):
             if name in contact_names[:i]:
