@@ -79,6 +79,12 @@ def check_case(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, log=None) -> None:
     loads). Collective."""
     if case.tier not in ("fe", "modal"):
         return
+    if case.tier == "modal" and "transient" in case.analyses:
+        from app.reduced import motor
+
+        if motor.is_motor_case(case):       # the motor's reduced stator: its band and electrodes
+            motor.check_model(case, comm)
+            return
     if "transient" in case.analyses:        # the modal tier builds the same model before reducing it
         from app.transient.driver import build
 
@@ -124,6 +130,15 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
     from app.fe.operators import add_damping, assemble_operators
 
     results = summary["results"]
+    if case.tier == "modal" and list(case.analyses) == ["transient"]:
+        from app.reduced import motor
+
+        if motor.is_motor_case(case):       # its reduced stator may come from the cache: no mesh needed
+            with timer.phase("transient"):
+                results["transient"] = motor.run(case, out, comm, log, resume=resume)
+            summary["outputs"] += results["transient"].pop("outputs", [])
+            print_table(results, log)
+            return
     with timer.phase("mesh"):
         model = build_model(case, comm)
     imap = model.W.dofmap.index_map
@@ -189,6 +204,10 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
     if "transient" in case.analyses:
         if case.tier == "modal":
             from app.reduced import driver as transient_driver
+            from app.reduced import motor
+
+            if motor.is_motor_case(case):
+                transient_driver = motor
         else:
             from app.transient import driver as transient_driver
 
@@ -240,6 +259,10 @@ def transient_rows(transient: dict | None) -> list[tuple[str, str, str]]:
     impacts, largest force and rate; the foundation's mean force and power; the transducer's rise."""
     if not transient:
         return []
+    if transient.get("motor"):
+        from app.reduced.motor import table_rows
+
+        return table_rows(transient)
     rows = [("simulated time", f"{transient['simulated_time_s'] * 1e3:.4g}", "ms"),
             ("drive amplitude", f"{transient['drive_voltage_V']:.4g}", "V"),
             ("steps / cut-backs", f"{transient['steps']} / {transient['cutbacks']}", "-"),

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Literal
 
 from app.case.loader import apply_overrides, read_toml
@@ -289,7 +290,13 @@ def _section_types():
 
 def _check_modal_tier(transient, file: str) -> None:
     """What the modal tier's compiled loop does not model yet (app/reduced/kernel.py): refused
-    when the case is read, naming the key, instead of silently ignored."""
+    when the case is read, naming the key, instead of silently ignored. A motor (a cone contact on a
+    rotor) runs on its own reduced loop (app/reduced/motor.py), with its own checks."""
+    from app.motor.rotor_case import check_motor_case, is_motor_case
+
+    if is_motor_case(SimpleNamespace(transient=transient)):
+        check_motor_case(SimpleNamespace(transient=transient), file)
+        return
     for i, contact in enumerate(transient.contacts):
         if contact.kind == "surface":
             raise CaseError(file, f"transient.contacts[{i}].kind",

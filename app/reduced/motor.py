@@ -1,0 +1,569 @@
+"""The motor in the modal tier: a Craig-Bampton stator pressing a rigid cone rotor (docs/motor-rotor.md).
+
+Case -> FE stator (mesh, forms, electrodes) -> Craig-Bampton basis whose interface is ``reduction.ring_points``
+nodes of the contact band, evenly round the contact circle (all three displacement DOFs each; driven
+electrodes as input coordinates) -> the compiled loop of :mod:`app.reduced.ring_kernel`, called one drive
+period at a time until the rotor turns steadily ([transient.steady_state]) or end_time_s -> the time series
+(``transient.h5``), the operating point (speed, torque, powers, efficiency, contact states, pressure round the
+ring, the contact point's path) in summary.json and ``motor_ring.csv``.
+
+The reduced model depends only on the stator, its electrodes, its damping, the basis settings and the band; it
+is kept in a cache (``PIEZODYN_CACHE_DIR``, default ``~/.cache/piezodyn``) keyed by those sections, so a sweep
+over load torque, preload, voltage or rotor data builds it once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from app import series as S
+from app.errors import CaseError, NumericalFailure
+from app.files import write_json_atomic
+from app.motor.rotor_case import check_motor_case, is_motor_case  # noqa: F401 (the runner's entry points)
+from app.reduced import ring_kernel as rk
+from app.reduced.craig_bampton import ReducedBasis, harmonic_response
+from app.series import TimeSeriesWriter
+
+CACHE_VERSION = 1
+MAX_CUTBACK_LEVEL = 4
+#: interface displacement tolerance of the Newton iteration [m] (1e-8 of a micrometre wave)
+NEWTON_TOL_M = 1e-14
+
+
+@dataclass
+class RingModel:
+    """The reduced stator and its contact band: everything the kernel needs, as arrays (cacheable)."""
+
+    K: np.ndarray
+    M: np.ndarray
+    C: np.ndarray
+    electrodes: list
+    charge_rows: np.ndarray          # (n_electrodes, n) Q_e = row @ q [C]
+    mode_frequencies_Hz: np.ndarray
+    node_xyz: np.ndarray             # (n_points, 3) reference positions of the band nodes [m]
+    band_area_m2: float
+    reduction_wall_s: float
+
+    @property
+    def n_points(self) -> int:
+        return self.node_xyz.shape[0]
+
+    def basis(self) -> ReducedBasis:
+        rows = {name: self.charge_rows[i] for i, name in enumerate(self.electrodes)}
+        return ReducedBasis(self.K, self.M, self.C, np.arange(3 * self.n_points), list(self.electrodes),
+                            self.mode_frequencies_Hz, rows, [], None)
+
+
+def _cache_key(case) -> str:
+    cfg = case.transient
+    c = cfg.contacts[0]
+    relevant = {"version": CACHE_VERSION, "geometry": asdict(case.geometry), "materials": repr(case.materials),
+                "regions": repr(case.regions), "electrodes": repr(case.electrodes), "supports": repr(case.supports),
+                "damping": asdict(case.damping), "reduction": asdict(case.reduction),
+                "drive_Hz": cfg.drive.frequency_Hz, "facets": c.facets, "radius_m": c.radius_m,
+                "z_m": cfg.bodies[0].position_m[2], "half_angle_deg": c.half_angle_deg}
+    text = json.dumps(relevant, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def _cache_dir() -> Path:
+    return Path(os.environ.get("PIEZODYN_CACHE_DIR", Path.home() / ".cache" / "piezodyn"))
+
+
+def load_or_build(case, comm, log) -> RingModel:
+    path = _cache_dir() / f"motor-{_cache_key(case)}.npz"
+    if path.is_file():
+        with np.load(path, allow_pickle=False) as f:
+            model = RingModel(f["K"], f["M"], f["C"], [str(e) for e in f["electrodes"]], f["charge_rows"],
+                              f["mode_frequencies_Hz"], f["node_xyz"], float(f["band_area_m2"]),
+                              float(f["reduction_wall_s"]))
+        log(f"modal tier (motor): reduced stator from the cache {path}")
+        return model
+    model = build_ring_model(case, comm, log)
+    if comm.rank == 0:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
+        np.savez(tmp, K=model.K, M=model.M, C=model.C, electrodes=np.array(model.electrodes),
+                 charge_rows=model.charge_rows, mode_frequencies_Hz=model.mode_frequencies_Hz,
+                 node_xyz=model.node_xyz, band_area_m2=model.band_area_m2, reduction_wall_s=model.reduction_wall_s)
+        os.replace(tmp, path)
+    return model
+
+
+def _band_nodes(model, tag: int):
+    """(coordinates (n, 3), global DOFs (n, 3)) of every displacement node on facet group ``tag``, the same
+    arrays on every rank (sorted by coordinates)."""
+    from dolfinx import fem
+
+    mesh = model.mesh
+    fdim = mesh.topology.dim - 1
+    facets = model.mesh_data.facet_tags.find(tag)
+    W = model.W
+    imap = W.dofmap.index_map
+    n_owned = imap.size_local
+    held = set(np.asarray(model.support_dofs).tolist())
+    per_component = []
+    for k in range(3):
+        V, _ = W.sub(0).sub(k).collapse()
+        parent, child = fem.locate_dofs_topological((W.sub(0).sub(k), V), fdim, facets)
+        coords = V.tabulate_dof_coordinates()[np.asarray(child)]
+        parent = np.asarray(parent)
+        owned = parent < n_owned
+        glob = imap.local_to_global(parent[owned].astype(np.int32))
+        glob = np.where([p in held for p in parent[owned]], -1, glob)
+        gathered = model.comm.allgather((coords[owned], glob))
+        xyz = np.concatenate([g[0] for g in gathered])
+        dofs = np.concatenate([g[1] for g in gathered])
+        order = np.lexsort((xyz[:, 2], xyz[:, 1], xyz[:, 0]))
+        per_component.append((xyz[order], dofs[order]))
+    xyz = per_component[0][0]
+    for k in (1, 2):
+        if per_component[k][0].shape != xyz.shape or not np.allclose(per_component[k][0], xyz, atol=1e-12):
+            raise NumericalFailure("contact band: the displacement components do not share their nodes")
+    return xyz, np.column_stack([per_component[k][1] for k in range(3)])
+
+
+def build_ring_model(case, comm, log) -> RingModel:
+    import ufl
+    from dolfinx import fem
+
+    from app.fe.model import build_model, facet_group_tag
+    from app.fe.operators import assemble_operators
+    from app.reduced.craig_bampton import reduce_model
+
+    cfg = case.transient
+    contact = cfg.contacts[0]
+    file = case.source
+    model = build_model(case, comm)
+    if model.mesh.geometry.dim != 3:
+        raise CaseError(file, "geometry.model", "the modal tier's motor is a 3D model")
+    if model.electrodes_of("floating"):
+        raise CaseError(file, "electrodes", "floating electrodes are not supported by the transient analysis")
+    tag = facet_group_tag(model.mesh_data.facet_names, contact.facets, file, "transient.contacts[0].facets")
+    xyz, dofs = _band_nodes(model, tag)
+    if xyz.shape[0] == 0:
+        raise CaseError(file, "transient.contacts[0].facets", "the facet group has no nodes")
+    if (dofs < 0).any():
+        raise CaseError(file, "transient.contacts[0].facets", "the contact band touches a support")
+    n_points = case.reduction.ring_points
+    if n_points > xyz.shape[0]:
+        raise CaseError(file, "reduction.ring_points", f"the band has only {xyz.shape[0]} nodes")
+    # the band node nearest each of n_points targets evenly round the contact circle
+    r_c = contact.radius_m
+    z_c = cfg.bodies[0].position_m[2]
+    angles = 2 * math.pi * np.arange(n_points) / n_points
+    targets = np.column_stack([r_c * np.cos(angles), r_c * np.sin(angles), np.full(n_points, z_c)])
+    chosen = [int(np.argmin(np.linalg.norm(xyz - t, axis=1))) for t in targets]
+    if len(set(chosen)) != n_points:
+        raise CaseError(file, "reduction.ring_points", "more points than band nodes round the circle: use fewer")
+    interface = dofs[chosen].reshape(-1).astype(np.int64)
+    ds = ufl.Measure("ds", domain=model.mesh, subdomain_data=model.mesh_data.facet_tags)
+    band_area = comm.allreduce(fem.assemble_scalar(fem.form(1.0 * ds(tag))), op=MPI.SUM)
+
+    damping_Hz = case.damping.reference_frequency_Hz or cfg.drive.frequency_Hz
+    ops = assemble_operators(model, damping_frequency_Hz=damping_Hz)
+    fixed = np.concatenate([model.support_dofs, model.grounded_dofs]
+                           + [model.electrode_dofs[n] for n in model.electrodes_of("ground")])
+    electrodes = {n: model.electrode_dofs[n] for n in model.electrodes_of("voltage")}
+    red = case.reduction
+    cutoff = red.cutoff_Hz if red.cutoff_Hz is not None else (
+        None if red.n_modes is not None else red.cutoff_factor * cfg.drive.frequency_Hz)
+    start = time.perf_counter()
+    basis = reduce_model(ops.K, ops.M, ops.C, model.W, fixed, interface, electrodes, n_modes=red.n_modes,
+                         cutoff_Hz=cutoff)
+    wall = time.perf_counter() - start
+    ops.destroy()
+    log(f"modal tier (motor): {n_points} band nodes ({basis.n_interface} interface DOFs), {len(electrodes)} "
+        f"electrodes, {basis.n_modes} fixed-interface modes up to {basis.mode_frequencies_Hz.max():.0f} Hz, "
+        f"{basis.size} coordinates ({wall:.1f} s)")
+    rows = np.array([basis.charge_rows[n] for n in basis.electrodes])
+    out = RingModel(basis.K, basis.M, basis.C if basis.C is not None else np.zeros_like(basis.K),
+                    list(basis.electrodes), rows, basis.mode_frequencies_Hz, xyz[chosen], band_area, wall)
+    basis.destroy()
+    return out
+
+
+@dataclass
+class Geometry:
+    frame: np.ndarray     # (n, 3, 3): n, e_theta, t_m per node
+    g0: np.ndarray        # geometric gap at the rotor's reference height [m]
+    rho: np.ndarray       # distance from the axis [m]
+    area: np.ndarray      # band area per node [m^2]
+    angle_deg: np.ndarray  # azimuth of each node [deg]
+    sin_a: float
+    cos_a: float
+
+
+def ring_geometry(ring: RingModel, case) -> Geometry:
+    contact = case.transient.contacts[0]
+    alpha = math.radians(contact.half_angle_deg)
+    sin_a, cos_a = math.sin(alpha), math.cos(alpha)
+    x, y, z = ring.node_xyz.T
+    rho = np.hypot(x, y)
+    e_r = np.column_stack([x / rho, y / rho, np.zeros_like(x)])
+    e_t = np.column_stack([-y / rho, x / rho, np.zeros_like(x)])
+    e_z = np.tile([0.0, 0.0, 1.0], (x.size, 1))
+    frame = np.stack([cos_a * e_r - sin_a * e_z, e_t, sin_a * e_r + cos_a * e_z], axis=1)
+    # The band's nodes are taken on the design cone: the straight-edged mesh puts mid-edge nodes up to h^2/(8 r)
+    # inside it (2.4 um at 0.5 mm elements, more than the wave's amplitude), a faceting error, not a gap. As
+    # ANSYS's KEYOPT(9) = 1 (exclude initial geometric penetration or gap), the initial gap is zero.
+    g0 = np.zeros(x.size)
+    area = np.full(x.size, ring.band_area_m2 / x.size)
+    return Geometry(np.ascontiguousarray(frame), g0, rho, area, np.degrees(np.arctan2(y, x)) % 360.0, sin_a, cos_a)
+
+
+class SteadyWatch:
+    """Cycle means of the watched quantity; steady once it changed by less than the tolerance over the
+    window (relative to the larger of its size and ``floor``)."""
+
+    def __init__(self, section, floor: float):
+        self.window, self.tol, self.min_cycles = section.window_cycles, section.relative_tolerance, section.min_cycles
+        self.floor = floor
+        self.means: list[float] = []
+
+    def add(self, mean: float) -> bool:
+        self.means.append(mean)
+        k = len(self.means)
+        if k < max(self.min_cycles, self.window + 1):
+            return False
+        recent = self.means[-self.window - 1:]
+        change = max(recent) - min(recent)
+        return change <= self.tol * max(abs(mean), self.floor)
+
+
+def run(case, out_dir, comm, log, resume: bool = False) -> dict:
+    """Run the motor case in the modal tier into ``out_dir``; returns the summary's transient results."""
+    from app.blas import limit_blas_threads
+
+    limit_blas_threads()
+    file = case.source
+    if resume:
+        raise CaseError(file, "--resume", "the modal tier's motor runs have no checkpoints (a point takes seconds "
+                                          "to minutes: run it again)")
+    check_motor_case(case, file)
+    cfg = case.transient
+    out_dir = Path(out_dir)
+    setup_start = time.perf_counter()
+    ring = load_or_build(case, comm, log)
+    geo = ring_geometry(ring, case)
+    contact, body = cfg.contacts[0], cfg.bodies[0]
+    rotation = body.rotations[0]
+    friction = contact.friction
+    mu_d, fact, decay, tau_cap, eps = ((friction.mu_dynamic, friction.static_ratio, friction.decay_s_per_m,
+                                        friction.shear_cap_Pa, friction.regularisation_speed_m_per_s)
+                                       if friction is not None else (0.0, 1.0, 0.0, 1e20, 1e-4))
+    preload = -float((body.applied_force_N or [0.0, 0.0, 0.0])[2])
+    spin_free = rotation.motion == "free"
+    spin0 = rotation.rate_rad_per_s if rotation.motion != "fixed" else 0.0
+    f_drive = cfg.drive.frequency_Hz
+    period = 1.0 / f_drive
+    per_period = max(4, int(round(period / cfg.steps.closed_s)))
+    dt = period / per_period
+    beta, gamma = cfg.scheme.beta, cfg.scheme.gamma
+    omega = 2 * math.pi * f_drive
+    names = list(ring.electrodes)
+    amplitudes = np.array([case.electrodes[n].amplitude_V if case.electrodes[n].amplitude_V is not None
+                           else cfg.drive.voltage_V for n in names], dtype=float)
+    phases = np.radians([case.electrodes[n].phase_deg for n in names])
+    n = ring.K.shape[0]
+    n_el = len(names)
+    prescribed = np.arange(3 * ring.n_points, 3 * ring.n_points + n_el, dtype=np.int64)
+    free = np.setdiff1d(np.arange(n), prescribed).astype(np.int64)
+    invs = np.empty((MAX_CUTBACK_LEVEL + 1, free.size, free.size))
+    for level in range(MAX_CUTBACK_LEVEL + 1):
+        h = dt / 2**level
+        K_eff = ring.K + gamma / (beta * h) * ring.C + ring.M / (beta * h * h)
+        invs[level] = np.linalg.inv(K_eff[np.ix_(free, free)])
+
+    # initial state: the stator's free harmonic steady state (or rest), the rotor resting on the highest crest
+    q, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+    cosine = cfg.initial_state == "harmonic"
+    basis = ring.basis()
+    if cosine:
+        x = harmonic_response(basis, f_drive, {nm: A * np.exp(1j * p) for nm, A, p in zip(names, amplitudes, phases)})
+        q, v = x.real.copy(), -omega * x.imag
+        a = -omega**2 * x.real
+    else:
+        q[prescribed] = amplitudes * np.sin(phases)
+        v[prescribed] = amplitudes * omega * np.cos(phases)
+        a[prescribed] = -amplitudes * omega**2 * np.sin(phases)
+        MFF = ring.M[np.ix_(free, free)]
+        q[free] = -np.linalg.solve(MFF, ring.M[np.ix_(free, prescribed)] @ q[prescribed])
+        v[free] = -np.linalg.solve(MFF, ring.M[np.ix_(free, prescribed)] @ v[prescribed])
+        rhs = -ring.K @ q - ring.C @ v - ring.M[:, prescribed] @ a[prescribed]
+        a[free] = np.linalg.solve(MFF, rhs[free])
+    uB = q[:3 * ring.n_points].reshape(-1, 3)
+    gaps = geo.g0 + np.einsum("ij,ij->i", geo.frame[:, 0, :], uB)
+    dz0 = -float(gaps.min()) / geo.sin_a
+    rot = np.array([dz0, 0.0, -preload / body.mass_kg, rotation.angle_rad, spin0, 0.0])
+    energies = np.zeros(7)
+    istate = np.zeros(rk.N_ISTATE, np.int64)
+    n_b = ring.n_points
+    kernel_args = (ring.K, ring.M, ring.C, free, prescribed, n_b, amplitudes, phases, omega, cosine, beta, gamma,
+                   geo.frame, geo.g0, geo.rho, geo.area, geo.sin_a, geo.cos_a, contact.stiffness, mu_d, fact, decay,
+                   tau_cap, eps, body.mass_kg, preload, rotation.inertia_kg_m2, rotation.torque_N_m,
+                   rotation.brake_N_m_s_per_rad, spin_free, NEWTON_TOL_M, ring.charge_rows)
+    columns = np.zeros((per_period, rk.N_COLUMNS))
+    point_state = np.zeros((per_period, n_b), np.int64)
+    point_fn = np.zeros((per_period, n_b))
+    trajectory = np.zeros((per_period, 3))
+
+    def one_period(t):
+        columns[:] = 0.0
+        trajectory[:] = 0.0
+        return rk.run_period(t, per_period, dt, invs, MAX_CUTBACK_LEVEL, q, v, a, rot, energies, istate,
+                             *kernel_args, columns, point_state, point_fn, trajectory)
+
+    # compile (or load) the kernel on a copy of the state: set-up, not time-loop cost
+    saved = (q.copy(), v.copy(), a.copy(), rot.copy(), energies.copy(), istate.copy())
+    one_period(0.0)
+    q[:], v[:], a[:], rot[:], energies[:], istate[:] = saved
+    setup_wall = time.perf_counter() - setup_start
+
+    h5_path = out_dir / S.TIME_SERIES_FILE
+    units = motor_units(body.name, contact.name, names)
+    series = TimeSeriesWriter(h5_path, units, comm)
+    steady = None
+    if cfg.steady_state is not None:
+        torque_bound = mu_d * fact * preload / geo.sin_a * float(np.mean(geo.rho))
+        wave_speed = omega * 1e-6 / float(np.mean(geo.rho))     # rotor speed of a 1 um tangential wave [rad/s]
+        steady = SteadyWatch(cfg.steady_state, 0.02 * (wave_speed if spin_free else torque_bound))
+    max_periods = int(math.floor(cfg.end_time_s / period + 1e-9))
+    log(f"transient (modal tier, motor): {cfg.initial_state} start, {amplitudes.max():.4g} V at {f_drive:.2f} Hz, "
+        f"preload {preload:.4g} N, {per_period} steps per period, up to {max_periods} periods")
+    window = cfg.steady_state.window_cycles if cfg.steady_state is not None else 20
+    history = []          # per period: (columns, point_state, point_fn, trajectory) of the last `window` periods
+    t = 0.0
+    last_row = np.zeros(rk.N_COLUMNS)       # the state before the first step: energies 0, stored energy at t = 0
+    last_row[rk.C_E_STORED] = (0.5 * v @ ring.M @ v + 0.5 * q @ ring.K @ q + 0.5 * rotation.inertia_kg_m2 * spin0**2
+                               + preload * dz0)
+    start = time.perf_counter()
+    reached_steady = False
+    periods = 0
+    while periods < max_periods:
+        t = one_period(t)
+        if istate[rk.I_FAILED]:
+            if os.environ.get("PIEZODYN_DEBUG_FAILED_STEP"):
+                np.savez(os.environ["PIEZODYN_DEBUG_FAILED_STEP"], q=q, v=v, a=a, rot=rot, t=t, dt=dt)
+            series.close()
+            raise NumericalFailure(f"modal tier (motor): a step failed at t = {t:.6e} s after "
+                                   f"{MAX_CUTBACK_LEVEL} halvings of dt")
+        periods += 1
+        series.write_block(motor_block(columns, geo, body, contact.name, names, amplitudes, phases, omega, cosine,
+                                       cfg.bodies[0].position_m[2]))
+        history.append((columns.copy(), point_state.copy(), point_fn.copy(), trajectory.copy(), last_row))
+        last_row = columns[-1].copy()
+        if len(history) > window:
+            history.pop(0)
+        if steady is not None:
+            watched = columns[:, rk.C_SPIN] if spin_free else columns[:, rk.C_TORQUE]
+            if steady.add(float(np.mean(watched))):
+                reached_steady = True
+                break
+    series.close()
+    wall = time.perf_counter() - start
+    point = operating_point(history, geo, case, spin_free)
+    results = {"tier": "modal", "scene": "motor", "steps": int(istate[rk.I_STEPS]),
+               "newton_iterations": int(istate[rk.I_NEWTON]), "cutbacks": int(istate[rk.I_CUTBACKS]),
+               "periods": periods, "steps_per_period": per_period, "simulated_time_s": t, "wall_time_s": wall,
+               "setup_wall_s": setup_wall, "reduction_wall_s": ring.reduction_wall_s,
+               "wall_s_per_simulated_ms": wall / (t * 1e3) if t > 0 else 0.0,
+               "drive_frequency_Hz": f_drive, "initial_state": cfg.initial_state,
+               "steady": reached_steady if steady is not None else None,
+               "reduction": {"ring_points": n_b, "interface_dofs": 3 * n_b, "modes": int(ring.mode_frequencies_Hz.size),
+                             "size": n, "highest_mode_Hz": float(ring.mode_frequencies_Hz.max()),
+                             "band_area_m2": ring.band_area_m2},
+               "motor": point, "time_series": h5_path.name, "outputs": [h5_path.name]}
+    if comm.rank == 0:
+        ring_csv = out_dir / "motor_ring.csv"
+        write_ring_csv(ring_csv, point.pop("_ring"))
+        results["outputs"].append(ring_csv.name)
+        path_csv = out_dir / "motor_contact_path.csv"
+        write_path_csv(path_csv, point.pop("_path"))
+        results["outputs"].append(path_csv.name)
+        if case.output.plots:
+            from app.motor.plots import operating_point_plots
+
+            results["outputs"] += operating_point_plots(out_dir, ring_csv, path_csv, case.title)
+    else:
+        point.pop("_ring")
+        point.pop("_path")
+    log(f"transient (modal tier, motor): {periods} periods, {results['steps']} steps, {results['cutbacks']} cut-backs, "
+        f"{wall:.1f} s wall; speed {point['speed_rpm']:.2f} rpm, torque {point['friction_torque_N_m']:.4g} N m, "
+        f"efficiency {100 * point['efficiency']:.2f} %, steady {results['steady']}")
+    return results
+
+
+def motor_units(body: str, contact: str, electrodes: list[str]) -> dict[str, str]:
+    units = {S.TIME: "s", S.STEP: "s", S.DRIVE: "V", S.body_position(body): "m", S.body_velocity(body): "m/s",
+             S.body_angle(body): "rad", S.body_angular_velocity(body): "rad/s", S.contact_force(contact): "N",
+             S.contact_closed(contact): "1", f"{contact}_torque_N_m": "N m", f"{contact}_normal_force_N": "N",
+             f"{contact}_nodes_in_contact": "1", f"{contact}_drive_speed_m_per_s": "m/s",
+             f"{contact}_dissipated_J": "J", "electrical_input_J": "J", "damping_dissipated_J": "J",
+             "output_work_J": "J", "stored_energy_J": "J", "electrode_reaction_work_J": "J", "contact_work_J": "J"}
+    units.update({S.electrode_voltage(e): "V" for e in electrodes})
+    return units
+
+
+def motor_block(columns, geo, body, contact, electrodes, amplitudes, phases, omega, cosine, z_ref) -> dict:
+    t = columns[:, rk.C_TIME]
+    rows = t.size
+    block = {S.TIME: t, S.STEP: np.full(rows, t[1] - t[0] if rows > 1 else t[0])}
+    for e, name in enumerate(electrodes):
+        arg = omega * t + phases[e]
+        block[S.electrode_voltage(name)] = amplitudes[e] * (np.cos(arg) if cosine else np.sin(arg))
+    block[S.DRIVE] = block[S.electrode_voltage(electrodes[0])]
+    position = np.zeros((rows, 3))
+    position[:, 2] = z_ref + columns[:, rk.C_DZ]
+    velocity = np.zeros((rows, 3))
+    velocity[:, 2] = columns[:, rk.C_DZ_RATE]
+    block[S.body_position(body.name)] = position
+    block[S.body_velocity(body.name)] = velocity
+    block[S.body_angle(body.name)] = columns[:, rk.C_ANGLE:rk.C_ANGLE + 1]
+    block[S.body_angular_velocity(body.name)] = columns[:, rk.C_SPIN:rk.C_SPIN + 1]
+    force = np.zeros((rows, 3))
+    force[:, 2] = columns[:, rk.C_AXIAL]
+    block[S.contact_force(contact)] = force
+    block[S.contact_closed(contact)] = (columns[:, rk.C_ACTIVE] > 0).astype(float)
+    block[f"{contact}_torque_N_m"] = columns[:, rk.C_TORQUE]
+    block[f"{contact}_normal_force_N"] = columns[:, rk.C_NORMAL]
+    block[f"{contact}_nodes_in_contact"] = columns[:, rk.C_ACTIVE]
+    block[f"{contact}_drive_speed_m_per_s"] = columns[:, rk.C_DRIVE_SPEED]
+    block[f"{contact}_dissipated_J"] = columns[:, rk.C_E_FRIC]
+    block["electrical_input_J"] = columns[:, rk.C_E_EL]
+    block["damping_dissipated_J"] = columns[:, rk.C_E_DAMP]
+    block["output_work_J"] = columns[:, rk.C_E_OUT]
+    block["stored_energy_J"] = columns[:, rk.C_E_STORED]
+    block["electrode_reaction_work_J"] = columns[:, rk.C_E_REACTION]
+    block["contact_work_J"] = columns[:, rk.C_E_CONTACT]
+    return block
+
+
+def operating_point(history, geo: Geometry, case, spin_free: bool) -> dict:
+    """The steady operating point over the last periods (the steady-state window): means, powers, efficiency,
+    energy balance, contact states along the band, pressure round the ring, the contact point's path."""
+    cols = np.concatenate([h[0] for h in history])
+    states = np.concatenate([h[1] for h in history])
+    fns = np.concatenate([h[2] for h in history])
+    before = history[0][4]          # the row that ends the period before the window
+    energy = {k: cols[-1, k] - before[k] for k in (rk.C_E_EL, rk.C_E_DAMP, rk.C_E_FRIC, rk.C_E_OUT, rk.C_E_STORED,
+                                                   rk.C_E_REACTION, rk.C_E_CONTACT, rk.C_E_ROTOR, rk.C_E_PENALTY)}
+    duration = cols[-1, rk.C_TIME] - before[rk.C_TIME]
+    body = case.transient.bodies[0]
+    rotation = body.rotations[0]
+    speed = float(np.mean(cols[:, rk.C_SPIN]))
+    load = rotation.torque_N_m - rotation.brake_N_m_s_per_rad * speed
+    torque = float(np.mean(cols[:, rk.C_TORQUE]))
+    p_el = energy[rk.C_E_EL] / duration
+    p_out = energy[rk.C_E_OUT] / duration
+    # friction loss: the work the stator does on the contact that neither the penalty stores nor the rotor takes
+    # (the scheme's own discrete work); the trapezoidal sum of the slip power -f_t.s is reported beside it
+    friction_J = energy[rk.C_E_CONTACT] - energy[rk.C_E_ROTOR] - energy[rk.C_E_PENALTY]
+    p_fric = friction_J / duration
+    p_fric_slip = energy[rk.C_E_FRIC] / duration
+    p_damp = energy[rk.C_E_DAMP] / duration
+    mech = torque * speed                   # friction torque times speed: the shaft power the contact delivers
+    stored = energy[rk.C_E_STORED]
+    balance = energy[rk.C_E_EL] - (energy[rk.C_E_DAMP] + friction_J + energy[rk.C_E_OUT] + stored)
+    normal = float(np.mean(cols[:, rk.C_NORMAL]))
+    counts = np.array([(states == s).mean() for s in (rk.SEPARATED, rk.STICK, rk.FORWARD_SLIP, rk.BACKWARD_SLIP)])
+    drive_sign = np.sign(np.mean(cols[:, rk.C_DRIVE_SPEED])) or 1.0
+    forward, backward = (counts[2], counts[3]) if drive_sign > 0 else (counts[3], counts[2])
+    pressure = fns / geo.area[None, :]
+    order = np.argsort(geo.angle_deg)
+    ring_rows = {"angle_deg": geo.angle_deg[order], "mean_pressure_Pa": pressure.mean(axis=0)[order],
+                 "last_pressure_Pa": pressure[-1][order], "contact_fraction": (states != rk.SEPARATED).mean(axis=0)[order],
+                 "stick_fraction": (states == rk.STICK).mean(axis=0)[order]}
+    path = history[-1][3]
+    alpha = math.radians(case.transient.contacts[0].half_angle_deg)
+    friction = case.transient.contacts[0].friction
+    mu_s = friction.mu_dynamic * friction.static_ratio if friction is not None else 0.0
+    r_c = float(np.mean(geo.rho))
+    preload = -float((body.applied_force_N or [0, 0, 0])[2])
+    return {
+        "speed_rad_per_s": speed, "speed_rpm": speed * 60.0 / (2 * math.pi),
+        "speed_change_over_window": float(np.ptp([np.mean(h[0][:, rk.C_SPIN]) for h in history])),
+        "load_torque_N_m": -load, "friction_torque_N_m": torque,
+        "friction_torque_std_N_m": float(np.std([np.mean(h[0][:, rk.C_TORQUE]) for h in history])),
+        "output_power_W": p_out if spin_free else mech, "shaft_power_W": mech,
+        "electrical_power_W": p_el, "efficiency": (p_out if spin_free else mech) / p_el if p_el > 0 else 0.0,
+        "friction_loss_W": p_fric, "friction_slip_power_W": p_fric_slip, "damping_loss_W": p_damp,
+        "electrical_power_from_reactions_W": energy[rk.C_E_REACTION] / duration,
+        "energy_balance_relative": balance / energy[rk.C_E_EL] if energy[rk.C_E_EL] else 0.0,
+        "stored_energy_change_J": stored, "window_s": duration,
+        "normal_force_N": normal, "normal_force_closed_form_N": preload / math.sin(alpha),
+        "axial_force_N": float(np.mean(cols[:, rk.C_AXIAL])),
+        "coulomb_torque_bound_N_m": mu_s * preload / math.sin(alpha) * r_c, "contact_radius_m": r_c,
+        "rotor_axial_offset_m": float(np.mean(cols[:, rk.C_DZ])),
+        "rotor_axial_vibration_m": float(np.ptp(cols[:, rk.C_DZ])),
+        "fractions": {"separation": float(counts[0]), "stick": float(counts[1]), "forward_slip": float(forward),
+                      "backward_slip": float(backward)},
+        "nodes_in_contact_mean": float(np.mean(cols[:, rk.C_ACTIVE])),
+        "drive_speed_m_per_s": float(np.mean(cols[:, rk.C_DRIVE_SPEED])),
+        "contact_point_amplitude_m": {"normal": float(np.ptp(path[:, 0]) / 2), "tangential": float(np.ptp(path[:, 1]) / 2),
+                                      "meridional": float(np.ptp(path[:, 2]) / 2)},
+        "_ring": ring_rows, "_path": {"time_s": history[-1][0][:, rk.C_TIME], "normal_m": path[:, 0],
+                                      "tangential_m": path[:, 1], "meridional_m": path[:, 2]},
+    }
+
+
+def write_ring_csv(path: Path, rows: dict) -> None:
+    keys = list(rows)
+    lines = [",".join(keys)]
+    for i in range(len(rows[keys[0]])):
+        lines.append(",".join(f"{rows[k][i]:.8g}" for k in keys))
+    path.write_text("\n".join(lines) + "\n")
+
+
+def write_path_csv(path: Path, rows: dict) -> None:
+    write_ring_csv(path, rows)
+
+
+def save_summary(path: Path, summary: dict) -> None:
+    write_json_atomic(path, summary)
+
+
+def check_model(case, comm) -> None:
+    """``validate``'s checks that need the mesh: the contact band exists and can carry ring_points nodes, no
+    floating electrodes (without reducing anything)."""
+    from app.fe.model import build_model, facet_group_tag
+
+    file = case.source
+    model = build_model(case, comm)
+    if model.electrodes_of("floating"):
+        raise CaseError(file, "electrodes", "floating electrodes are not supported by the transient analysis")
+    contact = case.transient.contacts[0]
+    tag = facet_group_tag(model.mesh_data.facet_names, contact.facets, file, "transient.contacts[0].facets")
+    xyz, _ = _band_nodes(model, tag)
+    if case.reduction.ring_points > xyz.shape[0]:
+        raise CaseError(file, "reduction.ring_points", f"the band has only {xyz.shape[0]} nodes")
+
+
+def table_rows(results: dict) -> list[tuple[str, str, str]]:
+    """End-of-run lines of a motor operating point."""
+    p = results["motor"]
+    f = p["fractions"]
+    return [("simulated time / periods", f"{results['simulated_time_s'] * 1e3:.4g} / {results['periods']}", "ms / -"),
+            ("steps / cut-backs", f"{results['steps']} / {results['cutbacks']}", "-"),
+            ("steady state reached", str(results["steady"]), "-"),
+            ("wall time per simulated ms", f"{results['wall_s_per_simulated_ms']:.4g}", "s"),
+            ("rotor speed", f"{p['speed_rpm']:.4g} ({p['speed_rad_per_s']:.4g} rad/s)", "rpm"),
+            ("load torque / friction torque", f"{p['load_torque_N_m'] * 1e3:.4g} / {p['friction_torque_N_m'] * 1e3:.4g}",
+             "mN m"),
+            ("Coulomb bound mu_s N r_c", f"{p['coulomb_torque_bound_N_m'] * 1e3:.4g}", "mN m"),
+            ("normal force (P / sin alpha)", f"{p['normal_force_N']:.4g} ({p['normal_force_closed_form_N']:.4g})", "N"),
+            ("output / electrical power", f"{p['output_power_W'] * 1e3:.4g} / {p['electrical_power_W'] * 1e3:.4g}", "mW"),
+            ("efficiency", f"{100 * p['efficiency']:.3g}", "%"),
+            ("friction / damping loss", f"{p['friction_loss_W'] * 1e3:.4g} / {p['damping_loss_W'] * 1e3:.4g}", "mW"),
+            ("energy balance (relative)", f"{p['energy_balance_relative']:.2e}", "-"),
+            ("separation / stick / fwd slip / bwd slip",
+             f"{f['separation']:.3f} / {f['stick']:.3f} / {f['forward_slip']:.3f} / {f['backward_slip']:.3f}", "-")]

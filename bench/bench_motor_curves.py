@@ -1,0 +1,113 @@
+"""Speed-torque curves of the wedge-wave motor in the modal tier, at the paper's two preloads.
+
+For each preload (0.98 N and 4.116 N): the held rotor (rotation fixed) gives the stall torque T_s, then a
+free rotor under load torques T_s * k / n (k = 0 .. n-1) gives the curve: speed, output power T_L Omega,
+electrical power from the electrode charges, efficiency, contact-state fractions, energy balance. Every
+point is ``piezodyn run cases/wwusm-motor.toml`` with ``--set`` overrides (the reduced stator comes from the
+cache after the first point), run until the cycle-mean speed (or torque) changes by less than 0.5 % over
+20 periods. The peer for cost is the FE tier on the same case: its per-step time (``--fe-step-s``, measured
+by an FE run of the case, see BENCHMARKS.md) times the steps the modal tier took gives the FE-tier cost of
+the same curves.
+
+    .venv/bin/python bench/bench_motor_curves.py --out /tmp/motor_curves [--points 8] [--fe-step-s 2.0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from app.runner import run_case  # noqa: E402
+
+CASE = ROOT / "cases" / "wwusm-motor.toml"
+PRELOADS_N = (0.98, 4.116)
+COLUMNS = ("preload_N", "load_torque_N_m", "speed_rpm", "speed_rad_per_s", "friction_torque_N_m", "output_power_W",
+           "electrical_power_W", "efficiency", "normal_force_N", "coulomb_torque_bound_N_m", "separation", "stick",
+           "forward_slip", "backward_slip", "energy_balance_relative", "steady", "periods", "steps", "cutbacks",
+           "wall_s")
+
+
+def point(out: Path, sets: list[str]) -> dict:
+    start = time.perf_counter()
+    summary = run_case(CASE, sets, out, quiet=True)
+    wall = time.perf_counter() - start
+    tr = summary["results"]["transient"]
+    m = tr["motor"]
+    row = {"load_torque_N_m": m["load_torque_N_m"], "speed_rpm": m["speed_rpm"],
+           "speed_rad_per_s": m["speed_rad_per_s"], "friction_torque_N_m": m["friction_torque_N_m"],
+           "output_power_W": m["output_power_W"], "electrical_power_W": m["electrical_power_W"],
+           "efficiency": m["efficiency"], "normal_force_N": m["normal_force_N"],
+           "coulomb_torque_bound_N_m": m["coulomb_torque_bound_N_m"],
+           "energy_balance_relative": m["energy_balance_relative"], "steady": tr["steady"],
+           "periods": tr["periods"], "steps": tr["steps"], "cutbacks": tr["cutbacks"], "wall_s": wall}
+    row.update(m["fractions"])
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="/tmp/motor_curves")
+    parser.add_argument("--points", type=int, default=8, help="free-rotor load points per preload (besides stall)")
+    parser.add_argument("--fe-step-s", type=float, default=None, help="FE-tier wall time per step of this case")
+    args = parser.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    start = time.perf_counter()
+    for preload in PRELOADS_N:
+        base = [f"transient.bodies[0].applied_force_N=[0.0, 0.0, {-preload!r}]"]
+        stall = point(out / f"P{preload}_stall", base + ['transient.bodies[0].rotations[0].motion="fixed"'])
+        stall_torque = stall["friction_torque_N_m"]
+        stall.update(preload_N=preload, load_torque_N_m=stall_torque)
+        print(f"P = {preload} N: stall torque {stall_torque * 1e3:.4g} mN m ({stall['wall_s']:.0f} s)", flush=True)
+        for k in range(args.points):
+            load = stall_torque * k / args.points
+            sets = base + [f"transient.bodies[0].rotations[0].torque_N_m={-load!r}"]
+            row = point(out / f"P{preload}_T{k}", sets)
+            row["preload_N"] = preload
+            rows.append(row)
+            print(f"  load {load * 1e3:7.3f} mN m: {row['speed_rpm']:7.2f} rpm, efficiency "
+                  f"{100 * row['efficiency']:5.2f} %, balance {row['energy_balance_relative']:.1e}, "
+                  f"steady {row['steady']}, {row['wall_s']:.0f} s", flush=True)
+        rows.append(stall)
+    total = time.perf_counter() - start
+    with open(out / "motor_curves.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: row[k] for k in COLUMNS})
+    from app.motor.plots import CURVE_PLOT, speed_torque_plot
+
+    curves = {}
+    for preload in PRELOADS_N:
+        mine = [r for r in rows if r["preload_N"] == preload]
+        curves[f"preload {preload} N"] = {key: [r[key] for r in mine] for key in
+                                          ("load_torque_N_m", "speed_rpm", "output_power_W", "efficiency")}
+        curves[f"preload {preload} N"]["torque_N_m"] = curves[f"preload {preload} N"].pop("load_torque_N_m")
+    speed_torque_plot(out / CURVE_PLOT, curves, "WW-USM, modal tier: speed-torque at 400 Vpp, 36.065 kHz")
+    steps = sum(r["steps"] for r in rows)
+    report = {"points": len(rows), "wall_s": total, "steps": steps, "cutbacks": sum(r["cutbacks"] for r in rows)}
+    if args.fe_step_s:
+        report["fe_tier_estimate_s"] = steps * args.fe_step_s
+        report["ratio"] = report["fe_tier_estimate_s"] / total
+    (out / "motor_curves.json").write_text(json.dumps({"report": report, "rows": rows}, indent=1))
+    print(json.dumps(report, indent=1))
+    print("| preload [N] | load [mN m] | speed [rpm] | output [mW] | electrical [mW] | efficiency [%] | "
+          "sep / stick / fwd / bwd | balance | periods |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['preload_N']} | {r['load_torque_N_m'] * 1e3:.3f} | {r['speed_rpm']:.2f} | "
+              f"{r['output_power_W'] * 1e3:.3f} | {r['electrical_power_W'] * 1e3:.1f} | {100 * r['efficiency']:.2f} | "
+              f"{r['separation']:.2f} / {r['stick']:.2f} / {r['forward_slip']:.2f} / {r['backward_slip']:.2f} | "
+              f"{r['energy_balance_relative']:.1e} | {r['periods']} |")
+
+
+if __name__ == "__main__":
+    main()
