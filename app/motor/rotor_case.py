@@ -23,7 +23,8 @@ def check_motor_case(case, file: str) -> None:
     if contact.axis is None or [abs(a) for a in contact.axis] != [0.0, 0.0, 1.0]:
         raise CaseError(file, f"{key}.contacts[0].axis", "the modal tier's cone turns about the z axis: [0, 0, 1]")
     if contact.damping:
-        raise CaseError(file, f"{key}.contacts[0].damping", "contact damping is not available in the modal tier's motor")
+        raise CaseError(file, f"{key}.contacts[0].damping",
+                        "contact damping is not available in the modal tier's motor")
     if len(cfg.bodies) != 1:
         raise CaseError(file, f"{key}.bodies", "the modal tier's motor has one rigid body, the rotor")
     body = cfg.bodies[0]

@@ -481,7 +481,8 @@ def operating_point(history, geo: Geometry, case, spin_free: bool) -> dict:
     pressure = fns / geo.area[None, :]
     order = np.argsort(geo.angle_deg)
     ring_rows = {"angle_deg": geo.angle_deg[order], "mean_pressure_Pa": pressure.mean(axis=0)[order],
-                 "last_pressure_Pa": pressure[-1][order], "contact_fraction": (states != rk.SEPARATED).mean(axis=0)[order],
+                 "last_pressure_Pa": pressure[-1][order],
+                 "contact_fraction": (states != rk.SEPARATED).mean(axis=0)[order],
                  "stick_fraction": (states == rk.STICK).mean(axis=0)[order]}
     path = history[-1][3]
     alpha = math.radians(case.transient.contacts[0].half_angle_deg)
@@ -509,7 +510,8 @@ def operating_point(history, geo: Geometry, case, spin_free: bool) -> dict:
                       "backward_slip": float(backward)},
         "nodes_in_contact_mean": float(np.mean(cols[:, rk.C_ACTIVE])),
         "drive_speed_m_per_s": float(np.mean(cols[:, rk.C_DRIVE_SPEED])),
-        "contact_point_amplitude_m": {"normal": float(np.ptp(path[:, 0]) / 2), "tangential": float(np.ptp(path[:, 1]) / 2),
+        "contact_point_amplitude_m": {"normal": float(np.ptp(path[:, 0]) / 2),
+                                      "tangential": float(np.ptp(path[:, 1]) / 2),
                                       "meridional": float(np.ptp(path[:, 2]) / 2)},
         "_ring": ring_rows, "_path": {"time_s": history[-1][0][:, rk.C_TIME], "normal_m": path[:, 0],
                                       "tangential_m": path[:, 1], "meridional_m": path[:, 2]},
@@ -557,11 +559,13 @@ def table_rows(results: dict) -> list[tuple[str, str, str]]:
             ("steady state reached", str(results["steady"]), "-"),
             ("wall time per simulated ms", f"{results['wall_s_per_simulated_ms']:.4g}", "s"),
             ("rotor speed", f"{p['speed_rpm']:.4g} ({p['speed_rad_per_s']:.4g} rad/s)", "rpm"),
-            ("load torque / friction torque", f"{p['load_torque_N_m'] * 1e3:.4g} / {p['friction_torque_N_m'] * 1e3:.4g}",
+            ("load torque / friction torque",
+             f"{p['load_torque_N_m'] * 1e3:.4g} / {p['friction_torque_N_m'] * 1e3:.4g}",
              "mN m"),
             ("Coulomb bound mu_s N r_c", f"{p['coulomb_torque_bound_N_m'] * 1e3:.4g}", "mN m"),
             ("normal force (P / sin alpha)", f"{p['normal_force_N']:.4g} ({p['normal_force_closed_form_N']:.4g})", "N"),
-            ("output / electrical power", f"{p['output_power_W'] * 1e3:.4g} / {p['electrical_power_W'] * 1e3:.4g}", "mW"),
+            ("output / electrical power",
+             f"{p['output_power_W'] * 1e3:.4g} / {p['electrical_power_W'] * 1e3:.4g}", "mW"),
             ("efficiency", f"{100 * p['efficiency']:.3g}", "%"),
             ("friction / damping loss", f"{p['friction_loss_W'] * 1e3:.4g} / {p['damping_loss_W'] * 1e3:.4g}", "mW"),
             ("energy balance (relative)", f"{p['energy_balance_relative']:.2e}", "-"),
