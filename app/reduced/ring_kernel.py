@@ -503,8 +503,8 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
                 ra = rotn.copy()
                 conv, its = _step(h, np.ascontiguousarray(level_invs[level]), tt, qa, va, aa, ra, K, M, C, free,
                                   prescribed, n_b, amp, phase, omega, cosine, beta, gamma, frame, g0, rho, area,
-                                  sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, rotor_mass, preload, inertia, load_torque, brake,
-                                  spin_free, tol_u, qn, vn, an, rotn, work)
+                                  sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, rotor_mass, preload, inertia,
+                                  load_torque, brake, spin_free, tol_u, qn, vn, an, rotn, work)
                 its_total += its
                 if not conv:
                     ok = False
