@@ -499,6 +499,8 @@ def operating_point(history, geo: Geometry, case, spin_free: bool) -> dict:
         "electrical_power_W": p_el, "efficiency": (p_out if spin_free else mech) / p_el if p_el > 0 else 0.0,
         "friction_loss_W": p_fric, "friction_slip_power_W": p_fric_slip, "damping_loss_W": p_damp,
         "electrical_power_from_reactions_W": energy[rk.C_E_REACTION] / duration,
+        "energy_balance_reactions_relative": (energy[rk.C_E_REACTION] - (energy[rk.C_E_EL] - balance))
+        / energy[rk.C_E_REACTION] if energy[rk.C_E_REACTION] else 0.0,
         "energy_balance_relative": balance / energy[rk.C_E_EL] if energy[rk.C_E_EL] else 0.0,
         "stored_energy_change_J": stored, "window_s": duration,
         "normal_force_N": normal, "normal_force_closed_form_N": preload / math.sin(alpha),
