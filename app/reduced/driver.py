@@ -200,15 +200,12 @@ class ReducedScene:
             if nodes.size == 0:
                 raise CaseError(file, f"{key}.facets", f"facet group {c.facets!r} has no nodes")
             b = body_index[c.body]
-            specs.append(SurfaceContactSpec(nodes, b, self.z0_of(b), c.shape, normal, c.radius_m or 0.0,
-                                            c.stiffness, c.damping))
+            start_m = np.asarray(self.cfg.bodies[b].position_m, dtype=float)     # the obstacle's reference
+            specs.append(SurfaceContactSpec(nodes, b, start_m, c.shape, normal, c.radius_m or 0.0, c.stiffness,
+                                            c.damping))
             for row in nodes.global_dofs:
                 interface += [int(d) for d in row if d >= 0 and int(d) not in interface]
         return specs
-
-    def z0_of(self, body: int) -> np.ndarray:
-        b = self.cfg.bodies[body]
-        return np.asarray(b.position_m, dtype=float)
 
     # --------------------------------------------------------------- initial state
     def drive(self) -> tuple[float, np.ndarray, np.ndarray]:
