@@ -10,11 +10,17 @@ interval of each is mean +- t_{0.975, B-1} s / sqrt(B).
 Batch means assume windows long against the motion's correlation time (here ~ a few ms against
 100 ms windows).
 
-Tiers: ``modal`` runs here (cases/usdc-fe.toml with tier = "modal"); ``fe`` reads finished FE-tier
-runs (``--fe-dir FORCE=DIR``, e.g. from ``piezodyn run cases/usdc-fe.toml --set
-transient.end_time_s=1.0 ...``), whose intervals are the yardstick for the modal tier.
+Tiers: ``modal`` (cases/usdc-fe.toml with tier = "modal") and ``lumped`` (its lumped model,
+cases/usdc-lumped-fe-scene.toml) run here; ``fe`` reads finished FE-tier runs (``--fe-dir
+FORCE=DIR``, repeatable, also several per force, e.g. from ``piezodyn run cases/usdc-fe.toml --set
+transient.end_time_s=1.0 ...``), whose intervals are the yardstick: every modal and lumped
+statistic is flagged "in" or "OUT" of the FE interval at its force (its mean inside FE mean +-
+half-width of the longest FE run), and the lumped ones outside are listed under the table.
+``--keep-dir DIR`` keeps the run directories (DIR/modal1s_9N, DIR/lumped1s_9N, ...) and reuses
+finished ones, so the table can be made again when the FE runs finish without re-running the rest.
 
-    .venv/bin/python bench/bench_tier_statistics.py --seconds 1.0 --forces 0,3,6,9 [--fe-dir 9=DIR]
+    .venv/bin/python bench/bench_tier_statistics.py --seconds 1.0 --forces 0,3,6,9 --keep-dir DIR \
+        [--fe-dir 0=DIR0 --fe-dir 9=DIR9 ...]
 """
 
 from __future__ import annotations
@@ -76,39 +82,154 @@ def batch_statistics(h5_path: Path, force_N: float, batches: int, skip_s: float)
             values.items()}
 
 
+LUMPED_CASE = ROOT / "cases" / "usdc-lumped-fe-scene.toml"
+
+
+def lumped_batch_statistics(force_N: float, seconds: float, batches: int, skip_s: float) -> dict[str, tuple]:
+    """As :func:`batch_statistics` for the lumped tier, from its exact event table instead of samples
+    (its time series is 1D and sampled every 10 us, too coarse for microsecond contacts): impacts
+    are the closing events in a window, the rock force the impulse of the stem-rock contacts ending
+    in it, the power into the rock the window's increment of the rock work (ledger + layer energy,
+    app.lumped.stats) from runs ending at the window edges (the run is deterministic: a shorter run
+    is the longer one's prefix, checked on the event count), the rise the window's mean transducer
+    coordinate above its mean over the first drive period."""
+    from app.lumped import kernel as K
+    from app.lumped.driver import compute
+    from app.lumped.model import ID3
+    from app.lumped.outputs import BODIES
+    from app.lumped.parameters import CONTACT_NAMES
+
+    def simulate(duration_s):
+        case = load_case(LUMPED_CASE, [f"lumped.downforce_N={force_N!r}", f"lumped.duration_s={duration_s!r}"])
+        return compute(case.lumped)[1], case
+
+    def rock_work(result) -> float:
+        k = result.parameters.contacts[2].stiffness_N_per_m
+        return result.ledger_J["stem_rock"] + 0.5 * k * (result.final_y[ID3] ** 2 - result.initial_y[ID3] ** 2)
+
+    full, case = simulate(seconds)
+    ev = full.events
+    closing = ev[:, K.EV_CLOSING] == 1.0
+    edges = np.linspace(skip_s, seconds, batches + 1)
+    work = []
+    for edge in edges:
+        prefix = full if edge >= seconds else simulate(float(edge))[0]
+        if prefix.events.shape[0] != int(np.sum(ev[:, K.EV_TIME] <= edge)) and prefix is not full:
+            raise RuntimeError(f"lumped run to {edge} s is not the prefix of the {seconds} s run")
+        work.append(rock_work(prefix))
+    t = full.samples_t_s
+    z = full.samples_y[:, BODIES["transducer"][0]]
+    start = float(np.mean(z[t <= t[0] + 1.0 / case.lumped.drive.frequency_Hz]))
+    names = {name: i for i, name in enumerate(CONTACT_NAMES)}
+    values = {key: [] for key in [*KEYS, RISE]}
+    for j, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        inside = (ev[:, K.EV_TIME] > lo) & (ev[:, K.EV_TIME] <= hi)
+        width = hi - lo
+        for contact in ("tip_ball", "ball_stem", "stem_rock"):
+            values[f"{contact.replace('_', '-')} impacts/s"].append(
+                np.sum(inside & closing & (ev[:, K.EV_CONTACT] == names[contact])) / width)
+        rock_ends = inside & ~closing & (ev[:, K.EV_CONTACT] == names["stem_rock"])
+        values["mean rock force [N]"].append(float(np.sum(ev[rock_ends, K.EV_IMPULSE])) / width)
+        values["power into rock [W]"].append((work[j + 1] - work[j]) / width)
+        rows = (t > lo) & (t <= hi)
+        values[RISE].append(1e3 * (float(np.mean(z[rows])) - start))
+    t_crit = sps.t.ppf(0.975, batches - 1)
+    return {key: (float(np.mean(v)), float(t_crit * np.std(v, ddof=1) / np.sqrt(batches))) for key, v in
+            values.items()}
+
+
+def _run(tier: str, force: float, seconds: float, out: Path) -> float:
+    """Run one tier into ``out`` unless a finished run is there; -> wall s per simulated ms."""
+    summary = out / "summary.json"
+    if not summary.exists():
+        if tier == "modal":
+            settings = ['tier="modal"', f"transient.end_time_s={seconds}", "output.fields=false",
+                        "output.plots=false", _force_set(force)]
+            case = CASE
+        else:
+            settings = [f"lumped.duration_s={seconds!r}", f"lumped.downforce_N={force!r}", "lumped.output.plots=false"]
+            case = LUMPED_CASE
+        command = [sys.executable, "-m", "app", "run", str(case), "--out", str(out), "--quiet"]
+        for item in settings:
+            command += ["--set", item]
+        subprocess.run(command, check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    results = json.loads(summary.read_text())["results"]
+    results = results.get("transient", results.get("lumped", results))
+    return results["wall_s_per_simulated_ms"]
+
+
+def _verdict(value: tuple, reference: tuple | None) -> str:
+    """" in" when the mean lies in the FE interval; " OUT" otherwise, " OUT (overlap)" when the two
+    intervals still overlap: two runs of the same chaotic process put one mean outside the other's
+    95 % interval about one time in six (the difference has twice the variance), so an OUT with
+    overlapping intervals is weak evidence of a difference."""
+    if reference is None:
+        return ""
+    difference = abs(value[0] - reference[0])
+    if difference <= reference[1]:
+        return " in"
+    return " OUT (overlap)" if difference <= reference[1] + value[1] else " OUT"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=1.0, help="simulated time per run [s]")
     parser.add_argument("--forces", default="0,3,6,9", help="downforces [N]")
+    parser.add_argument("--tiers", default="modal,lumped", help="tiers run here (modal, lumped)")
     parser.add_argument("--batches", type=int, default=10)
     parser.add_argument("--skip-ms", type=float, default=5.0, help="start-up left out [ms]")
-    parser.add_argument("--fe-dir", action="append", default=[], metavar="FORCE=DIR", help="a finished FE-tier run")
+    parser.add_argument("--fe-dir", action="append", default=[], metavar="FORCE=DIR",
+                        help="a finished FE-tier run (repeatable, several per force allowed)")
+    parser.add_argument("--keep-dir", type=Path, default=None,
+                        help="keep (and reuse) the run directories here: <tier><seconds>s_<force>N")
     args = parser.parse_args()
-    fe_dirs = {float(k): Path(v) for k, v in (item.split("=", 1) for item in args.fe_dir)}
+    fe_dirs: dict[float, list[Path]] = {}
+    for item in args.fe_dir:
+        force, directory = item.split("=", 1)
+        fe_dirs.setdefault(float(force), []).append(Path(directory))
+    tiers = [t for t in args.tiers.split(",") if t]
+    skip = args.skip_ms * 1e-3
     rows = []
+    outside: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
+        base = args.keep_dir if args.keep_dir is not None else Path(tmp)
+        base.mkdir(parents=True, exist_ok=True)
         for force in [float(f) for f in args.forces.split(",")]:
-            out = Path(tmp) / f"modal_{force:g}N"
-            start = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "app", "run", str(CASE), "--out", str(out), "--quiet",
-                            "--set", 'tier="modal"', "--set", f"transient.end_time_s={args.seconds}",
-                            "--set", "output.fields=false", "--set", "output.plots=false",
-                            "--set", _force_set(force)], check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
-            wall = time.perf_counter() - start
-            per_ms = json.loads((out / "summary.json").read_text())["results"]["transient"]["wall_s_per_simulated_ms"]
-            rows.append((force, f"modal ({args.seconds:g} s, {wall:.0f} s wall, {per_ms:.3f} s/ms)",
-                         batch_statistics(out / S.TIME_SERIES_FILE, force, args.batches, args.skip_ms * 1e-3)))
-            if force in fe_dirs:
-                summary = json.loads((fe_dirs[force] / "summary.json").read_text())["results"]["transient"]
-                fe_h5 = fe_dirs[force] / summary["time_series"]
-                rows.append((force, f"FE ({summary['simulated_time_s']:g} s)",
-                             batch_statistics(fe_h5, force, args.batches, args.skip_ms * 1e-3)))
-    print(f"# batch means, {args.batches} windows, 95 % intervals, {time.strftime('%Y-%m-%d')}")
+            reference, reference_s = None, 0.0
+            for directory in fe_dirs.get(force, []):
+                summary = json.loads((directory / "summary.json").read_text())["results"]["transient"]
+                values = batch_statistics(directory / summary["time_series"], force, args.batches, skip)
+                seconds = summary["simulated_time_s"]
+                rows.append((force, f"FE ({seconds:g} s, {directory.name})", values, None))
+                if seconds > reference_s:       # the longest FE run is the yardstick
+                    reference, reference_s = values, seconds
+            for tier in tiers:
+                out = base / f"{tier}{args.seconds:g}s_{force:g}N"
+                start = time.perf_counter()
+                per_ms = _run(tier, force, args.seconds, out)
+                wall = time.perf_counter() - start
+                values = (batch_statistics(out / S.TIME_SERIES_FILE, force, args.batches, skip) if tier == "modal"
+                          else lumped_batch_statistics(force, args.seconds, args.batches, skip))
+                rows.append((force, f"{tier} ({args.seconds:g} s, {per_ms:.3g} s/ms)", values, reference))
+                if tier == "lumped" and reference is not None:
+                    outside += [f"{force:g} N: lumped {key} = {values[key][0]:.3g} outside the FE interval "
+                                f"{reference[key][0]:.3g} ± {reference[key][1]:.2g}"
+                                for key in values if _verdict(values[key], reference[key]).startswith(" OUT")]
+                print(f"# {tier} {force:g} N: {wall:.0f} s wall here", file=sys.stderr, flush=True)
+    print(f"# batch means, {args.batches} windows after {args.skip_ms:g} ms, 95 % intervals (t, B-1 dof), "
+          f"{time.strftime('%Y-%m-%d')}; in/OUT: mean inside the FE interval of the longest FE run at that force")
     print("| downforce | tier | " + " | ".join([*KEYS, RISE]) + " |")
     print("|---|---|" + "---|" * (len(KEYS) + 1))
-    for force, tier, values in rows:
-        cells = [f"{m:.3g} ± {h:.2g}" for m, h in values.values()]
+    for force, tier, values, reference in rows:
+        cells = [f"{m:.3g} ± {h:.2g}" + _verdict((m, h), reference[key] if reference else None)
+                 for key, (m, h) in values.items()]
         print(f"| {force:g} N | {tier} | " + " | ".join(cells) + " |")
+    without = sorted({f"{f:g} N" for f, *_ in rows} - {f"{f:g} N" for f in fe_dirs})
+    if without:
+        print(f"\nNo FE run given at {', '.join(without)}: no in/OUT flags there.")
+    if outside:
+        print("\nLumped tier outside the FE interval (its mean outside the FE 95 % interval):\n"
+              + "\n".join(f"- {line}" for line in outside))
 
 
 if __name__ == "__main__":

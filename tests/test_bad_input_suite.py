@@ -119,6 +119,7 @@ SET_INPUTS = [
     (STRIP, [f"{_WAVE}.mass_kg=1"], f"{_WAVE}.mass_kg"),
     (STRIP, ['transient.initial_state="harmonic"'], "transient.initial_state"),
     (STRIP, ["transient.contacts=[]", 'tier="modal"'], _WAVE),
+    (STRIP, ['tier="modal"'], "transient.contacts[0].friction"),    # surface contacts: frictionless only
     (STRIP, ['supports=[{facets=["bottom"], components=["x"]}]'], f"{_WAVE}.facets"),
 ]
 # --set syntax: the line names --set and the key

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from app.reduced import kernel as kr
+from app.reduced.surface import SURFACE_KEYS, empty_surface_arrays
 from forms.newmark import TimeScheme
 
 GDIM = 2
@@ -38,10 +39,12 @@ def _run(t_end, structure, bodies, nodes, points, sizes, scheme, samples):
     fstate = np.array([0.0, np.inf])
     cap = 100000
     out = [np.zeros(cap), np.zeros(cap), np.zeros((cap, samples.shape[0])), np.zeros((cap, 0)), np.zeros((cap, m)),
-           np.zeros((cap, m)), np.zeros((cap, n_contacts)), np.zeros((cap, n_contacts), np.bool_)]
+           np.zeros((cap, m)), np.zeros((cap, n_contacts)), np.zeros((cap, n_contacts), np.bool_), np.zeros((cap, 0))]
+    surface = empty_surface_arrays(GDIM)
     code, rows = kr.run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate, K, M, C, fq, free_q, np.zeros(0, np.int64),
                         np.zeros(0), np.zeros(0), 1.0, False, body_mass, body_force, zfree, GDIM, *nodes, *points,
-                        scheme.beta, scheme.gamma, scheme.alpha_m, scheme.alpha_f, *sizes, 2.0, samples, *out)
+                        *[surface[k] for k in SURFACE_KEYS], scheme.beta, scheme.gamma, scheme.alpha_m,
+                        scheme.alpha_f, *sizes, 2.0, samples, *out)
     assert code == kr.DONE
     return rows, [o[:rows] for o in out], istate
 

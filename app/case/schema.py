@@ -298,11 +298,9 @@ def _check_modal_tier(transient, file: str) -> None:
         check_motor_case(SimpleNamespace(transient=transient), file)
         return
     for i, contact in enumerate(transient.contacts):
-        if contact.kind == "surface":
-            raise CaseError(file, f"transient.contacts[{i}].kind",
-                            "surface contacts are not available in tier 'modal' yet (use tier 'fe')")
         if getattr(contact, "friction", None) is not None:
-            raise CaseError(file, f"transient.contacts[{i}].friction", "friction is not available in tier 'modal' yet")
+            raise CaseError(file, f"transient.contacts[{i}].friction",
+                            "friction is not available in tier 'modal' yet (frictionless contacts only; use tier 'fe')")
     if transient.base_motions:
         raise CaseError(file, "transient.base_motions[0]", "base motions are not available in tier 'modal' yet")
     for i, body in enumerate(transient.bodies):

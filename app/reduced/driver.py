@@ -8,7 +8,8 @@ scheme -> the time series under the FE tier's names (``transient.h5``) and its s
 Loads and drive as in the FE tier: gravity and the downforce act on the transducer like its mass
 (projected onto the basis), the drive U(t) = V sin(wt) from rest or V cos(wt) from the harmonic
 steady state (here the reduced model's own steady state), V from ``tip_amplitude_m`` by a reduced
-harmonic solve. Not yet in this tier: surface contacts, friction, field output, checkpoints.
+harmonic solve. Surface contacts are frictionless node sets with lumped areas (app.reduced.surface).
+Not yet in this tier: friction, field output, checkpoints.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from app import series as S
 from app.errors import CaseError, NumericalFailure
 from app.reduced import kernel as kr
 from app.reduced.craig_bampton import ReducedBasis, harmonic_response, reduce_model
+from app.reduced.surface import SURFACE_KEYS, SurfaceContactSpec, kernel_surface_arrays, surface_nodes
 from app.series import TimeSeriesWriter
 from app.transient.driver import plot_spec
 
@@ -52,7 +54,8 @@ class ReducedScene:
         self.names = {"bodies": [b.name for b in cfg.bodies], "contacts": [c.name for c in cfg.contacts]}
         body_index = {name: i for i, name in enumerate(self.names["bodies"])}
 
-        # interface: the FE node of every node contact (its displacement DOFs along the normal)
+        # interface: the FE node of every node contact (its displacement DOFs along the normal), then
+        # every displacement DOF of the nodes of every surface contact
         nodes = []
         interface: list[int] = []
         for i, c in enumerate(cfg.contacts):
@@ -76,6 +79,7 @@ class ReducedScene:
             if all(j < 0 for j in coords):
                 raise CaseError(file, f"{key}.node_point", "the node has no free displacement DOF along the normal")
             nodes.append((c, x_node, coords))
+        surfaces = self._surface_contacts(interface, body_index)
 
         fixed = np.concatenate([model.support_dofs, model.grounded_dofs]
                                + [model.electrode_dofs[n] for n in model.electrodes_of("ground")])
@@ -157,6 +161,8 @@ class ReducedScene:
         self.pc_touch = np.array([c.touch_distance_m for c in points], dtype=float)
         self.pc_k = np.array([c.stiffness for c in points], dtype=float)
         self.pc_c = np.array([c.damping for c in points], dtype=float)
+        self.order += [c.name for c in cfg.contacts if c.kind == "surface"]
+        self.surface = kernel_surface_arrays(surfaces, list(interface), gdim)
 
         # named points: their displacement component as a row on q
         self.sample_names = list(case.points)
@@ -168,6 +174,38 @@ class ReducedScene:
         self.prescribed = np.array([basis.electrode_index(n) for n in electrodes], dtype=np.int64)
         self.electrode_names = list(electrodes)
         self.free = np.setdiff1d(np.arange(basis.size), self.prescribed).astype(np.int64)
+
+    def _surface_contacts(self, interface: list[int], body_index: dict) -> list[SurfaceContactSpec]:
+        """The case's surface contacts as node sets with lumped areas (app.reduced.surface); their
+        nodes' displacement DOFs join the interface after the node contacts'."""
+        from app.fe.model import facet_group_tag
+        from forms.kinematics import volume_weight
+
+        case, model, file, gdim = self.case, self.model, self.case.source, self.gdim
+        weight = volume_weight(model.mesh, model.kind, case.geometry.thickness_m)
+        specs = []
+        for i, c in enumerate(self.cfg.contacts):
+            if c.kind != "surface":
+                continue
+            key = f"transient.contacts[{i}]"
+            if c.friction is not None:       # also refused when the case is read (app.case.schema)
+                raise CaseError(file, f"{key}.friction", "friction is not available in tier 'modal' yet")
+            tag = facet_group_tag(model.mesh_data.facet_names, c.facets, file, f"{key}.facets")
+            normal = None if c.normal is None else np.asarray(c.normal, dtype=float)
+            if normal is not None and (normal.size != gdim or not math.isclose(np.linalg.norm(normal), 1.0,
+                                                                               rel_tol=1e-9)):
+                raise CaseError(file, f"{key}.normal", f"must be a unit vector with {gdim} components")
+            nodes = surface_nodes(model.W, model.W.sub(0), model.mesh_data.facet_tags, tag, weight,
+                                  model.support_dofs)
+            if nodes.size == 0:
+                raise CaseError(file, f"{key}.facets", f"facet group {c.facets!r} has no nodes")
+            b = body_index[c.body]
+            start_m = np.asarray(self.cfg.bodies[b].position_m, dtype=float)     # the obstacle's reference
+            specs.append(SurfaceContactSpec(nodes, b, start_m, c.shape, normal, c.radius_m or 0.0, c.stiffness,
+                                            c.damping))
+            for row in nodes.global_dofs:
+                interface += [int(d) for d in row if d >= 0 and int(d) not in interface]
+        return specs
 
     # --------------------------------------------------------------- initial state
     def drive(self) -> tuple[float, np.ndarray, np.ndarray]:
@@ -275,7 +313,8 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     cap = ROWS_PER_CHUNK
     buffers = [np.zeros(cap), np.zeros(cap), np.zeros((cap, len(scene.sample_names))),
                np.zeros((cap, scene.prescribed.size)), np.zeros((cap, z.size)), np.zeros((cap, z.size)),
-               np.zeros((cap, n_contacts)), np.zeros((cap, n_contacts), np.bool_)]
+               np.zeros((cap, n_contacts)), np.zeros((cap, n_contacts), np.bool_),
+               np.zeros((cap, scene.surface["sc_k"].size * gdim))]
     units = {S.TIME: "s", S.STEP: "s", S.DRIVE: "V"}
     units.update({S.point_displacement(n): "m" for n in scene.sample_names})
     for name in scene.names["bodies"]:
@@ -292,13 +331,17 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     directions = _force_directions(scene)
     log(f"transient (modal tier): {cfg.initial_state} start, drive {scale:.4g} V at {cfg.drive.frequency_Hz:.2f} Hz, "
         f"{len(scene.names['bodies'])} rigid bodies, {n_contacts} contacts, {cfg.end_time_s * 1e3:.4g} ms")
+    # an undamped model (no Rayleigh, no material Q) has no C: the kernel takes zeros
+    damping = scene.basis.C if scene.basis.C is not None else np.zeros_like(scene.basis.K)
+
     def arguments(t_end):
         return (t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
-                scene.basis.K, scene.basis.M, scene.basis.C, scene.fq, scene.free, scene.prescribed,
+                scene.basis.K, scene.basis.M, damping, scene.fq, scene.free, scene.prescribed,
                 amplitudes, phases, omega, cosine, scene.body_mass, scene.body_force, scene.zfree,
                 gdim, scene.nc_coord, scene.nc_normal, scene.nc_offset, scene.nc_ref, scene.nc_body,
                 scene.nc_k, scene.nc_c, scene.nc_exp, scene.pc_lower, scene.pc_upper, scene.pc_dir,
-                scene.pc_touch, scene.pc_k, scene.pc_c, s.beta, s.gamma, s.alpha_m, s.alpha_f,
+                scene.pc_touch, scene.pc_k, scene.pc_c, *[scene.surface[k] for k in SURFACE_KEYS],
+                s.beta, s.gamma, s.alpha_m, s.alpha_f,
                 st.open_s, st.closed_s, st.change_s, st.min_s, 2.0, scene.sample_rows, *buffers)
 
     kr.run(*arguments(0.0))         # loads (or compiles) the kernel: set-up, not time-loop cost
@@ -314,8 +357,13 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
             for b, name in enumerate(scene.names["bodies"]):
                 block[S.body_position(name)] = buffers[4][:rows, b * gdim:(b + 1) * gdim]
                 block[S.body_velocity(name)] = buffers[5][:rows, b * gdim:(b + 1) * gdim]
+            n_scalar = len(directions)
             for i, name in enumerate(scene.order):
-                block[S.contact_force(name)] = buffers[6][:rows, i:i + 1] * directions[i][None, :]
+                if i < n_scalar:
+                    block[S.contact_force(name)] = buffers[6][:rows, i:i + 1] * directions[i][None, :]
+                else:                       # a surface contact: its force vector on the body
+                    c = i - n_scalar
+                    block[S.contact_force(name)] = buffers[8][:rows, c * gdim:(c + 1) * gdim]
                 block[S.contact_closed(name)] = buffers[7][:rows, i].astype(float)
             series.write_block(block)
         if code == kr.STEP_FAILED:

@@ -9,7 +9,11 @@ and Python callbacks:
   bodies' translations z; the equations are imposed at the generalized mid-points, contact forces
   evaluated there, as in the FE tier;
 * interactions: node contacts (a power-law spring, Hertz with exponent 1.5, plus a clipped damper,
-  between an interface node and a body's sphere) and rigid-rigid Kelvin-Voigt links;
+  between an interface node and a body's sphere), rigid-rigid Kelvin-Voigt links, and frictionless
+  surface contacts: a facet group's nodes (interface coordinates) each carry a lumped area and
+  press with the penalty pressure < k (-g) + c (-dg/dt) > against the body's plane or sphere, the
+  gap and normal formed exactly at the node (a sphere's normal turns with the node: its tangent
+  includes the p / |d| (I - n n) term);
 * Newton with backtracking on the free coordinates and body DOFs, converged when the residual
   norm is below ``rtol`` times the step's force scale (plus round-off), as the FE tier's SNES;
 * step sizes by contact state: ``open``, ``closed``, ``change`` with event refinement (a step that
@@ -84,6 +88,55 @@ def _node_force(i, q_mid, v_mid, z_mid, zd_mid, nc_coord, nc_normal, nc_offset, 
 
 
 @njit(cache=True, error_model="numpy")
+def _surface_node(i, q_mid, v_mid, z_mid, zd_mid, sn_contact, sn_coord, sn_rel, sc_body, sc_kind, sc_normal,
+                  sc_radius, sc_ref, gdim, d, w, n):
+    """Gap [m], gap rate [m/s] and distance |d| [m] (sphere; 1 for a plane) of surface node i at a
+    state; fills d (node relative to the obstacle), w (relative velocity) and the unit normal n.
+
+    The node's position relative to the obstacle is formed as (reference difference, stored once)
+    + (u - body displacement), never from absolute positions, as the FE tier does (the gap of a
+    stiff penalty must not carry round-off of |x|). A sphere with a pole p stores e0 = x - (centre +
+    R p) and forms g = (|e|^2 + 2 R p.e) / (|R p + e| + R), the cancellation-free |d| - R."""
+    c = sn_contact[i]
+    b = sc_body[c]
+    for k in range(gdim):
+        j = sn_coord[i, k]
+        u = q_mid[j] if j >= 0 else 0.0
+        uv = v_mid[j] if j >= 0 else 0.0
+        d[k] = sn_rel[i, k] + (u - (z_mid[b * gdim + k] - sc_ref[c, k]))
+        w[k] = uv - zd_mid[b * gdim + k]
+    if sc_kind[c] == 0:                                 # plane: fixed normal
+        gap = 0.0
+        rate = 0.0
+        for k in range(gdim):
+            n[k] = sc_normal[c, k]
+            gap += n[k] * d[k]
+            rate += n[k] * w[k]
+        return gap, rate, 1.0
+    radius = sc_radius[c]
+    has_pole = False
+    for k in range(gdim):
+        has_pole = has_pole or sc_normal[c, k] != 0.0
+    ee = 0.0
+    pe = 0.0
+    if has_pole:                                        # d holds e = y - (centre + R p)
+        for k in range(gdim):
+            ee += d[k] * d[k]
+            pe += sc_normal[c, k] * d[k]
+            d[k] = radius * sc_normal[c, k] + d[k]
+    dist = 0.0
+    for k in range(gdim):
+        dist += d[k] * d[k]
+    dist = np.sqrt(dist)
+    gap = (ee + 2.0 * radius * pe) / (dist + radius) if has_pole else dist - radius
+    rate = 0.0
+    for k in range(gdim):
+        n[k] = d[k] / dist
+        rate += n[k] * w[k]
+    return gap, rate, dist
+
+
+@njit(cache=True, error_model="numpy")
 def _point_force(i, z_mid, zd_mid, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, gdim):
     lo, up = pc_lower[i], pc_upper[i]
     delta = pc_touch[i]
@@ -100,16 +153,82 @@ def _point_force(i, z_mid, zd_mid, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, p
 
 
 @njit(cache=True, error_model="numpy")
+def _surface_terms(q_mid, v_mid, z_mid, zd_mid, s, w_f, c_vel, G_SS, gdim, sn_contact, sn_coord, sn_rel, sn_area,
+                   sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref, F, J, Kss, want_jacobian, sforce):
+    """Residual (and tangent) terms of the surface contacts' nodes, the node-contact pattern with a
+    full gdim x gdim block: node i pushes with F_i = A_i p n on the structure and -F_i on the body,
+    p = < k (-g) + c (-dg/dt) > while g < 0. D = dF_i / d(relative-position increment over the
+    step) = A_i w_f [n (x) (-k n - c P w / r) + p P / r - c_vel c n (x) n] with P = I - n n, w the
+    relative velocity and r = |d| (a plane: the curvature terms vanish)."""
+    for c in range(sc_k.size):
+        for k in range(gdim):
+            sforce[c, k] = 0.0
+    if sn_contact.size == 0:
+        return
+    d = np.empty(gdim)
+    w = np.empty(gdim)
+    n = np.empty(gdim)
+    D = np.empty((gdim, gdim))
+    for i in range(sn_contact.size):
+        c = sn_contact[i]
+        b = sc_body[c]
+        gap, rate, dist = _surface_node(i, q_mid, v_mid, z_mid, zd_mid, sn_contact, sn_coord, sn_rel, sc_body,
+                                        sc_kind, sc_normal, sc_radius, sc_ref, gdim, d, w, n)
+        if gap >= 0.0:
+            continue
+        pressure = -sc_k[c] * gap - sc_c[c] * rate
+        if pressure <= 0.0:
+            continue
+        area = sn_area[i]
+        for k in range(gdim):
+            f = area * pressure * n[k]
+            j = sn_coord[i, k]
+            if j >= 0:
+                F[j] -= f
+            F[s + b * gdim + k] += f
+            sforce[c, k] -= f
+        if not want_jacobian:
+            continue
+        curved = sc_kind[c] != 0
+        for k in range(gdim):
+            for kk in range(gdim):
+                nn = n[k] * n[kk]
+                value = -(sc_k[c] + sc_c[c] * c_vel) * nn
+                if curved:
+                    projector = (1.0 if k == kk else 0.0) - nn
+                    value += (-sc_c[c] * n[k] * (w[kk] - rate * n[kk]) + pressure * projector) / dist
+                D[k, kk] = area * w_f * value
+        # rc_S = -F_i, r_z = +F_i; the relative position grows with u and falls with z
+        for k in range(gdim):
+            row_q = sn_coord[i, k]
+            row_z = s + b * gdim + k
+            for kk in range(gdim):
+                col_q = sn_coord[i, kk]
+                col_z = s + b * gdim + kk
+                coeff = D[k, kk]
+                if row_q >= 0:
+                    if col_q >= 0:
+                        Kss[row_q, col_q] -= coeff
+                    J[row_q, col_z] += coeff
+                if col_q >= 0:
+                    for kk2 in range(s):
+                        J[row_z, kk2] -= coeff * G_SS[col_q, kk2]      # D (-G)
+                J[row_z, col_z] -= coeff
+
+
+@njit(cache=True, error_model="numpy")
 def _contact_system(g, dz, uS0, G_SS, qS0, vS0, aS0, z0, zd0, zdd0, dt, beta, gamma, alpha_m, alpha_f,
                     body_mass, body_force, zfree, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c,
-                    nc_exp, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, F, J, want_jacobian, forces):
+                    nc_exp, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel, sn_area,
+                    sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref, F, J, want_jacobian, forces, sforce):
     """Condensed residual on (g, dz) and, optionally, its Jacobian; contact forces into ``forces``.
 
     The structure's equations are linear, so for contact residuals g on the interface coordinates
     its increments are dq = (predictor + w) - G g (``uS0`` = the interface part of predictor + w,
     ``G_SS`` = the interface block of K_eff^-1, both formed once per step / per dt). Newton then
     runs on g and the body increments dz only: F_g = rc_S(dq_S(g), dz) - g, F_z = r_z(dq_S, dz),
-    the FE tier's condensed system (app.transient.coupled) on a dense model."""
+    the FE tier's condensed system (app.transient.coupled) on a dense model. ``sforce`` gets the
+    force of each surface contact on its body [N]."""
     s = g.size
     m = dz.size
     c_acc = 1.0 / (beta * dt * dt)
@@ -166,6 +285,10 @@ def _contact_system(g, dz, uS0, G_SS, qS0, vS0, aS0, z0, zd0, zdd0, dt, beta, ga
                         for kk2 in range(s):
                             J[row_z, kk2] += coeff * G_SS[col_q, kk2]      # (-coeff) * (-G)
                     J[row_z, col_z] += coeff
+    _surface_terms(q_mid, v_mid, z_mid, zd_mid, s, w_f, c_vel, G_SS, gdim, sn_contact, sn_coord, sn_rel, sn_area,
+                   sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref, F, J, Kss, want_jacobian, sforce)
+    for c in range(sc_k.size):
+        forces[nc_k.size + pc_k.size + c] = np.sqrt(np.sum(sforce[c] * sforce[c]))
     if want_jacobian:
         KG = Kss @ G_SS
         for a in range(s):
@@ -201,7 +324,8 @@ def _contact_system(g, dz, uS0, G_SS, qS0, vS0, aS0, z0, zd0, zdd0, dt, beta, ga
 
 @njit(cache=True, error_model="numpy")
 def _status(q, v, z, zd, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower,
-            pc_upper, pc_dir, pc_touch, pc_k, pc_c, closed):
+            pc_upper, pc_dir, pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel, sc_body, sc_kind, sc_normal,
+            sc_radius, sc_k, sc_ref, closed):
     """Closed flags of every contact at an end-of-step state and the earliest predicted closure [s]."""
     closure = np.inf
     for i in range(nc_k.size):
@@ -229,6 +353,20 @@ def _status(q, v, z, zd, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, 
         closed[base + i] = delta > 0.0
         if delta <= 0.0 and rate > 0.0:
             closure = min(closure, -delta / rate)
+    # a surface contact is closed while any of its nodes penetrates (where its force acts)
+    base = nc_k.size + pc_k.size
+    for c in range(sc_k.size):
+        closed[base + c] = False
+    d = np.empty(gdim)
+    w = np.empty(gdim)
+    n = np.empty(gdim)
+    for i in range(sn_contact.size):
+        gap, rate, _ = _surface_node(i, q, v, z, zd, sn_contact, sn_coord, sn_rel, sc_body, sc_kind, sc_normal,
+                                     sc_radius, sc_ref, gdim, d, w, n)
+        if gap < 0.0:
+            closed[base + sn_contact[i]] = True
+        elif rate < 0.0:
+            closure = min(closure, gap / -rate)
     return closure
 
 
@@ -259,13 +397,21 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
         K, M, C, fq, free_q, pres_q, drive_amp, drive_phase, omega, cosine, body_mass, body_force, zfree, gdim,
         nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp,
         pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c,
+        sn_contact, sn_coord, sn_rel, sn_area, sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref,
         beta, gamma, alpha_m, alpha_f, open_s, closed_s, change_s, min_s, growth,
-        sample_rows, out_time, out_dt, out_samples, out_drive, out_z, out_zd, out_force, out_closed):
+        sample_rows, out_time, out_dt, out_samples, out_drive, out_z, out_zd, out_force, out_closed, out_surface):
     """Advance the state arrays (in place) to ``t_end`` or until the output buffers are full.
     Returns (code, rows written). One output row per accepted step: time, dt, ``sample_rows @ q``,
-    the prescribed coordinates, body positions and velocities, contact forces [N] and closed flags.
+    the prescribed coordinates, body positions and velocities, contact forces [N] (magnitudes: node
+    contacts, links, then surface contacts) and closed flags, and the force vector of each surface
+    contact on its body (``out_surface``, gdim columns per surface contact).
 
-    The interface coordinates (those the node contacts act on) must be the first free
+    Surface contacts: ``sn_*`` per node (its contact, interface coordinate per axis or -1 if held,
+    reference relative position [m], lumped area [m^2]), ``sc_*`` per contact (body, shape 0 plane /
+    1 sphere, plane normal or sphere pole (zeros: none), radius [m], penalty [Pa/m], damping
+    [Pa s/m], the body's reference position [m]).
+
+    The interface coordinates (those the node and surface contacts act on) must be the first free
     coordinates, ``free_q[:s] == arange(s)`` (the Craig-Bampton order)."""
     nf = free_q.size
     m = z.size
@@ -273,7 +419,11 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
     for i in range(nc_coord.shape[0]):
         for k in range(gdim):
             s = max(s, nc_coord[i, k] + 1)
-    n_contacts = nc_k.size + pc_k.size
+    for i in range(sn_coord.shape[0]):
+        for k in range(gdim):
+            s = max(s, sn_coord[i, k] + 1)
+    n_contacts = nc_k.size + pc_k.size + sc_k.size
+    sforce = np.zeros((sc_k.size, gdim))
     F = np.zeros(s + m)
     F_try = np.zeros(s + m)
     J = np.zeros((s + m, s + m))
@@ -293,7 +443,8 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
     capacity = out_time.size
     t = fstate[F_TIME]
     closure = _status(q, v, z, zd, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp,
-                      pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, closed)
+                      pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel, sc_body,
+                      sc_kind, sc_normal, sc_radius, sc_k, sc_ref, closed)
     load_scale = np.sqrt(np.sum(fq * fq) + np.sum(body_force * body_force))
     body_mass_dofs = np.zeros(m)
     for j in range(m):
@@ -369,8 +520,13 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
             zdd1, zd1 = _contact_system(g, dz, uS0, G_SS, q[:s], v[:s], a[:s], z, zd, zdd, dt_try, beta, gamma,
                                         alpha_m, alpha_f, body_mass, body_force, zfree, gdim, nc_coord, nc_normal,
                                         nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower, pc_upper, pc_dir,
-                                        pc_touch, pc_k, pc_c, F, J, True, forces)
+                                        pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel, sn_area, sc_body,
+                                        sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref, F, J, True, forces, sforce)
             norm = np.sqrt(np.sum(F * F))
+            # ... nor below the round-off of the contact forces themselves: a body in free rigid
+            # translation balances nothing else (a rod striking a wall: scale ~1e-6 N against
+            # 6e5 N of contact force, whose balance rounds at ~1e-10 N)
+            atol += 10.0 * EPS * norm
             while iterations < MAX_NEWTON and np.isfinite(norm):
                 if norm <= atol:
                     converged = True
@@ -384,7 +540,8 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
                     _contact_system(g_try, dz_try, uS0, G_SS, q[:s], v[:s], a[:s], z, zd, zdd, dt_try, beta, gamma,
                                     alpha_m, alpha_f, body_mass, body_force, zfree, gdim, nc_coord, nc_normal,
                                     nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower, pc_upper, pc_dir,
-                                    pc_touch, pc_k, pc_c, F_try, J, False, forces)
+                                    pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel, sn_area, sc_body, sc_kind,
+                                    sc_normal, sc_radius, sc_k, sc_c, sc_ref, F_try, J, False, forces, sforce)
                     norm_try = np.sqrt(np.sum(F_try * F_try))
                     if norm_try <= (1.0 - 1e-4 * lam) * norm or norm_try <= atol:
                         accepted = True
@@ -399,7 +556,9 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
                 zdd1, zd1 = _contact_system(g, dz, uS0, G_SS, q[:s], v[:s], a[:s], z, zd, zdd, dt_try, beta, gamma,
                                             alpha_m, alpha_f, body_mass, body_force, zfree, gdim, nc_coord,
                                             nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower,
-                                            pc_upper, pc_dir, pc_touch, pc_k, pc_c, F, J, True, forces)
+                                            pc_upper, pc_dir, pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel,
+                                            sn_area, sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref, F, J,
+                                            True, forces, sforce)
                 norm = np.sqrt(np.sum(F * F))
                 if small and norm <= 1e3 * atol:
                     converged = True
@@ -422,7 +581,8 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
             q1 = q + dq
             z1 = z + dz
             new_closure = _status(q1, v1, z1, zd1, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k,
-                                  nc_c, nc_exp, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, new_closed)
+                                  nc_c, nc_exp, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, sn_contact,
+                                  sn_coord, sn_rel, sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_ref, new_closed)
             changed = False
             for i in range(n_contacts):
                 changed = changed or (new_closed[i] != closed[i])
@@ -441,6 +601,9 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
         for i in range(n_contacts):
             out_force[rows, i] = forces[i]
             out_closed[rows, i] = new_closed[i]
+        for c in range(sc_k.size):
+            for k in range(gdim):
+                out_surface[rows, c * gdim + k] = sforce[c, k]
         rows += 1
         q[:] = q1
         v[:] = v1
