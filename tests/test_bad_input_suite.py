@@ -24,6 +24,9 @@ FE = CASES / "usdc-fe.toml"
 LUMPED = CASES / "usdc-lumped.toml"
 TRANSDUCER = CASES / "usdc-transducer.toml"
 STRIP = CASES / "validation" / "strip-friction-drive.toml"
+MOTOR = CASES / "wwusm-motor.toml"
+_ROTOR = "transient.bodies[0]"
+_CONE = "transient.contacts[0]"
 _WAVE = "transient.base_motions[0]"
 # the drill scene on the 4 mm test mesh, 0.2 ms: if a bad input slipped through, the run stays short
 FE_TINY = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic_mesh_size_m=0.0025",
@@ -121,6 +124,24 @@ SET_INPUTS = [
     (STRIP, ["transient.contacts=[]", 'tier="modal"'], _WAVE),
     (STRIP, ['tier="modal"'], "transient.contacts[0].friction"),    # surface contacts: frictionless only
     (STRIP, ['supports=[{facets=["bottom"], components=["x"]}]'], f"{_WAVE}.facets"),
+    # the motor: cone contact, rotor, steady state (refused when the case is read, before any mesh)
+    (MOTOR, [f"{_CONE}.axis=[0.0, 1.0, 0.0]"], f"{_CONE}.axis"),
+    (MOTOR, [f"{_CONE}.axis=[0.0, 0.0, 2.0]"], f"{_CONE}.axis"),
+    (MOTOR, [f"{_CONE}.half_angle_deg=95"], f"{_CONE}.half_angle_deg"),
+    (MOTOR, [f'{_CONE}.shape="plane"'], f"{_CONE}.normal"),
+    (MOTOR, [f"{_CONE}.damping=1e6"], f"{_CONE}.damping"),
+    (MOTOR, [f"{_ROTOR}.position_m=[0.001, 0.0, 0.01374]"], f"{_ROTOR}.position_m"),
+    (MOTOR, [f"{_ROTOR}.free_axes=[true, true, true]"], f"{_ROTOR}.free_axes"),
+    (MOTOR, [f"{_ROTOR}.applied_force_N=[0.0, 0.0, 0.98]"], f"{_ROTOR}.applied_force_N"),
+    (MOTOR, [f'{_ROTOR}.rotations[0].axis="x"'], f"{_ROTOR}.rotations"),
+    (MOTOR, [f"{_ROTOR}.rotations[0].brake_N_m_s_per_rad=-1"], f"{_ROTOR}.rotations[0].brake_N_m_s_per_rad"),
+    (MOTOR, [f'{_ROTOR}.rotations[0].motion="fixed"', f"{_ROTOR}.rotations[0].brake_N_m_s_per_rad=0.1"],
+     f"{_ROTOR}.rotations[0].brake_N_m_s_per_rad"),
+    (MOTOR, ['transient.scheme.kind="generalized_alpha"'], "transient.scheme.kind"),
+    (MOTOR, ['transient.steady_state.body="stator"'], "transient.steady_state.body"),
+    (MOTOR, ["transient.steady_state.relative_tolerance=0"], "transient.steady_state.relative_tolerance"),
+    (MOTOR, ["reduction.ring_points=4"], "reduction.ring_points"),
+    (MOTOR, ["transient.loads.gravity_m_per_s2=[0.0, 0.0, -9.81]"], "transient.loads"),
 ]
 # --set syntax: the line names --set and the key
 SYNTAX_INPUTS = [(BAR, ["modal.n_modes"], "modal.n_modes"), (BAR, ["modal..n_modes=3"], "modal..n_modes=3"),
