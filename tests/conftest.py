@@ -1,6 +1,7 @@
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -9,6 +10,9 @@ ROOT = Path(__file__).resolve().parents[1]
 CASES = ROOT / "cases"
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("MPLBACKEND", "Agg")
+# reduced motor models (app/reduced/motor.py) are cached by their inputs: keep the tests' out of ~/.cache, in one
+# place that every rank and subprocess of a run sees
+os.environ.setdefault("PIEZODYN_CACHE_DIR", os.path.join(tempfile.gettempdir(), "piezodyn-test-cache"))
 
 
 def run_cli(*args, mpi: int = 0, timeout: float = 600, cwd=None):

@@ -32,6 +32,8 @@ TINY = {
     "validation/pzt4-strip-plane-strain.toml": ["geometry.parameters.axial_divisions=8"],
     "validation/strip-friction-drive.toml": ["transient.end_time_s=2.5e-5", "transient.output_interval_s=2.5e-5"],
     "validation/ring-inplane-3d.toml": ["geometry.parameters.mesh_size_m=0.002", "modal.n_modes=4"],
+    "wwusm-motor.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
+                         "reduction.ring_points=16", "transient.end_time_s=2.8e-4"],
     "wwusm-stator.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
                           "harmonic.n_points=2", "harmonic.wave.animation_frames=2",
                           # the coarse faceted cylinder sags ~0.15 mm: sample further inside

@@ -81,7 +81,8 @@ def _cache_dir() -> Path:
 
 def load_or_build(case, comm, log) -> RingModel:
     path = _cache_dir() / f"motor-{_cache_key(case)}.npz"
-    if path.is_file():
+    found = path.is_file() if comm is None else comm.bcast(path.is_file(), root=0)   # one verdict for all ranks
+    if found:
         with np.load(path, allow_pickle=False) as f:
             model = RingModel(f["K"], f["M"], f["C"], [str(e) for e in f["electrodes"]], f["charge_rows"],
                               f["mode_frequencies_Hz"], f["node_xyz"], float(f["band_area_m2"]),
