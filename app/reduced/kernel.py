@@ -17,8 +17,12 @@ and Python callbacks:
   predicted closure, cut-back by halving on Newton failure, growth back after cut-backs; below
   ``min`` the loop stops with a failure code (the driver turns it into NumericalFailure).
 
-The loop runs until the end time or until the output buffer is full (the driver writes the rows,
-checkpoints and calls again), so every quantity that the next chunk needs is in the state arrays.
+The loop runs until the end time, until the output buffer is full, or (when the driver asks for
+field output) right after the first accepted step at or after ``fstate[F_OUTPUT]``; the driver then
+writes the rows, expands the fields, checkpoints and calls again. Every quantity that the next
+call needs is in the state arrays (q, v, a, z, zd, zdd, istate, fstate); what else the loop keeps
+(the closed flags, the predicted closure, the K_eff^-1 of each step size) is a function of them,
+recomputed at the start of every call, so where a run is split into calls does not change it.
 """
 
 from __future__ import annotations
@@ -29,11 +33,11 @@ from numba import njit
 # integer controller state slots
 I_STEPS, I_ATTEMPTS, I_CUTBACKS, I_REFINEMENTS, I_NEWTON, I_CHANGED = range(6)
 N_ISTATE = 6
-# float controller state slots
-F_TIME, F_CAP = range(2)
-N_FSTATE = 2
+# float controller state slots: time [s], step cap after cut-backs [s], next field output [s]
+F_TIME, F_CAP, F_OUTPUT = range(3)
+N_FSTATE = 3
 # return codes
-DONE, BUFFER_FULL, STEP_FAILED = 0, 1, 2
+DONE, BUFFER_FULL, STEP_FAILED, FIELD_OUTPUT = 0, 1, 2, 3
 MAX_NEWTON = 20
 NEWTON_RTOL = 1e-10
 NEWTON_STOL = 1e-14
@@ -261,8 +265,9 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
         pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c,
         beta, gamma, alpha_m, alpha_f, open_s, closed_s, change_s, min_s, growth,
         sample_rows, out_time, out_dt, out_samples, out_drive, out_z, out_zd, out_force, out_closed):
-    """Advance the state arrays (in place) to ``t_end`` or until the output buffers are full.
-    Returns (code, rows written). One output row per accepted step: time, dt, ``sample_rows @ q``,
+    """Advance the state arrays (in place) to ``t_end``, until the output buffers are full or, if
+    ``fstate`` has the slot F_OUTPUT, until the first accepted step at t >= fstate[F_OUTPUT] (code
+    FIELD_OUTPUT; a 2-slot fstate never stops for output). Returns (code, rows written). One output row per accepted step: time, dt, ``sample_rows @ q``,
     the prescribed coordinates, body positions and velocities, contact forces [N] and closed flags.
 
     The interface coordinates (those the node contacts act on) must be the first free
@@ -298,6 +303,7 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
     body_mass_dofs = np.zeros(m)
     for j in range(m):
         body_mass_dofs[j] = body_mass[j // gdim] if zfree[j] else 0.0
+    next_output = fstate[F_OUTPUT] if fstate.size > F_OUTPUT else np.inf
     while t < t_end * (1.0 - 1e-12):
         if rows >= capacity:
             fstate[F_TIME] = t
@@ -458,5 +464,8 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
             fstate[F_CAP] = dt_try * growth
             if fstate[F_CAP] >= max(open_s, closed_s):
                 fstate[F_CAP] = np.inf
+        if t >= next_output:                    # the driver expands the fields of this state
+            fstate[F_TIME] = t
+            return FIELD_OUTPUT, rows
     fstate[F_TIME] = t
     return DONE, rows
