@@ -267,8 +267,9 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
         sample_rows, out_time, out_dt, out_samples, out_drive, out_z, out_zd, out_force, out_closed):
     """Advance the state arrays (in place) to ``t_end``, until the output buffers are full or, if
     ``fstate`` has the slot F_OUTPUT, until the first accepted step at t >= fstate[F_OUTPUT] (code
-    FIELD_OUTPUT; a 2-slot fstate never stops for output). Returns (code, rows written). One output row per accepted step: time, dt, ``sample_rows @ q``,
-    the prescribed coordinates, body positions and velocities, contact forces [N] and closed flags.
+    FIELD_OUTPUT; a 2-slot fstate never stops for output). Returns (code, rows written). One
+    output row per accepted step: time, dt, ``sample_rows @ q``, the prescribed coordinates, body
+    positions and velocities, contact forces [N] and closed flags.
 
     The interface coordinates (those the node contacts act on) must be the first free
     coordinates, ``free_q[:s] == arange(s)`` (the Craig-Bampton order)."""

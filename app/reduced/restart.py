@@ -20,6 +20,7 @@ run repeats the interrupted run's steps bit for bit, on any number of ranks.
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,7 +30,7 @@ from petsc4py import PETSc
 
 from app.errors import CaseError
 from app.files import atomic_write
-from app.transient.checkpoint import CHECKPOINT_DIR, POINTER, CellLayout
+from app.transient.checkpoint import CHECKPOINT_DIR, CellLayout
 
 MODEL_FILE = "reduced-model.npz"
 MODEL_KEY = "reduced_model"
@@ -93,8 +94,11 @@ def load_model(out_dir: Path, model, layout: CellLayout) -> SavedModel:
         try:
             with np.load(path) as npz:
                 data = {k: np.array(npz[k]) for k in npz.files}
-        except (OSError, ValueError, EOFError) as exc:
-            why = f"cannot be read ({exc})"
+            missing = [k for k in SavedModel.__dataclass_fields__ if k not in data]
+            if missing:
+                why = f"has no {missing[0]!r} (not a reduced model of this version)"
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            why = f"cannot be read (truncated or corrupt: {exc})"
     why = comm.bcast(why, root=0)
     if why:
         raise CaseError(str(path), None, why)
@@ -122,5 +126,3 @@ def checkpoint_files(out_dir: Path) -> list[str]:
     return [f"{CHECKPOINT_DIR}/{MODEL_FILE}"] if path.is_file() else []
 
 
-def pointer_path(out_dir: Path) -> Path:
-    return Path(out_dir) / CHECKPOINT_DIR / POINTER
