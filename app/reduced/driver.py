@@ -357,6 +357,10 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     log(f"transient (modal tier): {cfg.initial_state} start, drive {scale:.4g} V at {cfg.drive.frequency_Hz:.2f} Hz, "
         f"{len(scene.names['bodies'])} rigid bodies, {n_contacts} contacts, {cfg.end_time_s * 1e3:.4g} ms")
 
+    # K_eff^-1 per step size, kept across the loop's calls (a function of dt only, see the kernel)
+    cache_dt = np.full(kr.CACHE_SLOTS, -1.0)
+    cache_inv = np.zeros((kr.CACHE_SLOTS, scene.free.size, scene.free.size))
+
     def arguments(t_end, rows):
         return (t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
                 basis.K, basis.M, basis.C, scene.fq, scene.free, scene.prescribed,
@@ -365,7 +369,7 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                 scene.nc_k, scene.nc_c, scene.nc_exp, scene.pc_lower, scene.pc_upper, scene.pc_dir,
                 scene.pc_touch, scene.pc_k, scene.pc_c, s.beta, s.gamma, s.alpha_m, s.alpha_f,
                 st.open_s, st.closed_s, st.change_s, st.min_s, 2.0, scene.sample_rows,
-                *(buffer[:rows] for buffer in buffers))
+                *(buffer[:rows] for buffer in buffers), cache_dt, cache_inv)
 
     kr.run(*arguments(0.0, cap))    # loads (or compiles) the kernel: set-up, not time-loop cost
     setup_wall = time.perf_counter() - setup_start

@@ -38,6 +38,7 @@ F_TIME, F_CAP, F_OUTPUT = range(3)
 N_FSTATE = 3
 # return codes
 DONE, BUFFER_FULL, STEP_FAILED, FIELD_OUTPUT = 0, 1, 2, 3
+CACHE_SLOTS = 24        # K_eff^-1 kept for this many step sizes
 MAX_NEWTON = 20
 NEWTON_RTOL = 1e-10
 NEWTON_STOL = 1e-14
@@ -264,7 +265,8 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
         nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp,
         pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c,
         beta, gamma, alpha_m, alpha_f, open_s, closed_s, change_s, min_s, growth,
-        sample_rows, out_time, out_dt, out_samples, out_drive, out_z, out_zd, out_force, out_closed):
+        sample_rows, out_time, out_dt, out_samples, out_drive, out_z, out_zd, out_force, out_closed,
+        cache_dt=None, cache_inv=None):
     """Advance the state arrays (in place) to ``t_end``, until the output buffers are full or, if
     ``fstate`` has the slot F_OUTPUT, until the first accepted step at t >= fstate[F_OUTPUT] (code
     FIELD_OUTPUT; a 2-slot fstate never stops for output). Returns (code, rows written). One
@@ -272,7 +274,12 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
     positions and velocities, contact forces [N] and closed flags.
 
     The interface coordinates (those the node contacts act on) must be the first free
-    coordinates, ``free_q[:s] == arange(s)`` (the Craig-Bampton order)."""
+    coordinates, ``free_q[:s] == arange(s)`` (the Craig-Bampton order).
+
+    ``cache_dt`` (CACHE_SLOTS, -1 = empty) and ``cache_inv`` (CACHE_SLOTS x n_free x n_free), if
+    given, keep K_eff^-1 of the step sizes used from one call to the next (a run split into many
+    calls for checkpoints and field outputs then forms each once); they are a function of dt
+    alone, so they change the cost of a call, never its result."""
     nf = free_q.size
     m = z.size
     s = 0
@@ -289,12 +296,19 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
     pv = np.zeros(pres_q.size)
     pa = np.zeros(pres_q.size)
     # K_eff^-1 of the free coordinates for the few step sizes a run uses
-    slots = 24
-    cache_dt = np.full(slots, -1.0)
-    cache_inv = np.zeros((slots, nf, nf))
+    slots = CACHE_SLOTS
+    if cache_dt is None:
+        cache_dt = np.full(slots, -1.0)
+    if cache_inv is None:
+        cache_inv = np.zeros((slots, nf, nf))
     cache_cols = np.zeros((slots, nf, s))           # K_eff^-1 E: the columns of the interface coordinates
     cache_block = np.zeros((slots, s, s))           # their interface rows, G_SS
     cache_next = 0
+    for c in range(slots):                          # entries kept from an earlier call
+        if cache_dt[c] > 0:
+            cache_cols[c] = np.ascontiguousarray(cache_inv[c][:, :s])
+            cache_block[c] = np.ascontiguousarray(cache_inv[c][:s, :s])
+            cache_next = (c + 1) % slots
     rows = 0
     capacity = out_time.size
     t = fstate[F_TIME]
