@@ -131,7 +131,7 @@ def mark_started(out_dir: Path, comm, digest: dict) -> None:
         meta = {"format": FORMAT, "case": digest}
         # the record first: killed in between, the directory still holds a consistent older run
         write_json_atomic(directory / MARKER, meta, sync=True, indent=1)
-        for old in [directory / POINTER, *directory.glob("state-*.npz*")]:
+        for old in [directory / POINTER, *directory.glob("*.npz*")]:     # states, a reduced model
             old.unlink(missing_ok=True)
     comm.barrier()
 
