@@ -64,9 +64,6 @@ def _output_dir_problem(path: Path, resume: bool) -> str | None:
 def load_for_run(case_path: str | Path, overrides: list[str] | None, resume: bool = False) -> Case:
     """Load and check a case for ``run`` (and ``validate``): the schema, and the CLI rules."""
     case = load_case(case_path, overrides)
-    if resume and case.tier == "modal":
-        raise CaseError(str(case_path), "--resume", "tier 'modal' has no checkpoints yet (its runs are short: run "
-                                                    "again)")
     if resume and "transient" not in case.analyses:
         raise CaseError(str(case_path), "--resume", f"only a transient analysis can be resumed; this case runs "
                                                     f"{', '.join(case.analyses)}")

@@ -1,4 +1,4 @@
-"""Results open in ParaView: a transient result (serial and on 2 ranks) and a modal result, read by
+"""Results open in ParaView: a transient result (serial and on 2 ranks, FE and modal tier) and a modal result, read by
 ParaView's own XDMF readers through pvpython on a private Xvfb display (tests/paraview_open.py):
 Warp By Vector on the displacement, the potential on the same (warped) grid, the region tags, the rigid bodies as
 their own blocks, the mode frequencies as the time values. Skipped only when pvpython or Xvfb
@@ -133,6 +133,18 @@ def test_two_rank_transient_result_in_paraview(x_display, tmp_path):
                      *[a for o in FE_TINY for a in ("--set", o)], mpi=2)
     assert result.returncode == 0, result.stderr[-2000:]
     report = open_in_paraview(x_display, tmp_path / "transient_fields.xdmf", tmp_path / "paraview_transient_2ranks.png")
+    check_transient(report, tmp_path)
+
+
+@needs_paraview
+def test_modal_tier_transient_result_in_paraview(x_display, tmp_path):
+    """The modal tier's expanded fields (x = T q at the output interval) open like the FE tier's:
+    the same checks on the same scene (one warped FE grid with displacement, potential and
+    regions, the three bodies as their own blocks)."""
+    result = run_cli("run", CASES / "usdc-fe.toml", "--out", tmp_path, "--quiet",
+                     *[a for o in [*FE_TINY, 'tier="modal"'] for a in ("--set", o)])
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = open_in_paraview(x_display, tmp_path / "transient_fields.xdmf", tmp_path / "paraview_transient_modal.png")
     check_transient(report, tmp_path)
 
 

@@ -21,8 +21,12 @@ and Python callbacks:
   predicted closure, cut-back by halving on Newton failure, growth back after cut-backs; below
   ``min`` the loop stops with a failure code (the driver turns it into NumericalFailure).
 
-The loop runs until the end time or until the output buffer is full (the driver writes the rows,
-checkpoints and calls again), so every quantity that the next chunk needs is in the state arrays.
+The loop runs until the end time, until the output buffer is full, or (when the driver asks for
+field output) right after the first accepted step at or after ``fstate[F_OUTPUT]``; the driver then
+writes the rows, expands the fields, checkpoints and calls again. Every quantity that the next
+call needs is in the state arrays (q, v, a, z, zd, zdd, istate, fstate); what else the loop keeps
+(the closed flags, the predicted closure, the K_eff^-1 of each step size) is a function of them,
+recomputed at the start of every call, so where a run is split into calls does not change it.
 """
 
 from __future__ import annotations
@@ -33,11 +37,12 @@ from numba import njit
 # integer controller state slots
 I_STEPS, I_ATTEMPTS, I_CUTBACKS, I_REFINEMENTS, I_NEWTON, I_CHANGED = range(6)
 N_ISTATE = 6
-# float controller state slots
-F_TIME, F_CAP = range(2)
-N_FSTATE = 2
+# float controller state slots: time [s], step cap after cut-backs [s], next field output [s]
+F_TIME, F_CAP, F_OUTPUT = range(3)
+N_FSTATE = 3
 # return codes
-DONE, BUFFER_FULL, STEP_FAILED = 0, 1, 2
+DONE, BUFFER_FULL, STEP_FAILED, FIELD_OUTPUT = 0, 1, 2, 3
+CACHE_SLOTS = 24        # K_eff^-1 kept for this many step sizes
 MAX_NEWTON = 20
 NEWTON_RTOL = 1e-10
 NEWTON_STOL = 1e-14
@@ -399,12 +404,15 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
         pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c,
         sn_contact, sn_coord, sn_rel, sn_area, sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref,
         beta, gamma, alpha_m, alpha_f, open_s, closed_s, change_s, min_s, growth,
-        sample_rows, out_time, out_dt, out_samples, out_drive, out_z, out_zd, out_force, out_closed, out_surface):
-    """Advance the state arrays (in place) to ``t_end`` or until the output buffers are full.
-    Returns (code, rows written). One output row per accepted step: time, dt, ``sample_rows @ q``,
-    the prescribed coordinates, body positions and velocities, contact forces [N] (magnitudes: node
-    contacts, links, then surface contacts) and closed flags, and the force vector of each surface
-    contact on its body (``out_surface``, gdim columns per surface contact).
+        sample_rows, out_time, out_dt, out_samples, out_drive, out_z, out_zd, out_force, out_closed, out_surface,
+        cache_dt=None, cache_inv=None):
+    """Advance the state arrays (in place) to ``t_end``, until the output buffers are full or, if
+    ``fstate`` has the slot F_OUTPUT, until the first accepted step at t >= fstate[F_OUTPUT] (code
+    FIELD_OUTPUT; a 2-slot fstate never stops for output). Returns (code, rows written). One output
+    row per accepted step: time, dt, ``sample_rows @ q``, the prescribed coordinates, body positions
+    and velocities, contact forces [N] (magnitudes: node contacts, links, then surface contacts) and
+    closed flags, and the force vector of each surface contact on its body (``out_surface``, gdim
+    columns per surface contact).
 
     Surface contacts: ``sn_*`` per node (its contact, interface coordinate per axis or -1 if held,
     reference relative position [m], lumped area [m^2]), ``sc_*`` per contact (body, shape 0 plane /
@@ -412,7 +420,12 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
     [Pa s/m], the body's reference position [m]).
 
     The interface coordinates (those the node and surface contacts act on) must be the first free
-    coordinates, ``free_q[:s] == arange(s)`` (the Craig-Bampton order)."""
+    coordinates, ``free_q[:s] == arange(s)`` (the Craig-Bampton order).
+
+    ``cache_dt`` (CACHE_SLOTS, -1 = empty) and ``cache_inv`` (CACHE_SLOTS x n_free x n_free), if
+    given, keep K_eff^-1 of the step sizes used from one call to the next (a run split into many
+    calls for checkpoints and field outputs then forms each once); they are a function of dt
+    alone, so they change the cost of a call, never its result."""
     nf = free_q.size
     m = z.size
     s = 0
@@ -433,12 +446,19 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
     pv = np.zeros(pres_q.size)
     pa = np.zeros(pres_q.size)
     # K_eff^-1 of the free coordinates for the few step sizes a run uses
-    slots = 24
-    cache_dt = np.full(slots, -1.0)
-    cache_inv = np.zeros((slots, nf, nf))
+    slots = CACHE_SLOTS
+    if cache_dt is None:
+        cache_dt = np.full(slots, -1.0)
+    if cache_inv is None:
+        cache_inv = np.zeros((slots, nf, nf))
     cache_cols = np.zeros((slots, nf, s))           # K_eff^-1 E: the columns of the interface coordinates
     cache_block = np.zeros((slots, s, s))           # their interface rows, G_SS
     cache_next = 0
+    for c in range(slots):                          # entries kept from an earlier call
+        if cache_dt[c] > 0:
+            cache_cols[c] = np.ascontiguousarray(cache_inv[c][:, :s])
+            cache_block[c] = np.ascontiguousarray(cache_inv[c][:s, :s])
+            cache_next = (c + 1) % slots
     rows = 0
     capacity = out_time.size
     t = fstate[F_TIME]
@@ -449,6 +469,7 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
     body_mass_dofs = np.zeros(m)
     for j in range(m):
         body_mass_dofs[j] = body_mass[j // gdim] if zfree[j] else 0.0
+    next_output = fstate[F_OUTPUT] if fstate.size > F_OUTPUT else np.inf
     while t < t_end * (1.0 - 1e-12):
         if rows >= capacity:
             fstate[F_TIME] = t
@@ -621,5 +642,8 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
             fstate[F_CAP] = dt_try * growth
             if fstate[F_CAP] >= max(open_s, closed_s):
                 fstate[F_CAP] = np.inf
+        if t >= next_output:                    # the driver expands the fields of this state
+            fstate[F_TIME] = t
+            return FIELD_OUTPUT, rows
     fstate[F_TIME] = t
     return DONE, rows

@@ -86,19 +86,26 @@ class CheckpointWriter:
 
     def write(self, state: TransientState, stepper: dict, rows_of=None) -> None:
         """Collective. ``rows_of()`` returns the number of time-series rows on disk (after flush)."""
+        fields = {k: self.layout.gather(getattr(state, k)) for k in ("u", "v", "a")}
+        arrays = dict(z=state.z, zd=state.zd, zdd=state.zdd, **fields) if self.comm.rank == 0 else None
+        self.write_arrays(state.t, arrays, stepper, rows_of)
+
+    def write_arrays(self, t_s: float, arrays: dict | None, stepper: dict, rows_of=None, meta: dict | None = None
+                     ) -> None:
+        """Collective: a checkpoint at time ``t_s`` [s] of ``arrays`` (name -> array, rank 0's are
+        stored) and the JSON-able ``stepper`` snapshot; ``meta``: more entries for the JSON."""
         if self.flush is not None:
             self.flush()
         rows = int(rows_of()) if rows_of is not None else 0
         rows = self.comm.bcast(rows, root=0)
-        fields = {k: self.layout.gather(getattr(state, k)) for k in ("u", "v", "a")}
         seq = self.seq + 1
         if self.comm.rank == 0:
             path = self._state_file(seq)
-            atomic_write(path, lambda fh: np.savez(fh, z=state.z, zd=state.zd, zdd=state.zdd, **fields), sync=True)
+            atomic_write(path, lambda fh: np.savez(fh, **arrays), sync=True)
             kill_point("checkpoint_state")
-            meta = {"format": FORMAT, "seq": seq, "t_s": state.t, "mpi_size": self.comm.size, "rows": rows,
-                    "voltage_V": self.voltage_V, "stepper": stepper, "case": self.case_digest}
-            atomic_write(self.dir / POINTER, lambda fh: _write_json(fh, meta), sync=True)
+            record = {"format": FORMAT, "seq": seq, "t_s": t_s, "mpi_size": self.comm.size, "rows": rows,
+                      "voltage_V": self.voltage_V, "stepper": stepper, "case": self.case_digest, **(meta or {})}
+            atomic_write(self.dir / POINTER, lambda fh: _write_json(fh, record), sync=True)
             old = self._state_file(self.seq)
             if self.seq and old.exists():
                 old.unlink()
@@ -124,7 +131,7 @@ def mark_started(out_dir: Path, comm, digest: dict) -> None:
         meta = {"format": FORMAT, "case": digest}
         # the record first: killed in between, the directory still holds a consistent older run
         write_json_atomic(directory / MARKER, meta, sync=True, indent=1)
-        for old in [directory / POINTER, *directory.glob("state-*.npz*")]:
+        for old in [directory / POINTER, *directory.glob("*.npz*")]:     # states, a reduced model
             old.unlink(missing_ok=True)
     comm.barrier()
 
@@ -212,13 +219,31 @@ def load_checkpoint(out_dir: Path, layout: CellLayout, case, digest: dict) -> Re
     """Read the checkpoint of ``out_dir`` on every rank; None when the run was killed before its
     first checkpoint (start again from t = 0); CaseError (exit 2) when there is none, it is
     unreadable, belongs to a different case or mesh, or lies after the case's end time."""
-    comm = layout.comm
+    found = read_checkpoint(out_dir, layout.comm, case, digest)
+    if found is None:
+        return None
+    meta, data = found
+    pointer = Path(out_dir) / CHECKPOINT_DIR / POINTER
+    try:
+        u, v, a = (layout.scatter(data[k]) for k in ("u", "v", "a"))
+    except ValueError as exc:
+        raise CaseError(str(pointer), "mesh", str(exc)) from None
+    state = TransientState(float(meta["t_s"]), u, v, a, data["z"], data["zd"], data["zdd"])
+    return Resumed(state, meta["stepper"], float(meta["voltage_V"]), int(meta["rows"]), int(meta["seq"]))
+
+
+def read_checkpoint(out_dir: Path, comm, case, digest: dict, needs: tuple[str, ...] = ()
+                    ) -> tuple[dict, dict] | None:
+    """(JSON record, arrays of its state file) of the checkpoint of ``out_dir`` on every rank, or
+    None when the run was killed before its first checkpoint; CaseError as ``load_checkpoint``.
+    ``needs``: more files of the checkpoint directory the record must name under these keys
+    (checked to exist, e.g. the modal tier's reduced model)."""
     file = case.source
     directory = Path(out_dir) / CHECKPOINT_DIR
     pointer = directory / POINTER
     verdict = None
     if comm.rank == 0:
-        verdict = _check_pointer(directory, case)
+        verdict = _check_pointer(directory, case, needs)
     verdict = comm.bcast(verdict, root=0)
     if "error" in verdict:
         raise CaseError(*verdict["error"])
@@ -237,15 +262,10 @@ def load_checkpoint(out_dir: Path, layout: CellLayout, case, digest: dict) -> Re
         with np.load(directory / f"state-{meta['seq']}.npz") as npz:
             data = {k: np.array(npz[k]) for k in npz.files}
     data = comm.bcast(data, root=0)
-    try:
-        u, v, a = (layout.scatter(data[k]) for k in ("u", "v", "a"))
-    except ValueError as exc:
-        raise CaseError(str(pointer), "mesh", str(exc)) from None
-    state = TransientState(float(meta["t_s"]), u, v, a, data["z"], data["zd"], data["zdd"])
-    return Resumed(state, meta["stepper"], float(meta["voltage_V"]), int(meta["rows"]), int(meta["seq"]))
+    return meta, data
 
 
-def _check_pointer(directory: Path, case) -> dict:
+def _check_pointer(directory: Path, case, needs: tuple[str, ...] = ()) -> dict:
     """Rank 0: {"meta", "started_only"} of the checkpoint in ``directory``, or {"error": CaseError
     arguments} (the verdict is broadcast, so every rank raises the same error)."""
     pointer, marker = directory / POINTER, directory / MARKER
@@ -262,6 +282,11 @@ def _check_pointer(directory: Path, case) -> dict:
         state = directory / f"state-{meta['seq']}.npz"
         if not state.is_file():
             return {"error": (str(pointer), "seq", f"the state file {state.name} it names is missing")}
+        for key in needs:
+            if key not in meta:
+                return {"error": (str(pointer), key, "missing in the checkpoint")}
+            if not (directory / str(meta[key])).is_file():
+                return {"error": (str(pointer), key, f"the file {meta[key]} it names is missing")}
         return {"meta": meta, "started_only": False}
     if marker.exists():
         meta, why = _read_json(marker)
