@@ -38,6 +38,8 @@ MAX_NEWTON = 40
 #: scales of the Newton unknowns in the damping test: interface displacements and dz [m], spin [rad/s]
 UNKNOWN_SCALE_M = 1e-12
 SPIN_SCALE_RAD_PER_S = 1e-4
+#: a Newton iteration whose damping finds no descent is accepted within this factor of the tolerances
+ROUND_OFF_FACTOR = 1e3
 #: the penalty's kink at first touch is rounded over this penetration [m] (a few % of the static penetration)
 ROUNDING_M = 1e-9
 DEBUG = False          # print Newton iterations (with NUMBA_DISABLE_JIT=1 only)
@@ -325,7 +327,8 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
     for r in range(nB):
         xtB[r] = xt[free[r]]
         vtB[r] = vt[free[r]]
-    force_scale = max(preload, 1e-30)
+    # force scale of the step: the preload, or with none (a rotor let go) the contact forces of the predictor
+    force_scale = max(preload, 1e-3 * rotor_mass * 9.81)
     torque_scale = max(abs(load_torque), mu_d * fact * force_scale * np.max(rho), 1e-30)
     converged = False
     its = 0
@@ -395,6 +398,7 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
                 break
             lam *= 0.5
         lam_last = lam
+        stalled = lam < 1e-3
         uB[:] = u_trial
         dd = dd_trial
         ds = ds_trial
@@ -402,6 +406,10 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
         Ru[:] = Ru_trial
         Rz = Rz_t
         Rs = Rs_t
+        if stalled and res < ROUND_OFF_FACTOR:
+            # no descent left within a few of the tolerances: the residual is at its round-off floor
+            converged = True
+            break
     dz = dz_t + dd
     if not converged:
         return False, its
