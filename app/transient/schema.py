@@ -263,7 +263,8 @@ class LoadSection:
 @dataclass(frozen=True)
 class SteadyStateSection:
     """Stop a run once a rotor turns steadily: the mean angular velocity over one drive period changes by less
-    than ``relative_tolerance`` over ``window_cycles`` periods (a prescribed spin: the mean friction torque)."""
+    than ``relative_tolerance`` over ``window_cycles`` periods (a prescribed or held spin: the mean friction
+    torque)."""
 
     body: str = param(doc="rigid body whose first rotation is watched (the rotor)")
     window_cycles: int = param(20, ge=2, doc="periods over which the cycle mean may change by the tolerance")
@@ -322,9 +323,8 @@ class TransientSection:
             if body is None:
                 raise CaseError(file, f"{prefix}.steady_state.body",
                                 f"unknown rigid body {self.steady_state.body!r} (bodies: {', '.join(names) or 'none'})")
-            if not body.rotations or body.rotations[0].motion == "fixed":
-                raise CaseError(file, f"{prefix}.steady_state.body",
-                                f"body {body.name!r} has no turning rotation to watch")
+            if not body.rotations:
+                raise CaseError(file, f"{prefix}.steady_state.body", f"body {body.name!r} has no rotation to watch")
         contact_names = [c.name for c in self.contacts]
         for i, name in enumerate(contact_names):
             if name in contact_names[:i]:
