@@ -3,8 +3,9 @@
 Sign conventions (used by ``app.transient``):
 
 - The rigid obstacle's outward unit normal ``n`` points from the obstacle towards the deformable
-  body. The normal gap g = (y - p) . n for a plane through p, g = |y - c| - R for a sphere, with
-  y = x + u the current position of a surface point; g < 0 is penetration.
+  body. The normal gap g = (y - p) . n for a plane through p, g = |y - c| - R for a sphere,
+  g = (rho - R - h tan(alpha)) cos(alpha) for a solid cone (see :func:`cone_gap`), with y = x + u
+  the current position of a surface point; g < 0 is penetration.
 - The contact pressure is p = < k (-g) + c (-dg/dt) > H(-g) >= 0 (Macaulay bracket <.>: no
   adhesion); the traction on the deformable surface is p n (+ friction), the force on the rigid
   body is minus its integral.
@@ -17,6 +18,8 @@ translation: the assembler needs only the tangent of :func:`contact_residual` wi
 """
 
 from __future__ import annotations
+
+import math
 
 import ufl
 
@@ -58,6 +61,28 @@ def sphere_gap_from_pole(e, pole, radius):
 def sphere_normal(y, center, radius):
     d = y - center
     return d / ufl.sqrt(ufl.dot(d, d))
+
+
+def cone_gap(d, axis, radius, half_angle_rad):
+    """Normal gap [m] of the points ``d`` (relative to a reference point p on the axis) to a solid
+    cone about the unit ``axis`` through p whose conical face has ``radius`` at p and makes
+    ``half_angle_rad`` (alpha) with the axis, the radius growing along ``axis``: with h = d.a and
+    rho = |d - h a|, the face's radius at height h is R + h tan(alpha), and the distance normal to
+    the face is g = (rho - R - h tan(alpha)) cos(alpha) (exact for points whose foot lies on the
+    face, i.e. everywhere near it). Formed from d = y - p (small differences), so rho ~ R rounds at
+    eps R (3e-18 m at 13 mm), not at eps |y|."""
+    h = ufl.dot(d, axis)
+    radial = d - h * axis
+    rho = ufl.sqrt(ufl.dot(radial, radial))
+    return (rho - radius - h * math.tan(half_angle_rad)) * math.cos(half_angle_rad)
+
+
+def cone_normal(d, axis, half_angle_rad):
+    """Outward unit normal of the cone face of :func:`cone_gap` at the points ``d``:
+    n = cos(alpha) e_rho - sin(alpha) a, e_rho the unit radial direction (normal to the axis)."""
+    radial = d - ufl.dot(d, axis) * axis
+    e_rho = radial / ufl.sqrt(ufl.dot(radial, radial))
+    return math.cos(half_angle_rad) * e_rho - math.sin(half_angle_rad) * axis
 
 
 def normal_pressure(gap, gap_rate, stiffness, damping):

@@ -25,8 +25,9 @@ LUMPED = CASES / "usdc-lumped.toml"
 TRANSDUCER = CASES / "usdc-transducer.toml"
 STRIP = CASES / "validation" / "strip-friction-drive.toml"
 MOTOR = CASES / "wwusm-motor.toml"
-_ROTOR = "transient.bodies[0]"
 _CONE = "transient.contacts[0]"
+_ROTOR = "transient.bodies[0]"
+_SPIN = "transient.bodies[0].rotations[0]"
 _WAVE = "transient.base_motions[0]"
 # the drill scene on the 4 mm test mesh, 0.2 ms: if a bad input slipped through, the run stays short
 FE_TINY = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic_mesh_size_m=0.0025",
@@ -126,7 +127,6 @@ SET_INPUTS = [
     (STRIP, ['supports=[{facets=["bottom"], components=["x"]}]'], f"{_WAVE}.facets"),
     # the motor: cone contact, rotor, steady state (refused when the case is read, before any mesh)
     (MOTOR, [f"{_CONE}.axis=[0.0, 1.0, 0.0]"], f"{_CONE}.axis"),
-    (MOTOR, [f"{_CONE}.axis=[0.0, 0.0, 2.0]"], f"{_CONE}.axis"),
     (MOTOR, [f"{_CONE}.half_angle_deg=95"], f"{_CONE}.half_angle_deg"),
     (MOTOR, [f'{_CONE}.shape="plane"'], f"{_CONE}.normal"),
     (MOTOR, [f"{_CONE}.damping=1e6"], f"{_CONE}.damping"),
@@ -138,10 +138,32 @@ SET_INPUTS = [
     (MOTOR, [f'{_ROTOR}.rotations[0].motion="fixed"', f"{_ROTOR}.rotations[0].brake_N_m_s_per_rad=0.1"],
      f"{_ROTOR}.rotations[0].brake_N_m_s_per_rad"),
     (MOTOR, ['transient.scheme.kind="generalized_alpha"'], "transient.scheme.kind"),
-    (MOTOR, ['transient.steady_state.body="stator"'], "transient.steady_state.body"),
-    (MOTOR, ["transient.steady_state.relative_tolerance=0"], "transient.steady_state.relative_tolerance"),
     (MOTOR, ["reduction.ring_points=4"], "reduction.ring_points"),
     (MOTOR, ["transient.loads.gravity_m_per_s2=[0.0, 0.0, -9.81]"], "transient.loads"),
+    # cone obstacle, brake, steady-state stop (the motor case: caught before its mesh is built)
+    (MOTOR, [f"{_CONE}.axis=[0.0, 0.0, 2.0]"], f"{_CONE}.axis"),
+    (MOTOR, [f"{_CONE}.axis=[0.0, 1.0]"], f"{_CONE}.axis"),
+    (MOTOR, [f"{_CONE}.half_angle_deg=90.0"], f"{_CONE}.half_angle_deg"),
+    (MOTOR, [f"{_CONE}.half_angle_deg=0.0"], f"{_CONE}.half_angle_deg"),
+    (MOTOR, [f"{_CONE}.radius_m=-0.0128"], f"{_CONE}.radius_m"),
+    (MOTOR, [f'{_CONE}.axis="z"'], f"{_CONE}.axis"),
+    (STRIP, ['transient.contacts[0].shape="cone"'], "transient.contacts[0].radius_m"),
+    (MOTOR, [f"{_SPIN}.brake_N_m_s_per_rad=-1e-6"], f"{_SPIN}.brake_N_m_s_per_rad"),
+    (MOTOR, [f'{_SPIN}.motion="constant_rate"', f"{_SPIN}.brake_N_m_s_per_rad=1e-6"],
+     f"{_SPIN}.brake_N_m_s_per_rad"),
+    (MOTOR, ['transient.steady_state.body="stator"'], "transient.steady_state.body"),
+    (MOTOR, ["transient.steady_state.window_cycles=1"], "transient.steady_state.window_cycles"),
+    (MOTOR, ["transient.steady_state.relative_tolerance=0"], "transient.steady_state.relative_tolerance"),
+    (MOTOR, ["transient.steady_state.relative_tolerance=1.5"], "transient.steady_state.relative_tolerance"),
+    (MOTOR, ["transient.steady_state.min_cycles=0"], "transient.steady_state.min_cycles"),
+    (MOTOR, ["transient.steady_state.period_count=3"], "transient.steady_state.period_count"),
+    (MOTOR, ["transient.bodies[0].rotations=[]"], "transient.steady_state.body"),
+    # ... and those that need the mesh (the 2D strip: cheap)
+    (STRIP, ['transient.contacts[0].shape="cone"', "transient.contacts[0].radius_m=0.01",
+             "transient.contacts[0].axis=[0.0, 0.0, 1.0]", "transient.contacts[0].half_angle_deg=15.0"],
+     "transient.contacts[0].shape"),
+    (STRIP, ["transient.contacts=[]", 'transient.bodies[0].rotations=[{axis="plane", motion="constant_rate"}]',
+             'transient.steady_state={body="slider"}'], "transient.steady_state.body"),
 ]
 # --set syntax: the line names --set and the key
 SYNTAX_INPUTS = [(BAR, ["modal.n_modes"], "modal.n_modes"), (BAR, ["modal..n_modes=3"], "modal..n_modes=3"),

@@ -46,15 +46,20 @@ class ObstacleShape:
     """Shape of the rigid body seen by an FE surface: ``"plane"`` with outward unit ``normal``
     through the body position + ``offset_m``, or ``"sphere"`` of ``radius_m`` centred there; for a
     sphere an optional unit ``normal`` is the pole, the direction from the centre towards where
-    contact happens, about which the gap is formed without round-off (large radii)."""
+    contact happens, about which the gap is formed without round-off (large radii). ``"cone"``: a
+    solid cone about the unit ``axis`` through the body position + ``offset_m``, whose conical face
+    has ``radius_m`` there and makes ``half_angle_deg`` with the axis, its radius growing along
+    ``axis`` (:func:`forms.contact.cone_gap`; 3D only)."""
 
     kind: str
     normal: tuple[float, ...] = ()
     radius_m: float = 0.0
     offset_m: tuple[float, ...] = ()
+    axis: tuple[float, ...] = ()
+    half_angle_deg: float = 0.0
 
     def __post_init__(self):
-        if self.kind not in ("plane", "sphere"):
+        if self.kind not in ("plane", "sphere", "cone"):
             raise ValueError(f"unknown obstacle shape {self.kind!r}")
         unit = bool(self.normal) and np.isclose(np.linalg.norm(self.normal), 1.0)
         if self.kind == "plane" and not unit:
@@ -63,6 +68,17 @@ class ObstacleShape:
             raise ValueError("a sphere obstacle needs a positive radius")
         if self.kind == "sphere" and self.normal and not unit:
             raise ValueError("the pole of a sphere obstacle must be a unit vector")
+        if self.kind == "cone":
+            if len(self.axis) != 3 or not np.isclose(np.linalg.norm(self.axis), 1.0):
+                raise ValueError("a cone obstacle needs a unit axis with 3 components")
+            if not self.radius_m >= 0:
+                raise ValueError("a cone obstacle needs a radius >= 0 at its reference point")
+            if not 0.0 < self.half_angle_deg < 90.0:
+                raise ValueError("the half angle of a cone obstacle must lie in (0, 90) degrees")
+
+    @property
+    def half_angle_rad(self) -> float:
+        return math.radians(self.half_angle_deg)
 
 
 class MidpointFields:
@@ -88,7 +104,8 @@ class SurfaceContact(ForceColumns):
     point) makes the obstacle rotate with the body: the relative velocity of a surface point is
     v - v_body - omega x r, r = y - p_body, so friction sees the spin and its torque acts on the
     body. The obstacle must be a body of revolution about every such axis (a sphere centred on the
-    reference point, a plane normal to the axis in 3D): its gap does not change with the angle, and
+    reference point, a plane normal to the axis in 3D, a cone about the axis through the reference
+    point): its gap does not change with the angle, and
     omega x r has no normal component, so the rotation enters through friction only."""
 
     def __init__(self, name: str, fe: LinearFE, facet_tags, tag: int, body: str, shape: ObstacleShape,
@@ -127,9 +144,15 @@ class SurfaceContact(ForceColumns):
         # y - point, with y = x + u and point = reference + dz + offset (see above)
         relative = (x - self.body_reference - offset) + (u - self.body_displacement)
         zero = ufl.as_vector((0.0,) * gdim)
+        if shape.kind == "cone" and gdim != 3:
+            raise ValueError(f"contact {name!r}: a cone obstacle needs a 3D model")
         if shape.kind == "plane":
             normal = ufl.as_vector(shape.normal)
             gap = cf.plane_gap(relative, zero, normal)
+        elif shape.kind == "cone":
+            axis = ufl.as_vector(shape.axis)
+            normal = cf.cone_normal(relative, axis, shape.half_angle_rad)
+            gap = cf.cone_gap(relative, axis, shape.radius_m, shape.half_angle_rad)
         elif shape.normal:
             normal = cf.sphere_normal(relative, zero, shape.radius_m)
             # e = y - (centre + R pole) = (x - pole point at the reference) + (u - dz): the pole
@@ -186,13 +209,18 @@ class SurfaceContact(ForceColumns):
     def _check_revolution(self, axes: np.ndarray) -> None:
         shape = self.shape
         for a in axes:
+            offset = np.zeros(3)
+            offset[: len(shape.offset_m)] = shape.offset_m or ()
             if shape.kind == "plane":
                 normal = np.zeros(3)
                 normal[: len(shape.normal)] = shape.normal
                 ok = len(shape.normal) == 3 and np.linalg.norm(np.cross(a, normal)) < 1e-12
+            elif shape.kind == "cone":
+                # invariant under rotations about its own axis, when that axis is the rotation
+                # axis through the reference point
+                ok = (np.linalg.norm(np.cross(a, shape.axis)) < 1e-12
+                      and np.linalg.norm(np.cross(a, offset)) < 1e-15)
             else:
-                offset = np.zeros(3)
-                offset[: len(shape.offset_m)] = shape.offset_m or ()
                 ok = np.linalg.norm(np.cross(a, offset)) < 1e-15
             if not ok:
                 raise ValueError(f"contact {self.name!r}: the {shape.kind} obstacle is not a body of revolution "
@@ -293,10 +321,28 @@ class SurfaceContact(ForceColumns):
         if self.shape.kind == "plane":
             n = np.asarray(self.shape.normal)
             return (y - point) @ n, rel_v @ n
+        if self.shape.kind == "cone":
+            return self._cone_gaps(x, u[nodes], rel_v, point)
         d = y - point
         dist = np.linalg.norm(d, axis=1)
         return dist - self.shape.radius_m, np.einsum("ij,ij->i", d / dist[:, None], rel_v)
 
+    def _cone_gaps(self, x, u_nodes, rel_v, body_position):
+        """(gap [m], gap rate [m/s]) of points x + u to the cone (forms.contact.cone_gap), with the
+        position relative to the reference point formed from small differences as in the forms."""
+        shape = self.shape
+        a = np.asarray(shape.axis)
+        alpha = shape.half_angle_rad
+        reference = self.body_reference.value
+        d = (x - reference) + (u_nodes - (np.asarray(body_position) - reference))
+        if shape.offset_m:
+            d = d - np.asarray(shape.offset_m)
+        h = d @ a
+        radial = d - np.outer(h, a)
+        rho = np.linalg.norm(radial, axis=1)
+        gap = (rho - shape.radius_m - h * math.tan(alpha)) * math.cos(alpha)
+        normal = math.cos(alpha) * radial / rho[:, None] - math.sin(alpha) * a
+        return gap, np.einsum("ij,ij->i", normal, rel_v)
 
     # ------------------------------------------------------------ interaction protocol
     kind = "surface"

@@ -228,8 +228,15 @@ class CoupledSystem:
         """The Jacobian data with every FE contact block zero, as ``_jacobian_callback`` builds it
         when no FE contact is active."""
         s_count, m = self.contact_global.size, self.m
-        Kzz = self._rigid_block(np.diag((1 - self.scheme.alpha_m) * self.c_acc * self.rigid.mass_diagonal))
+        Kzz = self._rigid_block(np.diag(self._rigid_diagonal()))
         self._set_jacobian(np.zeros((s_count, s_count)), np.zeros((s_count, m)), np.zeros((m, s_count)), Kzz)
+
+    def _rigid_diagonal(self) -> np.ndarray:
+        """d r_z / d z_{n+1} of the bodies alone: inertia (1 - alpha_m) c_acc m and brake
+        (1 - alpha_f) c_vel c (the brake acts on the mid-point rate)."""
+        s = self.scheme
+        return ((1 - s.alpha_m) * self.c_acc * self.rigid.mass_diagonal
+                + (1 - s.alpha_f) * self.c_vel * self.rigid.damping_diagonal)
 
     def _begin_step(self, state: TransientState, dt: float) -> None:
         s, fe, rigid = self.scheme, self.fe, self.rigid
@@ -251,7 +258,8 @@ class CoupledSystem:
         self.zdd_hat = acceleration(0.0, 0.0, zd0, zdd0, dt, s)
         self.rigid_force_ext = rigid.external_force_N(self.t_mid)
         self.rigid_inertia_const = rigid.mass_diagonal * ((1 - s.alpha_m) * self.zdd_hat + s.alpha_m * zdd0)
-        rigid_scale_sq = float(np.sum(self.rigid_force_ext**2 + (rigid.mass_diagonal * zdd0) ** 2))
+        rigid_scale_sq = float(np.sum(self.rigid_force_ext**2 + (rigid.mass_diagonal * zdd0) ** 2
+                                      + rigid.brake_force_N(zd0) ** 2))
         self._force_scale = float(np.sqrt(scale_sq + rigid_scale_sq))
         # Below ~eps |terms| the residual is round-off: never ask for less. The rigid inertia is
         # formed from z / (beta dt^2)-sized terms; the FE terms are physical forces (see above).
@@ -374,6 +382,8 @@ class CoupledSystem:
         forces = {}
         r_z = self.rigid.mass_diagonal * (1 - self.scheme.alpha_m) * self.zdd1
         r_z = r_z + self.rigid.mass_diagonal * self.scheme.alpha_m * self.state0.zdd - self.rigid_force_ext
+        # brakes: a load -c omega at the generalised mid-point, like every other force of the step
+        r_z = r_z - self.rigid.brake_force_N(self.zd_mid)
         rc_S = np.zeros(self.contact_global.size)
         for c in self.interactions:
             forces[c.name] = c.add_residual(self, rc_S, r_z, r)
@@ -433,7 +443,7 @@ class CoupledSystem:
         Kss = np.zeros((s_count, s_count))
         B = np.zeros((s_count, m))
         L = np.zeros((m, s_count))
-        Kzz = np.diag((1 - self.scheme.alpha_m) * self.c_acc * self.rigid.mass_diagonal)
+        Kzz = np.diag(self._rigid_diagonal())
         for c in self.interactions:
             if c.fe_coupled:
                 c.add_tangent(self, Kss, B, L, Kzz)
@@ -471,7 +481,7 @@ class CoupledSystem:
         dt |a_0 error| / 2 in the trapezoidal rule)."""
         rigid = self.rigid
         self.z_mid, self.zd_mid = state.z, state.zd
-        r_z = -rigid.external_force_N(state.t)
+        r_z = -rigid.external_force_N(state.t) - rigid.brake_force_N(state.zd)
         for c in self.interactions:
             if not c.fe_coupled:
                 c.add_residual(self, np.zeros(0), r_z, None)

@@ -45,6 +45,7 @@ from app.transient.interactions import BuildContext, build_interactions
 from app.transient.motions import DirichletData, build_motions
 from app.transient.rigid import RigidBody, RigidSet, constant_rate_motion
 from app.transient.state import TransientState
+from app.transient.steady import SteadyStateWatch
 from app.transient.stepper import TimeStepper
 from forms.kinematics import volume_weight
 
@@ -187,7 +188,8 @@ class TransientModel:
                          rotation_axes=tuple(r.axis for r in rotations),
                          inertia_kg_m2=tuple(r.inertia_kg_m2 for r in rotations), angle_rad=angles,
                          angular_velocity_rad_per_s=rates,
-                         applied_torque_N_m=(lambda t, m=torque: m) if torque is not None else None)
+                         applied_torque_N_m=(lambda t, m=torque: m) if torque is not None else None,
+                         brake_N_m_s_per_rad=tuple(r.brake_N_m_s_per_rad for r in rotations))
 
     # ----------------------------------------------------------- initial state
     def initial_state(self) -> tuple[TransientState, float]:
@@ -341,7 +343,9 @@ def build(case, comm, log) -> TransientModel:
             vector = getattr(c, key, None)
             if vector is not None and not np.any(np.asarray(vector, dtype=float)):
                 raise CaseError(file, f"transient.contacts[{i}].{key}", "must not be the zero vector")
-    return TransientModel(case, comm, log)
+    tm = TransientModel(case, comm, log)
+    tm.steady_watch = steady_state_watch(tm, case)
+    return tm
 
 
 def run(case, out_dir, comm, log, resume: bool = False) -> dict:
@@ -411,15 +415,16 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     s = cfg.steps
     sizes = StepSizes(open_s=s.open_s, closed_s=s.closed_s, change_s=s.change_s, min_s=s.min_s)
     progress = Progress(comm, t_start, cfg.end_time_s)
-    stepper = TimeStepper(system, StepController(sizes), progress=progress)
+    watch = tm.steady_watch
+    stepper = TimeStepper(system, StepController(sizes), progress=progress, watch=watch)
     if resumed is not None:
         stepper.restore(resumed.stepper)
     checkpoint = CheckpointWriter(out_dir, layout, cfg.checkpoint_interval_steps, voltage, digest, flush=series.flush,
                                   seq=resumed.seq if resumed is not None else 0)
     start = time.perf_counter()
     try:
-        stepper.run(state, cfg.end_time_s, on_step=on_step,
-                    checkpoint=_SeriesCheckpoint(checkpoint, series))
+        final = stepper.run(state, cfg.end_time_s, on_step=on_step,
+                            checkpoint=_SeriesCheckpoint(checkpoint, series))
     finally:
         progress.close()
         series.close()
@@ -427,8 +432,8 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
             fields.close()
     wall = time.perf_counter() - start
     results = dict(stepper.stats.as_dict())
-    simulated = cfg.end_time_s - t_start
-    results.update({"simulated_time_s": cfg.end_time_s, "resumed_from_s": t_start if resumed else None,
+    simulated = final.t - t_start
+    results.update({"simulated_time_s": final.t, "resumed_from_s": t_start if resumed else None,
                     "wall_s_per_simulated_ms": wall / (simulated * 1e3) if simulated > 0 else None,
                     "drive_voltage_V": voltage, "drive_frequency_Hz": cfg.drive.frequency_Hz,
                     "initial_state": cfg.initial_state, "time_series": h5_path.name,
@@ -437,6 +442,11 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                     "field_outputs": (fields.written if fields is not None else 0)})
     log(f"transient: {results['steps']} steps, {results['newton_iterations']} Newton iterations, "
         f"{results['cutbacks']} cut-backs, {results['factorisations']} factorisations, {wall:.1f} s wall")
+    if watch is not None:
+        results["steady_state"] = watch.results()
+        log(f"transient: {'steady' if watch.steady else 'not steady'} after {len(watch.means)} periods: "
+            f"cycle-mean speed {results['steady_state']['cycle_mean_speed_rad_per_s']} rad/s, "
+            f"contact torque {results['steady_state']['cycle_mean_torque_N_m']} N m")
     # Contact summary and statistics from the whole time series (a resumed run's too), rank 0.
     summaries = statistics_from_file(h5_path, case) if comm.rank == 0 else None
     results["contacts"], results["statistics"] = comm.bcast(summaries, root=0)
@@ -451,6 +461,26 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                           *results.get("plots", [])]
     system.destroy()
     return results
+
+
+def steady_state_watch(tm: TransientModel, case) -> SteadyStateWatch | None:
+    """The watch of ``[transient.steady_state]`` (None without it): the body's first rotation, its
+    speed if free, else the torque about it of the surface contacts on the body."""
+    cfg = case.transient.steady_state
+    if cfg is None:
+        return None
+    rigid = tm.rigid
+    body = rigid.body(cfg.body)
+    first = rigid.rotation_dofs(cfg.body).start
+    free = bool(rigid.free_mask[first])
+    sources = [(c.name, tm.gdim) for c in tm.system.interactions
+               if c.kind == "surface" and c.body == cfg.body and c.rotation_axes.size]
+    if not free and not sources:
+        raise CaseError(case.source, "transient.steady_state.body",
+                        f"the rotation of body {body.name!r} is prescribed and no surface contact acts on it: "
+                        "no torque to watch")
+    return SteadyStateWatch(cfg.body, first, sources, free, case.transient.drive.frequency_Hz, cfg.window_cycles,
+                            cfg.relative_tolerance, cfg.min_cycles)
 
 
 class _SeriesCheckpoint:

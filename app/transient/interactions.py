@@ -101,12 +101,21 @@ def build_surface(section, prefix: str, ctx: BuildContext):
     from app.transient.contact import ObstacleShape, SurfaceContact
 
     tag = facet_group_tag(ctx.model.mesh_data.facet_names, section.facets, ctx.file, f"{prefix}.facets")
-    normal = _vector(section, "normal", section.normal, ctx, prefix)
-    try:
-        shape = (ObstacleShape("plane", normal=tuple(normal)) if section.shape == "plane"
-                 else ObstacleShape("sphere", radius_m=section.radius_m, normal=tuple(normal or ())))
-    except ValueError as exc:
-        raise CaseError(ctx.file, f"{prefix}.normal", str(exc)) from None
+    if section.shape == "cone":
+        if ctx.gdim != 3:
+            raise CaseError(ctx.file, f"{prefix}.shape", f"a cone obstacle needs a 3D model (this one is {ctx.gdim}D)")
+        try:
+            shape = ObstacleShape("cone", radius_m=section.radius_m, axis=tuple(section.axis),
+                                  half_angle_deg=section.half_angle_deg)
+        except ValueError as exc:
+            raise CaseError(ctx.file, f"{prefix}.axis", str(exc)) from None
+    else:
+        normal = _vector(section, "normal", section.normal, ctx, prefix)
+        try:
+            shape = (ObstacleShape("plane", normal=tuple(normal)) if section.shape == "plane"
+                     else ObstacleShape("sphere", radius_m=section.radius_m, normal=tuple(normal or ())))
+        except ValueError as exc:
+            raise CaseError(ctx.file, f"{prefix}.normal", str(exc)) from None
     friction = section.friction.friction() if section.friction is not None else None
     axes = ctx.rigid.body(section.body).axis_vectors if ctx.rigid is not None else None
     try:

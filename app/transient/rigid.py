@@ -45,7 +45,10 @@ class RigidBody:
     body's coordinates (translations then angles); only the entries flagged in ``prescribed_axes``
     are used; a body with every coordinate prescribed and no motion is a fixed obstacle.
     ``applied_force_N`` returns the external force vector at time t (without gravity, which is
-    ``mass_kg * gravity_m_per_s2``), ``applied_torque_N_m`` the torques about the rotation axes."""
+    ``mass_kg * gravity_m_per_s2``), ``applied_torque_N_m`` the torques about the rotation axes.
+    ``brake_N_m_s_per_rad`` (one per rotation axis, default 0) is a viscous brake: a torque
+    -brake * angular velocity about that axis, on top of the applied torque (a load that grows
+    with speed; constant torque T against a brake c gives the steady speed T / c)."""
 
     name: str
     mass_kg: float
@@ -60,6 +63,7 @@ class RigidBody:
     angle_rad: tuple[float, ...] | None = None
     angular_velocity_rad_per_s: tuple[float, ...] | None = None
     applied_torque_N_m: Callable[[float], np.ndarray] | None = None
+    brake_N_m_s_per_rad: tuple[float, ...] | None = None
     free_axes_mask: np.ndarray = field(init=False)
 
     def __post_init__(self):
@@ -77,8 +81,13 @@ class RigidBody:
         self.angular_velocity_rad_per_s = np.asarray(
             self.angular_velocity_rad_per_s if self.angular_velocity_rad_per_s is not None else [0.0] * n_rot,
             dtype=float)
+        self.brake_N_m_s_per_rad = np.asarray(
+            self.brake_N_m_s_per_rad if self.brake_N_m_s_per_rad is not None else [0.0] * n_rot, dtype=float)
+        if np.any(self.brake_N_m_s_per_rad < 0):
+            raise ValueError(f"rigid body {self.name!r}: a brake must be >= 0")
         for label, arr in (("inertia_kg_m2", self.inertia_kg_m2), ("angle_rad", self.angle_rad),
-                           ("angular_velocity_rad_per_s", self.angular_velocity_rad_per_s)):
+                           ("angular_velocity_rad_per_s", self.angular_velocity_rad_per_s),
+                           ("brake_N_m_s_per_rad", self.brake_N_m_s_per_rad)):
             if arr.size != n_rot:
                 raise ValueError(f"rigid body {self.name!r}: {label} needs {n_rot} entries (one per rotation axis)")
         n = self.n_dofs
@@ -111,8 +120,14 @@ class RigidBody:
     def inertia_diagonal(self) -> np.ndarray:
         return np.concatenate([np.full(self.gdim, float(self.mass_kg)), self.inertia_kg_m2])
 
+    def damping_diagonal(self) -> np.ndarray:
+        """Viscous coefficients per coordinate: 0 on the translations, the brakes [N m s/rad] on
+        the angles (the load is -damping * rate)."""
+        return np.concatenate([np.zeros(self.gdim), self.brake_N_m_s_per_rad])
+
     def external_force_N(self, t: float) -> np.ndarray:
-        """Generalised external load: force [N] (incl. gravity), then torques [N m]."""
+        """Generalised external load: force [N] (incl. gravity), then torques [N m]; without the
+        brake, which depends on the rate (:meth:`RigidSet.brake_force_N`)."""
         force = self.mass_kg * self.gravity_m_per_s2
         if self.applied_force_N is not None:
             force = force + np.asarray(self.applied_force_N(t), dtype=float)
@@ -174,6 +189,9 @@ class RigidSet:
         self.mass_diagonal = (np.concatenate([b.inertia_diagonal() for b in bodies]) if bodies
                               else np.zeros(0))
         self.free_mask = np.concatenate([b.free_axes_mask for b in bodies]) if bodies else np.zeros(0, bool)
+        # brakes act on free coordinates only (a prescribed one is not loaded by anything)
+        damping = [b.damping_diagonal() for b in bodies]
+        self.damping_diagonal = np.concatenate(damping) * self.free_mask if bodies else np.zeros(0)
 
     def body(self, name: str) -> RigidBody:
         return self.bodies[self.index[name]]
@@ -208,9 +226,14 @@ class RigidSet:
             sl = self.all_dofs(b.name)
             inertia = b.inertia_diagonal()
             loaded = inertia > 0
-            a[sl][loaded] = b.external_force_N(t0)[loaded] / inertia[loaded]
+            load = b.external_force_N(t0) - b.damping_diagonal() * v[sl]
+            a[sl][loaded] = load[loaded] / inertia[loaded]
         self.apply_prescribed(t0, z, v, a)
         return z, v, a
+
+    def brake_force_N(self, rates: np.ndarray) -> np.ndarray:
+        """Generalised brake load (torques about the free axes) [N m] at the packed ``rates``."""
+        return -self.damping_diagonal * rates
 
     def external_force_N(self, t: float) -> np.ndarray:
         if not self.bodies:

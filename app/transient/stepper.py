@@ -46,7 +46,8 @@ class EnergyAccount:
     """Mechanical energy of a state and the work of external loads, for balance checks.
 
     Energy = 1/2 v.Mv + 1/2 u.Ku (FE) + 1/2 m |zd|^2 + 1/2 J omega^2 (rigid) + penalty energies; the work of FE
-    loads and rigid-body forces (incl. gravity) is accumulated with the trapezoidal rule."""
+    loads and rigid-body forces (incl. gravity and brakes, whose work is negative) is
+    accumulated with the trapezoidal rule."""
 
     def __init__(self, system: CoupledSystem):
         self.system = system
@@ -81,7 +82,8 @@ class EnergyAccount:
     def add_work(self, old: TransientState, new: TransientState) -> None:
         sysm = self.system
         dz = (new.z - old.z) * sysm.rigid.free_mask
-        f0, f1 = sysm.rigid.external_force_N(old.t), sysm.rigid.external_force_N(new.t)
+        f0 = sysm.rigid.external_force_N(old.t) + sysm.rigid.brake_force_N(old.zd)
+        f1 = sysm.rigid.external_force_N(new.t) + sysm.rigid.brake_force_N(new.zd)
         self.work_J += 0.5 * float((f0 + f1) @ dz)
         if sysm.fe is not None and sysm.fe.loads:
             n = sysm.n_fe
@@ -100,7 +102,9 @@ class TimeStepper:
     of time, dt, rigid-body motion, contact forces, optional energies)."""
 
     def __init__(self, system: CoupledSystem, controller: StepController, exports=(), track_energy=False,
-                 progress=None):
+                 progress=None, watch=None):
+        """``watch`` (optional, :class:`app.transient.steady.SteadyStateWatch`) ends the run at a
+        rotor's steady state; its cycle means are part of the checkpoint snapshot."""
         self.system = system
         self.controller = controller
         self.monitor = ContactMonitor(system)
@@ -108,6 +112,7 @@ class TimeStepper:
         self.energy = EnergyAccount(system) if track_energy else None
         self.progress = progress
         self.stats = RunStatistics()
+        self.watch = watch
         self.changed = False                # did the last accepted step change the contact set?
         # energy each interaction has dissipated since t = 0 [J]: its damping and friction power,
         # evaluated where the scheme evaluates forces (the step's generalised mid-point), integrated
@@ -136,7 +141,8 @@ class TimeStepper:
                 "factorisations": self._factorisations(),
                 "dissipated_J": dict(self.dissipated_J), "dissipation_W": dict(self.dissipation_W),
                 "statistics": {k: v for k, v in stats.as_dict().items() if k not in _DERIVED},
-                "failure_reasons": {str(k): v for k, v in stats.failure_reasons.items()}}
+                "failure_reasons": {str(k): v for k, v in stats.failure_reasons.items()},
+                "steady_state": self.watch.snapshot() if self.watch is not None else None}
 
     def restore(self, snap: dict) -> None:
         ctl, stats = self.controller, self.stats
@@ -150,6 +156,8 @@ class TimeStepper:
         for key, value in snap["statistics"].items():
             setattr(stats, key, value)
         stats.failure_reasons = {int(k): v for k, v in snap["failure_reasons"].items()}
+        if self.watch is not None and snap.get("steady_state") is not None:
+            self.watch.restore(snap["steady_state"])
 
     def _factorisations(self) -> int:
         cache = self.system.cache
@@ -169,7 +177,7 @@ class TimeStepper:
         status = self.monitor.status(state)
         if self.energy is not None:
             self.energy.initial = self.energy.energy_J(state)
-        while state.t < t_end_s * (1 - 1e-12):
+        while state.t < t_end_s * (1 - 1e-12) and not (self.watch is not None and self.watch.steady):
             dt = ctl.propose(status, self.changed)
             while True:
                 dt_try = self._step_size(dt, state.t, t_end_s)
@@ -197,6 +205,8 @@ class TimeStepper:
                 export.write(rec)
             if on_step is not None:
                 on_step(rec)
+            if self.watch is not None:
+                self.watch.update(rec)
             state, status, self.changed = new_state, new_status, changed    # shift state
             ctl.accepted(dt_try)                                            # adapt dt
             stats.steps += 1

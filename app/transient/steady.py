@@ -1,0 +1,117 @@
+"""Steady-state stop of a transient run (``[transient.steady_state]``): a rotor turns steadily once
+the mean of its angular velocity over one drive period (its "cycle mean") stops changing.
+
+:class:`SteadyStateWatch` integrates, per drive period [k T, (k + 1) T) (T = 1 / f_drive, k
+counted from t = 0; the period of the run's first step, entered late, is left out), the watched
+body's first angular velocity [rad/s] and the torque of its surface contacts about that axis [N m]
+with the trapezoidal rule over the accepted steps (a step
+that crosses a period boundary is split there by linear interpolation), so the means do not depend
+on whether the steps fit the period. The watched quantity is the speed for a free rotation and the
+contact (friction) torque for a prescribed or held one. After period n closes the run is steady
+when n >= min_cycles and the last window_cycles + 1 cycle means (window_cycles periods apart at
+the ends) lie within relative_tolerance of each other:
+
+    max - min <= relative_tolerance * max |mean|    (all zero counts as steady: a separated rotor).
+
+The range over the window rather than the change between its ends, so a cycle mean oscillating
+about a level (a beat between modes) is not mistaken for steady. Everything the test needs (the
+open period's partial integrals and every closed period's means) is in :meth:`snapshot`, which the
+stepper puts into the checkpoint: a resumed run decides exactly as the uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class SteadyStateWatch:
+    """Cycle means of a rotor's speed and contact torque, and the steady-state test."""
+
+    def __init__(self, body: str, speed_index: int, torque_sources: list[tuple[str, int]], free: bool,
+                 frequency_Hz: float, window_cycles: int, relative_tolerance: float, min_cycles: int):
+        """``speed_index``: the first angle's position in the packed rigid rates; ``torque_sources``:
+        (contact name, index of the torque about the first axis in that contact's reported force
+        vector) of the contacts acting on the body; ``free``: watch the speed (else the torque)."""
+        self.body, self.speed_index, self.torque_sources, self.free = body, speed_index, torque_sources, free
+        self.period_s = 1.0 / frequency_Hz
+        self.window_cycles, self.relative_tolerance, self.min_cycles = window_cycles, relative_tolerance, min_cycles
+        self.cycle = 0                     # index of the open period
+        self.integral = np.zeros(2)        # (speed, torque) integrated over the open period so far
+        self.last = None                   # (t, speed, torque) of the last sample
+        self.means: list[list[float]] = []  # closed periods: [speed mean, torque mean]
+        self.steady = False
+        self.skip_cycle = -1               # the period the count started in (entered late)
+
+    @property
+    def watched(self) -> str:
+        return "speed" if self.free else "torque"
+
+    def _values(self, rec: dict) -> np.ndarray:
+        speed = float(rec["velocity_m_per_s"][self.speed_index])
+        forces = rec["contact_force_N"]
+        torque = sum(float(forces[name][k]) for name, k in self.torque_sources)
+        return np.array([speed, torque])
+
+    def update(self, rec: dict) -> bool:
+        """Add an accepted step's record; True once the run is steady."""
+        t1 = float(rec["time_s"])
+        y1 = self._values(rec)
+        if self.last is None:
+            # The first record starts the count (the contact torque of the initial state is not
+            # evaluated): the period it falls in is entered late, so its mean is left out.
+            self.cycle = int(math.floor(t1 / self.period_s + 1e-9))
+            self.skip_cycle = self.cycle
+            self.last = (t1, float(y1[0]), float(y1[1]))
+            return self.steady
+        t0, y0 = self.last[0], np.array(self.last[1:])
+        while True:
+            boundary = (self.cycle + 1) * self.period_s
+            if t1 < boundary * (1 - 1e-12):
+                self.integral += 0.5 * (t1 - t0) * (y0 + y1)
+                break
+            # close the period at its boundary: interpolate the sample there
+            w = (boundary - t0) / (t1 - t0) if t1 > t0 else 1.0
+            yb = y0 + min(max(w, 0.0), 1.0) * (y1 - y0)
+            self.integral += 0.5 * (boundary - t0) * (y0 + yb)
+            if self.cycle != self.skip_cycle:
+                self.means.append((self.integral / self.period_s).tolist())
+            self.integral = np.zeros(2)
+            self.cycle += 1
+            t0, y0 = boundary, yb
+            self._test()
+        self.last = (t1, float(y1[0]), float(y1[1]))
+        return self.steady
+
+    def _test(self) -> None:
+        n = len(self.means)
+        if self.steady or n < max(self.min_cycles, self.window_cycles + 1):
+            return
+        column = 0 if self.free else 1
+        window = np.array([m[column] for m in self.means[-(self.window_cycles + 1):]])
+        scale = float(np.max(np.abs(window)))
+        self.steady = bool(np.ptp(window) <= self.relative_tolerance * scale)
+
+    # ------------------------------------------------------------ checkpoints and results
+    def snapshot(self) -> dict:
+        return {"cycle": self.cycle, "integral": self.integral.tolist(), "last": list(self.last) if self.last else None,
+                "means": [list(m) for m in self.means], "steady": self.steady, "skip_cycle": self.skip_cycle}
+
+    def restore(self, snap: dict) -> None:
+        self.cycle = int(snap["cycle"])
+        self.integral = np.asarray(snap["integral"], dtype=float)
+        self.last = tuple(snap["last"]) if snap["last"] is not None else None
+        self.means = [list(map(float, m)) for m in snap["means"]]
+        self.steady = bool(snap["steady"])
+        self.skip_cycle = int(snap["skip_cycle"])
+
+    def results(self) -> dict:
+        """The summary.json block: steady or not, closed periods, the last cycle means."""
+        last = self.means[-1] if self.means else [None, None]
+        column = 0 if self.free else 1
+        return {"body": self.body, "watched": self.watched, "steady": self.steady, "cycles": len(self.means),
+                "window_cycles": self.window_cycles, "relative_tolerance": self.relative_tolerance,
+                "min_cycles": self.min_cycles,
+                "cycle_mean_speed_rad_per_s": last[0], "cycle_mean_torque_N_m": last[1],
+                "cycle_means": [m[column] for m in self.means]}
