@@ -169,7 +169,8 @@ def test_free_rotor_turns_with_the_wave(motor_runs):
 def test_hard_cases_finish(motor_runs):
     *_, hard = motor_runs
     for name, run in hard.items():
-        assert run["simulated_time_s"] == pytest.approx(0.003, rel=0.02), name
+        # it ran to the end, or stopped at a steady state (a rotor thrown clear coasts at a constant speed)
+        assert run["steady"] or run["simulated_time_s"] == pytest.approx(0.003, rel=0.02), name
         assert run["cutbacks"] <= run["steps"] // 100, name
     # without preload the first crest throws the rotor off: it flies clear of the ring
     assert hard["no_preload"]["motor"]["fractions"]["separation"] > 0.9
