@@ -144,7 +144,7 @@ def _run(tier: str, force: float, seconds: float, out: Path) -> float:
     if not summary.exists():
         if tier == "modal":
             settings = ['tier="modal"', f"transient.end_time_s={seconds}", "output.fields=false",
-                        "output.plots=false", _force_set(force)]
+                        "output.plots=false", "transient.checkpoint_interval_steps=0", _force_set(force)]
             case = CASE
         else:
             settings = [f"lumped.duration_s={seconds!r}", f"lumped.downforce_N={force!r}", "lumped.output.plots=false"]
