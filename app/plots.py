@@ -14,6 +14,7 @@ import numpy as np  # noqa: E402
 # Unit suffixes of piezodyn's names (summary.json keys, case keys) -> (shown unit, factor from SI).
 # Lengths in mm, frequencies in kHz, masses in g, times in ms, as the terminal summaries show them.
 UNIT_SUFFIXES = (
+    ("_N_m", "mN m", 1e3),
     ("_m_per_s", "mm/s", 1e3),
     ("_N_s_per_m", "N s/m", 1.0),
     ("_N_per_m", "N/mm", 1e-3),

@@ -30,6 +30,10 @@ TAG_PROGRESS = 11
 
 # Headline results plotted against a swept parameter (the CSV holds every scalar); the first present are used.
 PLOT_COLUMNS = (
+    "transient.motor.speed_rpm",
+    "transient.motor.output_power_W",
+    "transient.motor.efficiency",
+    "transient.motor.friction_torque_N_m",
     "modal.working_resonance_Hz",
     "modal.working_antiresonance_Hz",
     "modal.working_k_eff",
