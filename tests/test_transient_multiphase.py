@@ -193,3 +193,29 @@ def test_harmonic_start_needs_a_driven_electrode(tmp_path):
     with pytest.raises(CaseError) as err:
         run(load_case(folder / "case.toml"), folder / "out", comm, lambda *args: None)
     assert err.value.key == "transient.initial_state"
+
+
+@pytest.mark.mpi
+def test_harmonic_start_is_the_harmonic_solution_at_the_electrode_amplitudes_and_phases(tmp_path):
+    """u(0) = Re X, v(0) = -omega Im X with X the harmonic response to the case's phasors (10 V at 0 deg,
+    5 V at 90 deg): each electrode's amplitude and phase counted once."""
+    from app.fe.operators import Operators
+    from app.harmonic import HarmonicSolver
+    from app.transient.driver import PointSampler, build
+
+    comm = MPI.COMM_WORLD
+    folder = comm.bcast(tmp_path / "start" if comm.rank == 0 else None, root=0)
+    if comm.rank == 0:
+        folder.mkdir()
+        (folder / "case.toml").write_text(CASE.format(a=10.0, b=5.0, start="harmonic"))
+    comm.barrier()
+    tm = build(load_case(folder / "case.toml"), comm, lambda *args: None)
+    state, voltage = tm.initial_state()
+    solver = HarmonicSolver(tm.model, Operators(tm.fe.K, tm.fe.M, tm.fe.C), voltage)   # the case's phasors
+    expected = solver.solve(50000.0).displacement_m["end"]
+    solver.destroy()
+    sampler = PointSampler(tm.model)
+    omega = 2 * np.pi * 50000.0
+    assert sampler.values(state.u)["end"] == pytest.approx(expected.real, rel=1e-9, abs=1e-12 * abs(expected))
+    assert sampler.values(state.v)["end"] == pytest.approx(-omega * expected.imag, rel=1e-9,
+                                                         abs=1e-12 * omega * abs(expected))

@@ -259,7 +259,10 @@ class TransientModel:
                           for n, e in self.case.electrodes.items()}
             model = copy.copy(model)
             model.case = dataclasses.replace(self.case, electrodes=electrodes)
-        solver = HarmonicSolver(model, ops, 1.0, prefix="transient_harmonic_")
+        # 1 V at phase 0 on this electrode: its own amplitude_V and phase_deg enter through the
+        # weight and phasor c_e of _harmonic_per_volt (HarmonicSolver's default phasors would apply
+        # them a second time)
+        solver = HarmonicSolver(model, ops, 1.0, prefix="transient_harmonic_", phasors={name: 1.0 + 0.0j})
         point = solver.solve(self.cfg.drive.frequency_Hz)
         out = []
         for vec in (solver.x_full_re, solver.x_full_im):

@@ -11,7 +11,10 @@ contact (friction) torque for a prescribed or held one. After period n closes th
 when n >= min_cycles and the last window_cycles + 1 cycle means (window_cycles periods apart at
 the ends) lie within relative_tolerance of each other:
 
-    max - min <= relative_tolerance * max |mean|    (all zero counts as steady: a separated rotor).
+    0 < max |mean|  and  max - min <= relative_tolerance * max |mean|
+
+(a window of zero means is not steady: a held rotor thrown off the stator by the wave's crests carries
+no torque during its flight, then lands again).
 
 The range over the window rather than the change between its ends, so a cycle mean oscillating
 about a level (a beat between modes) is not mistaken for steady. Everything the test needs (the
@@ -91,7 +94,8 @@ class SteadyStateWatch:
         column = 0 if self.free else 1
         window = np.array([m[column] for m in self.means[-(self.window_cycles + 1):]])
         scale = float(np.max(np.abs(window)))
-        self.steady = bool(np.ptp(window) <= self.relative_tolerance * scale)
+        # all zero is no steady state: a rotor thrown off the stator carries no torque while it flies
+        self.steady = bool(scale > 0 and np.ptp(window) <= self.relative_tolerance * scale)
 
     # ------------------------------------------------------------ checkpoints and results
     def snapshot(self) -> dict:
