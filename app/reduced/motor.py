@@ -237,6 +237,8 @@ class SteadyWatch:
         if k < max(self.min_cycles, self.window + 1):
             return False
         recent = self.means[-self.window - 1:]
+        if not any(recent):         # a held rotor thrown clear of the crests carries no torque: not a steady state
+            return False
         change = max(recent) - min(recent)
         return change <= self.tol * max(abs(mean), self.floor)
 
