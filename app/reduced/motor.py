@@ -27,7 +27,6 @@ from mpi4py import MPI
 
 from app import series as S
 from app.errors import CaseError, NumericalFailure
-from app.files import write_json_atomic
 from app.motor.rotor_case import check_motor_case, is_motor_case  # noqa: F401 (the runner's entry points)
 from app.reduced import ring_kernel as rk
 from app.reduced.craig_bampton import ReducedBasis, harmonic_response
@@ -355,8 +354,6 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
     while periods < max_periods:
         t = one_period(t)
         if istate[rk.I_FAILED]:
-            if os.environ.get("PIEZODYN_DEBUG_FAILED_STEP"):
-                np.savez(os.environ["PIEZODYN_DEBUG_FAILED_STEP"], q=q, v=v, a=a, rot=rot, t=t, dt=dt)
             series.close()
             raise NumericalFailure(f"modal tier (motor): a step failed at t = {t:.6e} s after "
                                    f"{MAX_CUTBACK_LEVEL} halvings of dt")
@@ -388,10 +385,10 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                "motor": point, "time_series": h5_path.name, "outputs": [h5_path.name]}
     if comm.rank == 0:
         ring_csv = out_dir / "motor_ring.csv"
-        write_ring_csv(ring_csv, point.pop("_ring"))
+        write_csv(ring_csv, point.pop("_ring"))
         results["outputs"].append(ring_csv.name)
         path_csv = out_dir / "motor_contact_path.csv"
-        write_path_csv(path_csv, point.pop("_path"))
+        write_csv(path_csv, point.pop("_path"))
         results["outputs"].append(path_csv.name)
         if case.output.plots:
             from app.motor.plots import operating_point_plots
@@ -523,20 +520,13 @@ def operating_point(history, geo: Geometry, case, spin_free: bool) -> dict:
     }
 
 
-def write_ring_csv(path: Path, rows: dict) -> None:
+def write_csv(path: Path, rows: dict) -> None:
+    """Columns of equal length as CSV, a header of their names."""
     keys = list(rows)
     lines = [",".join(keys)]
     for i in range(len(rows[keys[0]])):
         lines.append(",".join(f"{rows[k][i]:.8g}" for k in keys))
     path.write_text("\n".join(lines) + "\n")
-
-
-def write_path_csv(path: Path, rows: dict) -> None:
-    write_ring_csv(path, rows)
-
-
-def save_summary(path: Path, summary: dict) -> None:
-    write_json_atomic(path, summary)
 
 
 def check_model(case, comm) -> None:

@@ -148,14 +148,24 @@ def _point_force(i, u, v, dz, dz_rate, spin, frame, g0, rho, area, sin_a, cos_a,
 
 
 @njit(cache=True, error_model="numpy")
+def _rotor_load(fB, frame, rho):
+    """Axial force [N] and torque about z [N m] the rotor takes from the nodal forces fB on the stator (-fB)."""
+    axial = 0.0
+    torque = 0.0
+    for i in range(rho.size):
+        et = frame[i, 1]
+        axial -= fB[3 * i + 2]
+        torque -= rho[i] * (et[0] * fB[3 * i] + et[1] * fB[3 * i + 1] + et[2] * fB[3 * i + 2])
+    return axial, torque
+
+
+@njit(cache=True, error_model="numpy")
 def _evaluate(uB, vB, dz, dz_rate, spin, frame, g0, rho, area, sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps,
               cv, fB, Dall, dfdz_all, dfds_all, fn_all, s_all, want_jacobian):
     """Forces on all interface nodes (fB, 3 per node) and the rotor's axial force and torque."""
     n_points = rho.size
     f = np.zeros(3)
     empty = np.zeros((0, 0))
-    axial = 0.0
-    torque = 0.0
     for i in range(n_points):
         if want_jacobian:
             fn, s_t, s_m = _point_force(i, uB[3 * i:3 * i + 3], vB[3 * i:3 * i + 3], dz, dz_rate, spin, frame, g0,
@@ -170,11 +180,7 @@ def _evaluate(uB, vB, dz, dz_rate, spin, frame, g0, rho, area, sin_a, cos_a, k, 
         s_all[i, 1] = s_m
         for c in range(3):
             fB[3 * i + c] = f[c]
-        # the rotor takes -f: axial -f.e_z, torque rho e_theta.(-f)
-        axial -= f[2]
-        et = frame[i, 1]
-        torque -= rho[i] * (et[0] * f[0] + et[1] * f[1] + et[2] * f[2])
-    return axial, torque
+    return _rotor_load(fB, frame, rho)
 
 
 @njit(cache=True, error_model="numpy")
@@ -478,12 +484,7 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
         ok = False
         its_total = 0
         fB_step0 = fB.copy()
-        axial_step0 = 0.0
-        torque_step0 = 0.0
-        for i in range(n_b):
-            et = frame[i, 1]
-            axial_step0 -= fB[3 * i + 2]
-            torque_step0 -= rho[i] * (et[0] * fB[3 * i] + et[1] * fB[3 * i + 1] + et[2] * fB[3 * i + 2])
+        axial_step0, torque_step0 = _rotor_load(fB, frame, rho)
         while not ok:
             fB[:] = fB_step0
             sub = 2 ** level
@@ -504,12 +505,13 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
             torque0 = torque_step0
             tt = t
             pf0 = p_fric0
+            Kinv = np.ascontiguousarray(level_invs[level])     # once per attempt, not per sub-step
             for _sub in range(sub):
                 qa = qn.copy()
                 va = vn.copy()
                 aa = an.copy()
                 ra = rotn.copy()
-                conv, its = _step(h, np.ascontiguousarray(level_invs[level]), tt, qa, va, aa, ra, K, M, C, free,
+                conv, its = _step(h, Kinv, tt, qa, va, aa, ra, K, M, C, free,
                                   prescribed, n_b, amp, phase, omega, cosine, beta, gamma, frame, g0, rho, area,
                                   sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, rotor_mass, preload, inertia,
                                   load_torque, brake, spin_free, tol_u, qn, vn, an, rotn, work)
@@ -533,14 +535,9 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
                 _evaluate(qn[:nB], vn[:nB], rotn[0], rotn[1], rotn[4], frame, g0, rho, area, sin_a, cos_a, k, mu_d,
                           fact, decay, tau_cap, eps, 0.0, fB, Dd, dfdz, dfds, fn_all, s_all, False)
                 pf1 = _friction_power(fB, s_all, frame, n_b)
-                axial1 = 0.0
-                torque1 = 0.0
                 for r in range(nB):
                     e_c -= 0.5 * (fB_old[r] + fB[r]) * (qn[r] - qa[r])
-                for i in range(n_b):
-                    et = frame[i, 1]
-                    axial1 -= fB[3 * i + 2]
-                    torque1 -= rho[i] * (et[0] * fB[3 * i] + et[1] * fB[3 * i + 1] + et[2] * fB[3 * i + 2])
+                axial1, torque1 = _rotor_load(fB, frame, rho)
                 e_rot += 0.5 * (axial0 + axial1) * (rotn[0] - ra[0]) + 0.5 * (torque0 + torque1) * (rotn[3] - ra[3])
                 axial0 = axial1
                 torque0 = torque1
@@ -592,12 +589,7 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
             else:
                 point_state[step, i] = BACKWARD_SLIP
             point_fn[step, i] = fn_all[i]
-        axial = 0.0
-        torque = 0.0
-        for i in range(n_b):
-            axial -= fB[3 * i + 2]
-            et = frame[i, 1]
-            torque -= rho[i] * (et[0] * fB[3 * i] + et[1] * fB[3 * i + 1] + et[2] * fB[3 * i + 2])
+        axial, torque = _rotor_load(fB, frame, rho)
         n0 = frame[0, 0]
         e0 = frame[0, 1]
         m0 = frame[0, 2]
