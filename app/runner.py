@@ -260,10 +260,11 @@ def transient_rows(transient: dict | None) -> list[tuple[str, str, str]]:
         from app.reduced.motor import table_rows
 
         return table_rows(transient)
+    wall_per_ms = transient["wall_s_per_simulated_ms"]     # None: a finished run resumed (no step taken)
     rows = [("simulated time", f"{transient['simulated_time_s'] * 1e3:.4g}", "ms"),
             ("drive amplitude", f"{transient['drive_voltage_V']:.4g}", "V"),
             ("steps / cut-backs", f"{transient['steps']} / {transient['cutbacks']}", "-"),
-            ("wall time per simulated ms", f"{transient['wall_s_per_simulated_ms']:.4g}", "s")]
+            ("wall time per simulated ms", "-" if wall_per_ms is None else f"{wall_per_ms:.4g}", "s")]
     stats = transient.get("statistics") or {}
     rates = stats.get("impact_rate_per_s", {})
     for name, contact in (transient.get("contacts") or {}).items():

@@ -141,6 +141,30 @@ def test_resume_of_a_different_case_is_refused(one_go, tmp_path):
     assert empty.returncode == 2 and "no checkpoint" in empty.stderr
 
 
+def test_checkpoint_of_an_older_version_resumes(one_go, tmp_path):
+    """A checkpoint written before a case key existed (its record lacks the key) resumes when the
+    resumed case leaves that key at its schema default, and is refused naming the key when it does
+    not: a program update must not strand a long run's checkpoint."""
+    import shutil
+
+    out_ref, _ = one_go
+    if MPI.COMM_WORLD.rank == 0:
+        shutil.copytree(out_ref, tmp_path / "old", dirs_exist_ok=True)
+        pointer = tmp_path / "old" / "checkpoint" / "checkpoint.json"
+        meta = json.loads(pointer.read_text())
+        del meta["case"]["reduction"]["ring_points"]        # as if written before the key was added
+        pointer.write_text(json.dumps(meta))
+    sets = [a for o in [*TINY, f"transient.end_time_s={END_S!r}"] for a in ("--set", o)]
+    refused = run_cli("run", CASES / CASE, "--resume", tmp_path / "old", *sets,
+                      "--set", "reduction.ring_points=32")
+    assert refused.returncode == 2, refused.stderr[-2000:]
+    assert "reduction.ring_points" in refused.stderr and "Traceback" not in refused.stderr
+    resumed = run_cli("run", CASES / CASE, "--resume", tmp_path / "old", *sets)   # finished: 0 steps
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    if MPI.COMM_WORLD.rank == 0:
+        assert_same_series(read_series(out_ref / "transient.h5"), read_series(tmp_path / "old" / "transient.h5"))
+
+
 def test_tiny_drill_run_has_ball_tip_impacts(one_go):
     """The tip's axis node carries the ball contact (Hertz node contact): even the 4 mm test mesh,
     whose tip facets never see the 0.1 mm contact disc, has the tip hitting the ball."""

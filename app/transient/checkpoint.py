@@ -206,11 +206,48 @@ def case_digest(case) -> dict:
     return data
 
 
-def _differences(a, b, prefix="") -> list[str]:
+_MISSING = object()
+
+
+def _section_type(cls, key: str):
+    """The dataclass type of field ``key`` of dataclass ``cls`` (through ``X | None``), else None."""
+    import dataclasses
+    import typing
+
+    if cls is None or not dataclasses.is_dataclass(cls):
+        return None
+    hint = typing.get_type_hints(cls).get(key)
+    for tp in (hint, *typing.get_args(hint)):
+        if dataclasses.is_dataclass(tp):
+            return tp
+    return None
+
+
+def _field_default(cls, key: str):
+    """The schema default of field ``key`` of ``cls`` as the records store it, or _MISSING."""
+    import dataclasses
+
+    if cls is None or not dataclasses.is_dataclass(cls):
+        return _MISSING
+    for f in dataclasses.fields(cls):
+        if f.name == key:
+            if f.default is not dataclasses.MISSING:
+                return json.loads(json.dumps(jsonable(f.default), default=str))
+            return _MISSING
+    return _MISSING
+
+
+def _differences(a, b, prefix="", cls=None) -> list[str]:
+    """Dotted keys where the checkpointed record ``a`` and the resumed case's digest ``b`` differ.
+    A key the record lacks (a later version added it) matches when the resumed case leaves it at its
+    schema default, so a program update does not strand older checkpoints."""
     if isinstance(a, dict) and isinstance(b, dict):
         out = []
         for key in sorted(set(a) | set(b)):
-            out += _differences(a.get(key), b.get(key), f"{prefix}.{key}" if prefix else key)
+            path = f"{prefix}.{key}" if prefix else key
+            if key not in a and b[key] == _field_default(cls, key):
+                continue
+            out += _differences(a.get(key), b.get(key), path, _section_type(cls, key))
         return out
     return [] if a == b else [prefix]
 
@@ -248,7 +285,9 @@ def read_checkpoint(out_dir: Path, comm, case, digest: dict, needs: tuple[str, .
     if "error" in verdict:
         raise CaseError(*verdict["error"])
     meta = verdict["meta"]
-    changed = _differences(meta["case"], digest)
+    from app.case.schema import Case
+
+    changed = _differences(meta["case"], digest, cls=Case)
     if changed:
         raise CaseError(file, changed[0], "differs from the checkpointed run (only transient.end_time_s, "
                                           "transient.checkpoint_interval_steps and output.* may change on resume)")
