@@ -4,7 +4,9 @@ a test keeps the committed file in sync."""
 from __future__ import annotations
 
 import dataclasses
+import types
 import typing
+from typing import Literal
 
 from app.case import schema
 from app.case.validate import _type_name
@@ -46,6 +48,46 @@ def table(cls, title: str) -> list[str]:
     return lines + [""]
 
 
+def _dataclass_members(tp) -> tuple[bool, list]:
+    """(is a list, the dataclasses) a field of type ``tp`` holds: ``X``, ``X | None``, ``list[X]`` or a
+    list of a tagged union (one dataclass per ``kind``)."""
+    is_list = typing.get_origin(tp) is list
+    args = typing.get_args(tp) if is_list else (tp,)
+    members = []
+    for arg in args:
+        for option in (typing.get_args(arg) if typing.get_origin(arg) in (typing.Union, types.UnionType) else (arg,)):
+            if dataclasses.is_dataclass(option):
+                members.append(option)
+    return is_list, members
+
+
+def tables_below(cls, prefix: str, seen: set, context: str = "") -> list[str]:
+    """Tables of the sub-sections of ``cls`` (dataclass fields, lists of them, tagged unions), depth
+    first, titled with their dotted TOML paths (every field a class serves); each class once.
+    ``context``: the tagged-union kind the parent belongs to, repeated in the titles below it."""
+    hints = typing.get_type_hints(cls)
+    uses: dict = {}                                  # member class -> [(title, kind tag)]
+    for f in dataclasses.fields(cls):
+        is_list, members = _dataclass_members(hints[f.name])
+        path = f"{prefix}.{f.name}"
+        for member in members:
+            kind = typing.get_type_hints(member).get("kind")
+            tag = typing.get_args(kind) if typing.get_origin(kind) is Literal else ()
+            union_tag = tag[0] if len(members) > 1 and len(tag) == 1 else None
+            uses.setdefault(member, []).append((f"[[{path}]]" if is_list else f"[{path}]", path, union_tag))
+    parts = []
+    for member, where in uses.items():
+        if member in seen:
+            continue
+        seen.add(member)
+        title = ", ".join(t for t, _, _ in where)
+        tag = where[0][2]
+        suffix = f' with kind = "{tag}"' if tag else context
+        parts.append("\n".join(table(member, title + suffix)))
+        parts += tables_below(member, where[0][1], seen, f' (of kind = "{tag}")' if tag else context)
+    return parts
+
+
 def render() -> str:
     from geometry.builders import BUILDERS
 
@@ -65,6 +107,7 @@ def render() -> str:
         (schema.HarmonicSection, "[harmonic]"),
         (schema.TargetAmplitude, "[harmonic.target]"),
         (schema.CircuitSection, "[circuit]"),
+        (schema.ReductionSection, "[reduction]"),
         (schema.OutputSection, "[output]"),
     ]
     for name, (params_cls, _) in BUILDERS.items():
@@ -77,8 +120,12 @@ def render() -> str:
         except (ImportError, AttributeError):
             continue
         sections.append((cls, title))
+    seen = {cls for cls, _ in sections}
     for cls, title in sections:
         parts.append("\n".join(table(cls, title)))
+        if title.startswith("[") and not title.startswith("[["):
+            prefix = title[1:title.index("]")]
+            parts += tables_below(cls, prefix, seen)
     library = ", ".join(f"`{n}`" for n in __import__("app.materials", fromlist=["LIBRARY"]).LIBRARY)
     parts.append(f"## Material library\n\n`library = ...` copies one of: {library}; keys given next to it "
                  "override the entry. See docs/physics.md for the data and its sources.\n")
