@@ -165,7 +165,10 @@ def test_held_rotor_bounds_and_energy(motor_runs):
     # with the FE tier's charge functional the gap is the coarse basis's charge error (0.14 % on the case mesh)
     assert abs(m["energy_balance_reactions_relative"]) < 1e-6
     assert abs(m["energy_balance_relative"]) < 0.05
-    assert m["electrical_power_W"] == pytest.approx(m["friction_loss_W"] + m["damping_loss_W"], rel=0.05)
+    # after 288 periods the coarse stator's wave is still ringing down from its free amplitude: the electrical
+    # input plus the stored energy it releases is what friction and damping dissipate
+    released_W = -m["stored_energy_change_J"] / m["window_s"]
+    assert m["electrical_power_W"] + released_W == pytest.approx(m["friction_loss_W"] + m["damping_loss_W"], rel=0.05)
     fractions = m["fractions"]
     assert sum(fractions.values()) == pytest.approx(1.0)
     assert fractions["stick"] < 0.1                   # a held rotor: the contact slides
