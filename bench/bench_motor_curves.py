@@ -10,6 +10,12 @@ by an FE run of the case, see BENCHMARKS.md) times the steps the modal tier took
 the same curves.
 
     .venv/bin/python bench/bench_motor_curves.py --out /tmp/motor_curves [--points 8] [--fe-step-s 2.0]
+        [--chain] [--set reduction.contact_points=0 ...]
+
+``--chain`` runs the load points from the highest load down, each continuing from the state the previous point
+ended in (``motor_state.npz``; the stall point's for the first), instead of each starting from the harmonic
+state: the start's transient (the wave decaying from its free amplitude, 300-700 periods) is then paid once per
+preload (docs/motor-rotor.md, "Contact sampling").
 """
 
 from __future__ import annotations
@@ -34,11 +40,19 @@ COLUMNS = ("preload_N", "load_torque_N_m", "speed_rpm", "speed_rad_per_s", "fric
            "wall_s")
 
 
-def point(out: Path, sets: list[str]) -> dict:
+def point(out: Path, sets: list[str], warm_start: Path | None = None) -> dict:
     start = time.perf_counter()
-    summary = run_case(CASE, sets, out, quiet=True)
+    if warm_start is None:
+        tr = run_case(CASE, sets, out, quiet=True)["results"]["transient"]
+    else:
+        from mpi4py import MPI
+
+        from app.reduced import motor
+        from app.runner import load_for_run
+
+        out.mkdir(parents=True, exist_ok=True)
+        tr = motor.run(load_for_run(CASE, sets), out, MPI.COMM_WORLD, lambda *_: None, warm_start=warm_start)
     wall = time.perf_counter() - start
-    tr = summary["results"]["transient"]
     m = tr["motor"]
     row = {"load_torque_N_m": m["load_torque_N_m"], "speed_rpm": m["speed_rpm"],
            "speed_rad_per_s": m["speed_rad_per_s"], "friction_torque_N_m": m["friction_torque_N_m"],
@@ -56,21 +70,26 @@ def main() -> None:
     parser.add_argument("--out", default="/tmp/motor_curves")
     parser.add_argument("--points", type=int, default=8, help="free-rotor load points per preload (besides stall)")
     parser.add_argument("--fe-step-s", type=float, default=None, help="FE-tier wall time per step of this case")
+    parser.add_argument("--chain", action="store_true",
+                        help="each load point continues from the previous one's end state (highest load first)")
+    parser.add_argument("--set", nargs="*", default=[], help="further --set overrides for every point")
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     start = time.perf_counter()
     for preload in PRELOADS_N:
-        base = [f"transient.bodies[0].applied_force_N=[0.0, 0.0, {-preload!r}]"]
+        base = [f"transient.bodies[0].applied_force_N=[0.0, 0.0, {-preload!r}]"] + args.set
         stall = point(out / f"P{preload}_stall", base + ['transient.bodies[0].rotations[0].motion="fixed"'])
         stall_torque = stall["friction_torque_N_m"]
         stall.update(preload_N=preload, load_torque_N_m=stall_torque)
         print(f"P = {preload} N: stall torque {stall_torque * 1e3:.4g} mN m ({stall['wall_s']:.0f} s)", flush=True)
-        for k in range(args.points):
+        previous = out / f"P{preload}_stall" / "motor_state.npz"
+        for k in (reversed(range(args.points)) if args.chain else range(args.points)):
             load = stall_torque * k / args.points
             sets = base + [f"transient.bodies[0].rotations[0].torque_N_m={-load!r}"]
-            row = point(out / f"P{preload}_T{k}", sets)
+            row = point(out / f"P{preload}_T{k}", sets, previous if args.chain else None)
+            previous = out / f"P{preload}_T{k}" / "motor_state.npz"
             row["preload_N"] = preload
             rows.append(row)
             print(f"  load {load * 1e3:7.3f} mN m: {row['speed_rpm']:7.2f} rpm, efficiency "
@@ -87,7 +106,7 @@ def main() -> None:
 
     curves = {}
     for preload in PRELOADS_N:
-        mine = [r for r in rows if r["preload_N"] == preload]
+        mine = sorted((r for r in rows if r["preload_N"] == preload), key=lambda r: r["load_torque_N_m"])
         curves[f"preload {preload} N"] = {key: [r[key] for r in mine] for key in
                                           ("load_torque_N_m", "speed_rpm", "output_power_W", "efficiency")}
         curves[f"preload {preload} N"]["torque_N_m"] = curves[f"preload {preload} N"].pop("load_torque_N_m")

@@ -179,7 +179,13 @@ class ReductionSection:
         20.0, gt=1, doc="default cutoff = factor x the transient drive frequency (when neither key is given)")
     ring_points: int = param(
         64, ge=8, le=1024, doc="a cone (rotor) contact: band nodes kept as interface, evenly round the contact "
-                               "circle (each carries the band's area / ring_points)")
+                               "circle: the reduced model's contact interface")
+    contact_points: int = param(
+        512, ge=0, le=16384, doc="a cone (rotor) contact: points evenly round the contact circle where the gap and "
+                                 "friction are evaluated, each carrying band area / contact_points, their displacement "
+                                 "interpolated (cubic, in angle) from the ring_points nodes; 0: at the nodes "
+                                 "themselves, each carrying band area / ring_points (node-sampled, not converged: "
+                                 "docs/motor-rotor.md)")
 
 
 @dataclass(frozen=True)

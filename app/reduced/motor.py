@@ -65,9 +65,11 @@ class RingModel:
 def _cache_key(case) -> str:
     cfg = case.transient
     c = cfg.contacts[0]
+    # the contact points are evaluated on the reduced model: they do not change it
+    reduction = {key: value for key, value in asdict(case.reduction).items() if key != "contact_points"}
     relevant = {"version": CACHE_VERSION, "geometry": asdict(case.geometry), "materials": repr(case.materials),
                 "regions": repr(case.regions), "electrodes": repr(case.electrodes), "supports": repr(case.supports),
-                "damping": asdict(case.damping), "reduction": asdict(case.reduction),
+                "damping": asdict(case.damping), "reduction": reduction,
                 "drive_Hz": cfg.drive.frequency_Hz, "facets": c.facets, "radius_m": c.radius_m,
                 "z_m": cfg.bodies[0].position_m[2], "half_angle_deg": c.half_angle_deg}
     text = json.dumps(relevant, sort_keys=True, default=str)
@@ -194,31 +196,90 @@ def build_ring_model(case, comm, log) -> RingModel:
 
 @dataclass
 class Geometry:
-    frame: np.ndarray     # (n, 3, 3): n, e_theta, t_m per node
+    """The contact points: where the gap and the friction are evaluated, and how they see the interface nodes."""
+
+    frame: np.ndarray     # (n_c, 3, 3): n, e_theta, t_m per contact point
     g0: np.ndarray        # geometric gap at the rotor's reference height [m]
     rho: np.ndarray       # distance from the axis [m]
-    area: np.ndarray      # band area per node [m^2]
-    angle_deg: np.ndarray  # azimuth of each node [deg]
+    area: np.ndarray      # band area per contact point [m^2]
+    angle_deg: np.ndarray  # azimuth of each contact point [deg]
+    idx: np.ndarray       # (n_c, n_s) interface nodes of each point's interpolation stencil
+    B: np.ndarray         # (n_c, n_s, 3, 3) u_c = sum_s B[c, s] u_node[idx[c, s]] (global components)
     sin_a: float
     cos_a: float
 
+    @property
+    def n_points(self) -> int:
+        return self.rho.size
+
+    def displacement(self, uB: np.ndarray) -> np.ndarray:
+        """(n_c, 3) displacements of the contact points from the interface nodes' (n_b, 3)."""
+        return np.einsum("csij,csj->ci", self.B, uB[self.idx])
+
+
+def _cone_frames(angles, sin_a, cos_a):
+    """(n, 3, 3) rows n (the cone's outward normal), e_theta, t_m (meridional tangent) at the given azimuths."""
+    c, s = np.cos(angles), np.sin(angles)
+    e_r = np.column_stack([c, s, np.zeros_like(c)])
+    e_t = np.column_stack([-s, c, np.zeros_like(c)])
+    e_z = np.tile([0.0, 0.0, 1.0], (c.size, 1))
+    return np.stack([cos_a * e_r - sin_a * e_z, e_t, sin_a * e_r + cos_a * e_z], axis=1)
+
+
+def interpolation_stencil(node_angles: np.ndarray, point_angles: np.ndarray, order: int = 3):
+    """Lagrange interpolation round the ring, in angle: for each point, the ``order + 1`` nodes nearest it
+    (half before, half after, periodic) and their weights, from the nodes' own (unevenly spaced) angles [rad]."""
+    n_b = node_angles.size
+    order_of = np.argsort(node_angles)
+    theta = node_angles[order_of]
+    width = order + 1
+    idx = np.empty((point_angles.size, width), np.int64)
+    weights = np.empty((point_angles.size, width))
+    for c, phi in enumerate(point_angles % (2 * math.pi)):
+        right = int(np.searchsorted(theta, phi, side="right"))   # first node after phi (may be n_b: wraps)
+        ks = np.arange(right - (width + 1) // 2, right - (width + 1) // 2 + width)
+        turns = np.floor_divide(ks, n_b)
+        x = theta[ks % n_b] + 2 * math.pi * turns
+        for s in range(width):
+            others = np.delete(x, s)
+            weights[c, s] = np.prod((phi - others) / (x[s] - others))
+        idx[c] = order_of[ks % n_b]
+    return idx, weights
+
 
 def ring_geometry(ring: RingModel, case) -> Geometry:
+    """Contact points of the band: ``reduction.contact_points`` points evenly round the contact circle, each
+    carrying band area / contact_points, whose displacement is interpolated (cubic, in angle, in the local
+    n / theta / meridional components) from the interface nodes; with contact_points = 0, the interface nodes
+    themselves, each carrying band area / ring_points (the node-sampled contact)."""
     contact = case.transient.contacts[0]
     alpha = math.radians(contact.half_angle_deg)
     sin_a, cos_a = math.sin(alpha), math.cos(alpha)
-    x, y, z = ring.node_xyz.T
-    rho = np.hypot(x, y)
-    e_r = np.column_stack([x / rho, y / rho, np.zeros_like(x)])
-    e_t = np.column_stack([-y / rho, x / rho, np.zeros_like(x)])
-    e_z = np.tile([0.0, 0.0, 1.0], (x.size, 1))
-    frame = np.stack([cos_a * e_r - sin_a * e_z, e_t, sin_a * e_r + cos_a * e_z], axis=1)
+    x, y, _ = ring.node_xyz.T
+    node_angles = np.arctan2(y, x) % (2 * math.pi)
+    node_frames = _cone_frames(node_angles, sin_a, cos_a)
+    n_c = case.reduction.contact_points
+    if n_c == 0:
+        n_c = ring.n_points
+        angles = node_angles
+        rho = np.hypot(x, y)
+        frame = node_frames
+        idx = np.arange(n_c).reshape(-1, 1)
+        B = np.tile(np.eye(3), (n_c, 1, 1, 1))
+    else:
+        angles = 2 * math.pi * (np.arange(n_c) + 0.5) / n_c
+        rho = np.full(n_c, contact.radius_m)
+        frame = _cone_frames(angles, sin_a, cos_a)
+        idx, weights = interpolation_stencil(node_angles, angles)
+        # local components at the node (F_j u), interpolated, back to global at the point (F_c^T): w F_c^T F_j
+        B = weights[:, :, None, None] * np.einsum("cki,cskj->csij", frame, node_frames[idx])
     # The band's nodes are taken on the design cone: the straight-edged mesh puts mid-edge nodes up to h^2/(8 r)
     # inside it (2.4 um at 0.5 mm elements, more than the wave's amplitude), a faceting error, not a gap. As
     # ANSYS's KEYOPT(9) = 1 (exclude initial geometric penetration or gap), the initial gap is zero.
-    g0 = np.zeros(x.size)
-    area = np.full(x.size, ring.band_area_m2 / x.size)
-    return Geometry(np.ascontiguousarray(frame), g0, rho, area, np.degrees(np.arctan2(y, x)) % 360.0, sin_a, cos_a)
+    g0 = np.zeros(n_c)
+    area = np.full(n_c, ring.band_area_m2 / n_c)
+    return Geometry(np.ascontiguousarray(frame), g0, rho, area, np.degrees(angles) % 360.0,
+                    np.ascontiguousarray(idx), np.ascontiguousarray(B), sin_a, cos_a)
 
 
 class SteadyWatch:
@@ -242,8 +303,13 @@ class SteadyWatch:
         return change <= self.tol * max(abs(mean), self.floor)
 
 
-def run(case, out_dir, comm, log, resume: bool = False) -> dict:
-    """Run the motor case in the modal tier into ``out_dir``; returns the summary's transient results."""
+def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path | None = None) -> dict:
+    """Run the motor case in the modal tier into ``out_dir``; returns the summary's transient results.
+
+    The state at the end (stator coordinates, rotor, time) is written to ``motor_state.npz``; ``warm_start``
+    names such a file of an earlier run on the same reduced model to continue from (time and drive phase go
+    on; a prescribed or held spin takes this case's rate): a continuation, used by the sampling study
+    (bench/bench_motor_sampling.py) to skip the start's transient."""
     from app.blas import limit_blas_threads
 
     limit_blas_threads()
@@ -303,20 +369,29 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
         v[free] = -np.linalg.solve(MFF, ring.M[np.ix_(free, prescribed)] @ v[prescribed])
         rhs = -ring.K @ q - ring.C @ v - ring.M[:, prescribed] @ a[prescribed]
         a[free] = np.linalg.solve(MFF, rhs[free])
-    uB = q[:3 * ring.n_points].reshape(-1, 3)
-    gaps = geo.g0 + np.einsum("ij,ij->i", geo.frame[:, 0, :], uB)
+    uc = geo.displacement(q[:3 * ring.n_points].reshape(-1, 3))
+    gaps = geo.g0 + np.einsum("ij,ij->i", geo.frame[:, 0, :], uc)
     dz0 = -float(gaps.min()) / geo.sin_a
     rot = np.array([dz0, 0.0, -preload / body.mass_kg, rotation.angle_rad, spin0, 0.0])
+    t_start = 0.0
+    if warm_start is not None:
+        with np.load(warm_start) as saved:
+            if saved["q"].shape != q.shape or bool(saved["cosine"]) != cosine:
+                raise CaseError(file, "warm start", f"{warm_start} is the state of another reduced model or drive")
+            q, v, a, rot = (saved[key].astype(float) for key in ("q", "v", "a", "rot"))
+            t_start = float(saved["t"])
+        if not spin_free:
+            rot[4], rot[5] = spin0, 0.0
     energies = np.zeros(7)
     istate = np.zeros(rk.N_ISTATE, np.int64)
     n_b = ring.n_points
     kernel_args = (ring.K, ring.M, ring.C, free, prescribed, n_b, amplitudes, phases, omega, cosine, beta, gamma,
-                   geo.frame, geo.g0, geo.rho, geo.area, geo.sin_a, geo.cos_a, contact.stiffness, mu_d, fact, decay,
-                   tau_cap, eps, body.mass_kg, preload, rotation.inertia_kg_m2, rotation.torque_N_m,
+                   geo.frame, geo.g0, geo.rho, geo.area, geo.idx, geo.B, geo.sin_a, geo.cos_a, contact.stiffness,
+                   mu_d, fact, decay, tau_cap, eps, body.mass_kg, preload, rotation.inertia_kg_m2, rotation.torque_N_m,
                    rotation.brake_N_m_s_per_rad, spin_free, NEWTON_TOL_M, ring.charge_rows)
     columns = np.zeros((per_period, rk.N_COLUMNS))
-    point_state = np.zeros((per_period, n_b), np.int64)
-    point_fn = np.zeros((per_period, n_b))
+    point_state = np.zeros((per_period, geo.n_points), np.int64)
+    point_fn = np.zeros((per_period, geo.n_points))
     trajectory = np.zeros((per_period, 3))
 
     def one_period(t):
@@ -344,10 +419,14 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
         f"preload {preload:.4g} N, {per_period} steps per period, up to {max_periods} periods")
     window = cfg.steady_state.window_cycles if cfg.steady_state is not None else 20
     history = []          # per period: (columns, point_state, point_fn, trajectory) of the last `window` periods
-    t = 0.0
-    last_row = np.zeros(rk.N_COLUMNS)       # the state before the first step: energies 0, stored energy at t = 0
-    last_row[rk.C_E_STORED] = (0.5 * v @ ring.M @ v + 0.5 * q @ ring.K @ q + 0.5 * rotation.inertia_kg_m2 * spin0**2
-                               + preload * dz0)
+    t = t_start
+    last_row = np.zeros(rk.N_COLUMNS)       # the state before the first step: energies 0, the stored energy
+    last_row[rk.C_TIME] = t
+    gaps = geo.g0 + geo.sin_a * rot[0] + np.einsum("ij,ij->i", geo.frame[:, 0, :],
+                                                   geo.displacement(q[:3 * n_b].reshape(-1, 3)))
+    penalty0 = sum(rk._penalty(-g, contact.stiffness * A)[2] for g, A in zip(gaps, geo.area) if g < 0)
+    last_row[rk.C_E_STORED] = (0.5 * v @ ring.M @ v + 0.5 * q @ ring.K @ q + 0.5 * rotation.inertia_kg_m2 * rot[4]**2
+                               + 0.5 * body.mass_kg * rot[1]**2 + preload * rot[0] + penalty0)
     start = time.perf_counter()
     reached_steady = False
     periods = 0
@@ -371,6 +450,9 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                 break
     series.close()
     wall = time.perf_counter() - start
+    state_path = out_dir / "motor_state.npz"
+    if comm.rank == 0:
+        np.savez(state_path, q=q, v=v, a=a, rot=rot, t=t, cosine=cosine)
     point = operating_point(history, geo, case, spin_free)
     results = {"tier": "modal", "scene": "motor", "steps": int(istate[rk.I_STEPS]),
                "newton_iterations": int(istate[rk.I_NEWTON]), "cutbacks": int(istate[rk.I_CUTBACKS]),
@@ -379,10 +461,12 @@ def run(case, out_dir, comm, log, resume: bool = False) -> dict:
                "wall_s_per_simulated_ms": wall / (t * 1e3) if t > 0 else 0.0,
                "drive_frequency_Hz": f_drive, "initial_state": cfg.initial_state,
                "steady": reached_steady if steady is not None else None,
-               "reduction": {"ring_points": n_b, "interface_dofs": 3 * n_b, "modes": int(ring.mode_frequencies_Hz.size),
+               "reduction": {"ring_points": n_b, "contact_points": geo.n_points,
+                             "contact_sampling": "interpolated" if case.reduction.contact_points else "nodal",
+                             "interface_dofs": 3 * n_b, "modes": int(ring.mode_frequencies_Hz.size),
                              "size": n, "highest_mode_Hz": float(ring.mode_frequencies_Hz.max()),
                              "band_area_m2": ring.band_area_m2},
-               "motor": point, "time_series": h5_path.name, "outputs": [h5_path.name]}
+               "motor": point, "time_series": h5_path.name, "outputs": [h5_path.name, state_path.name]}
     if comm.rank == 0:
         ring_csv = out_dir / "motor_ring.csv"
         write_csv(ring_csv, point.pop("_ring"))

@@ -148,45 +148,81 @@ def _point_force(i, u, v, dz, dz_rate, spin, frame, g0, rho, area, sin_a, cos_a,
 
 
 @njit(cache=True, error_model="numpy")
-def _rotor_load(fB, frame, rho):
-    """Axial force [N] and torque about z [N m] the rotor takes from the nodal forces fB on the stator (-fB)."""
+def _rotor_load(fc, frame, rho):
+    """Axial force [N] and torque about z [N m] the rotor takes from the contact points' forces fc (n_c, 3) on
+    the stator (it takes -fc)."""
     axial = 0.0
     torque = 0.0
     for i in range(rho.size):
         et = frame[i, 1]
-        axial -= fB[3 * i + 2]
-        torque -= rho[i] * (et[0] * fB[3 * i] + et[1] * fB[3 * i + 1] + et[2] * fB[3 * i + 2])
+        axial -= fc[i, 2]
+        torque -= rho[i] * (et[0] * fc[i, 0] + et[1] * fc[i, 1] + et[2] * fc[i, 2])
     return axial, torque
 
 
 @njit(cache=True, error_model="numpy")
-def _evaluate(uB, vB, dz, dz_rate, spin, frame, g0, rho, area, sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps,
-              cv, fB, Dall, dfdz_all, dfds_all, fn_all, s_all, want_jacobian):
-    """Forces on all interface nodes (fB, 3 per node) and the rotor's axial force and torque."""
-    n_points = rho.size
+def _evaluate(uB, vB, dz, dz_rate, spin, frame, g0, rho, area, idx, B, sin_a, cos_a, k, mu_d, fact, decay, tau_cap,
+              eps, cv, fB, fc, Dall, dfdz_all, dfds_all, fn_all, s_all, uc_all, vc_all, want_jacobian):
+    """Forces at all contact points (fc, their derivatives with respect to the point's own displacement in
+    Dall, to dz and Omega in dfdz_all, dfds_all) and on the interface nodes (fB = P^T fc, 3 per node), and the
+    rotor's axial force and torque. A contact point's displacement and velocity are interpolated from the
+    interface nodes of its stencil: u_c = sum_s B[c, s] u_idx[c, s] (P, 3x3 blocks)."""
+    n_c = rho.size
+    n_s = idx.shape[1]
     f = np.zeros(3)
+    uc = np.zeros(3)
+    vc = np.zeros(3)
     empty = np.zeros((0, 0))
-    for i in range(n_points):
+    fB[:] = 0.0
+    for i in range(n_c):
+        # the gap first (the normal component only): most points are separated and need nothing else
+        n = frame[i, 0]
+        gap = g0[i] + sin_a * dz
+        for s in range(n_s):
+            j = 3 * idx[i, s]
+            for c in range(3):
+                gap += (n[0] * B[i, s, 0, c] + n[1] * B[i, s, 1, c] + n[2] * B[i, s, 2, c]) * uB[j + c]
+        if gap >= 0.0 and i > 0:      # point 0's displacement is always wanted (its path is an output)
+            fn_all[i] = 0.0
+            s_all[i, 0] = 0.0
+            s_all[i, 1] = 0.0
+            for r in range(3):
+                fc[i, r] = 0.0
+            continue
+        for r in range(3):
+            uc[r] = 0.0
+            vc[r] = 0.0
+        for s in range(n_s):
+            j = 3 * idx[i, s]
+            for r in range(3):
+                for c in range(3):
+                    uc[r] += B[i, s, r, c] * uB[j + c]
+                    vc[r] += B[i, s, r, c] * vB[j + c]
         if want_jacobian:
-            fn, s_t, s_m = _point_force(i, uB[3 * i:3 * i + 3], vB[3 * i:3 * i + 3], dz, dz_rate, spin, frame, g0,
-                                        rho, area, sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, cv, f,
-                                        Dall[i], dfdz_all[i], dfds_all[i])
+            fn, s_t, s_m = _point_force(i, uc, vc, dz, dz_rate, spin, frame, g0, rho, area, sin_a, cos_a, k, mu_d,
+                                        fact, decay, tau_cap, eps, cv, f, Dall[i], dfdz_all[i], dfds_all[i])
         else:
-            fn, s_t, s_m = _point_force(i, uB[3 * i:3 * i + 3], vB[3 * i:3 * i + 3], dz, dz_rate, spin, frame, g0,
-                                        rho, area, sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, cv, f,
-                                        empty, dfdz_all[i], dfds_all[i])
+            fn, s_t, s_m = _point_force(i, uc, vc, dz, dz_rate, spin, frame, g0, rho, area, sin_a, cos_a, k, mu_d,
+                                        fact, decay, tau_cap, eps, cv, f, empty, dfdz_all[i], dfds_all[i])
         fn_all[i] = fn
         s_all[i, 0] = s_t
         s_all[i, 1] = s_m
-        for c in range(3):
-            fB[3 * i + c] = f[c]
-    return _rotor_load(fB, frame, rho)
+        for r in range(3):
+            fc[i, r] = f[r]
+            uc_all[i, r] = uc[r]
+            vc_all[i, r] = vc[r]
+        if fn > 0.0:
+            for s in range(n_s):
+                j = 3 * idx[i, s]
+                for c in range(3):
+                    fB[j + c] += B[i, s, 0, c] * f[0] + B[i, s, 1, c] * f[1] + B[i, s, 2, c] * f[2]
+    return _rotor_load(fc, frame, rho)
 
 
 @njit(cache=True, error_model="numpy")
-def _residual(uB, dd, ds, w, G, xtB, vtB, cv, c_a, dz_t, dzr_t, spin_t, dt, gamma, frame, g0, rho,
-              area, sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, rotor_mass, preload, inertia, load_torque, brake,
-              spin_free, fB, Dall, dfdz, dfds, fn_all, s_all, vB, Ru, want_jacobian):
+def _residual(uB, dd, ds, w, G, xtB, vtB, cv, c_a, dz_t, dzr_t, spin_t, dt, gamma, frame, g0, rho, area, idx, B,
+              sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, rotor_mass, preload, inertia, load_torque, brake,
+              spin_free, fB, fc, Dall, dfdz, dfds, fn_all, s_all, uc_all, vc_all, vB, Ru, want_jacobian):
     """Residuals of the condensed step at (uB, dz_t + dd, spin_t + ds): Ru (in place), Rz, Rs, axial force, torque.
     The rotor's unknowns are corrections to their predictors, so that m c_a dz and J Omega / (gamma dt), large
     against the forces, never enter the residual (round-off)."""
@@ -196,9 +232,18 @@ def _residual(uB, dd, ds, w, G, xtB, vtB, cv, c_a, dz_t, dzr_t, spin_t, dt, gamm
         vB[r] = vtB[r] + cv * (uB[r] - xtB[r])
     dz = dz_t + dd
     dz_rate = dzr_t + cv * dd
-    axial, torque = _evaluate(uB, vB, dz, dz_rate, spin, frame, g0, rho, area, sin_a, cos_a, k, mu_d, fact,
-                              decay, tau_cap, eps, cv, fB, Dall, dfdz, dfds, fn_all, s_all, want_jacobian)
-    Ru[:] = uB - w[:nB] - G @ fB
+    axial, torque = _evaluate(uB, vB, dz, dz_rate, spin, frame, g0, rho, area, idx, B, sin_a, cos_a, k, mu_d, fact,
+                              decay, tau_cap, eps, cv, fB, fc, Dall, dfdz, dfds, fn_all, s_all, uc_all, vc_all,
+                              want_jacobian)
+    # G @ fB over the nodes that carry a force only (a few per crest)
+    for r in range(nB):
+        Ru[r] = uB[r] - w[r]
+    for j in range(nB // 3):
+        if fB[3 * j] != 0.0 or fB[3 * j + 1] != 0.0 or fB[3 * j + 2] != 0.0:
+            for c in range(3):
+                fj = fB[3 * j + c]
+                for r in range(nB):
+                    Ru[r] -= G[r, 3 * j + c] * fj
     Rz = rotor_mass * c_a * dd + preload - axial
     Rs = 0.0
     if spin_free:
@@ -207,76 +252,94 @@ def _residual(uB, dd, ds, w, G, xtB, vtB, cv, c_a, dz_t, dzr_t, spin_t, dt, gamm
 
 
 @njit(cache=True, error_model="numpy")
-def _newton_system(Ru, Rz, Rs, G, Dall, dfdz, dfds, fn_all, frame, rho, rotor_mass, c_a, inertia, gamma, dt, brake,
-                   spin_free):
-    """Newton matrix and residual on the nodes in contact (3 per node) plus dz and Omega: the rows of the
-    condensed interface equations u - w - G f(u) = 0 of those nodes and of the rotor's two equations (a node
-    out of contact has no force derivative, so its rows decouple; the caller recovers it). Returns (J, R,
-    active node list, count)."""
-    n_b = fn_all.size
-    # active nodes
+def _newton_system(Ru, Rz, Rs, G, Dall, dfdz, dfds, fn_all, frame, rho, idx, B, n_b, rotor_mass, c_a, inertia, gamma,
+                   dt, brake, spin_free):
+    """Newton matrix and residual on the interface nodes that carry a force (the stencil nodes of the contact
+    points in contact; 3 unknowns per node) plus dz and Omega: the rows of the condensed interface equations
+    u - w - G P^T f(P u) = 0 of those nodes and the rotor's two equations (a node without force has no force
+    derivative, so its rows decouple; the caller recovers it). Returns (J, R, active node list, count, and the
+    nodal force derivatives DF = d(P^T f)/du_A, dFz, dFs on the active nodes)."""
+    n_c = fn_all.size
+    n_s = idx.shape[1]
+    position = np.full(n_b, -1, np.int64)
     active = np.zeros(n_b, np.int64)
     na = 0
-    for i in range(n_b):
+    for i in range(n_c):
         if fn_all[i] > 0.0:
-            active[na] = i
-            na += 1
+            for s in range(n_s):
+                j = idx[i, s]
+                if position[j] < 0:
+                    position[j] = na
+                    active[na] = j
+                    na += 1
     m = 3 * na + 2
     J = np.zeros((m, m))
     R = np.zeros(m)
-    # rows of the active nodes: Ru_A = u_A - w_A - sum_j G_Aj f_j
+    DF = np.zeros((3 * na, 3 * na))
+    dFz = np.zeros(3 * na)
+    dFs = np.zeros(3 * na)
+    E = np.zeros((n_s, 3, 3))
+    for i in range(n_c):
+        if fn_all[i] <= 0.0:
+            continue
+        et = frame[i, 1]
+        for s2 in range(n_s):
+            for r in range(3):
+                for c in range(3):
+                    E[s2, r, c] = Dall[i, r, 0] * B[i, s2, 0, c] + Dall[i, r, 1] * B[i, s2, 1, c] \
+                        + Dall[i, r, 2] * B[i, s2, 2, c]
+        for s1 in range(n_s):
+            a1 = 3 * position[idx[i, s1]]
+            for s2 in range(n_s):
+                a2 = 3 * position[idx[i, s2]]
+                for r in range(3):
+                    for c in range(3):
+                        DF[a1 + r, a2 + c] += B[i, s1, 0, r] * E[s2, 0, c] + B[i, s1, 1, r] * E[s2, 1, c] \
+                            + B[i, s1, 2, r] * E[s2, 2, c]
+            for r in range(3):
+                dFz[a1 + r] += B[i, s1, 0, r] * dfdz[i, 0] + B[i, s1, 1, r] * dfdz[i, 1] + B[i, s1, 2, r] * dfdz[i, 2]
+                dFs[a1 + r] += B[i, s1, 0, r] * dfds[i, 0] + B[i, s1, 1, r] * dfds[i, 1] + B[i, s1, 2, r] * dfds[i, 2]
+        # rotor rows: axial = -sum f_z, torque = -sum rho e_t.f over the contact points
+        for s2 in range(n_s):
+            a2 = 3 * position[idx[i, s2]]
+            for c in range(3):
+                J[m - 2, a2 + c] += E[s2, 2, c]
+                if spin_free:
+                    J[m - 1, a2 + c] += rho[i] * (et[0] * E[s2, 0, c] + et[1] * E[s2, 1, c] + et[2] * E[s2, 2, c])
+        J[m - 2, m - 2] += dfdz[i, 2]
+        J[m - 2, m - 1] += dfds[i, 2]
+        if spin_free:
+            J[m - 1, m - 2] += rho[i] * (et[0] * dfdz[i, 0] + et[1] * dfdz[i, 1] + et[2] * dfdz[i, 2])
+            J[m - 1, m - 1] += rho[i] * (et[0] * dfds[i, 0] + et[1] * dfds[i, 1] + et[2] * dfds[i, 2])
+    # rows of the active nodes: Ru_A = u_A - w_A - G_A. P^T f
+    GA = np.empty((3 * na, 3 * na))
     for ia in range(na):
-        i = active[ia]
-        for c in range(3):
-            row = 3 * ia + c
-            gi = 3 * i + c
-            R[row] = Ru[gi]
-            J[row, row] += 1.0
+        for r in range(3):
+            gi = 3 * active[ia] + r
+            R[3 * ia + r] = Ru[gi]
             for ja in range(na):
-                j = active[ja]
-                for cc in range(3):
-                    gsum = 0.0
-                    for d in range(3):
-                        gsum += G[gi, 3 * j + d] * Dall[j, d, cc]
-                    J[row, 3 * ja + cc] -= gsum
-            gz = 0.0
-            gs = 0.0
-            for ja in range(na):
-                j = active[ja]
-                for d in range(3):
-                    gz += G[gi, 3 * j + d] * dfdz[j, d]
-                    gs += G[gi, 3 * j + d] * dfds[j, d]
-            J[row, m - 2] = -gz
-            J[row, m - 1] = -gs
-    # rotor rows: axial = sum -f_z ; torque = sum -rho e_t.f
+                for c in range(3):
+                    GA[3 * ia + r, 3 * ja + c] = G[gi, 3 * active[ja] + c]
+    if na > 0:
+        J[:3 * na, :3 * na] = np.eye(3 * na) - GA @ DF
+        J[:3 * na, m - 2] = -(GA @ dFz)
+        J[:3 * na, m - 1] = -(GA @ dFs)
     R[m - 2] = Rz
-    J[m - 2, m - 2] = rotor_mass * c_a
-    for ja in range(na):
-        j = active[ja]
-        for cc in range(3):
-            J[m - 2, 3 * ja + cc] = Dall[j, 2, cc]
-        J[m - 2, m - 2] += dfdz[j, 2]
-        J[m - 2, m - 1] += dfds[j, 2]
+    J[m - 2, m - 2] += rotor_mass * c_a
     if spin_free:
         R[m - 1] = Rs
-        J[m - 1, m - 1] = inertia / (gamma * dt) + brake
-        for ja in range(na):
-            j = active[ja]
-            et = frame[j, 1]
-            for cc in range(3):
-                J[m - 1, 3 * ja + cc] = rho[j] * (et[0] * Dall[j, 0, cc] + et[1] * Dall[j, 1, cc]
-                                                  + et[2] * Dall[j, 2, cc])
-            J[m - 1, m - 2] += rho[j] * (et[0] * dfdz[j, 0] + et[1] * dfdz[j, 1] + et[2] * dfdz[j, 2])
-            J[m - 1, m - 1] += rho[j] * (et[0] * dfds[j, 0] + et[1] * dfds[j, 1] + et[2] * dfds[j, 2])
+        J[m - 1, m - 1] += inertia / (gamma * dt) + brake
     else:
         R[m - 1] = 0.0
+        for c in range(m):
+            J[m - 1, c] = 0.0
         J[m - 1, m - 1] = 1.0
-    return J, R, active, na
+    return J, R, active, na, DF, dFz, dFs
 
 
 @njit(cache=True, error_model="numpy")
 def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, phase, omega, cosine, beta,
-          gamma, frame, g0, rho, area, sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, rotor_mass, preload,
+          gamma, frame, g0, rho, area, idx, B, sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, rotor_mass, preload,
           inertia, load_torque, brake, spin_free, tol_u, out_q, out_v, out_a, out_rot, work):
     """One Newmark step of size dt from (q, v, a, rot); Kinv = the free block's K_eff^-1 for dt.
     rot = [dz, dz', dz'', angle, Omega, Omega']. Returns (converged, Newton iterations)."""
@@ -321,12 +384,16 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
     spin_t = spin0 + (1.0 - gamma) * dt * rot[5] if spin_free else spin0
     ds = gamma * dt * rot[5] if spin_free else 0.0
     spin = spin_t + ds
+    n_c = rho.size
     fB = np.zeros(nB)
-    Dall = np.zeros((n_b, 3, 3))
-    dfdz = np.zeros((n_b, 3))
-    dfds = np.zeros((n_b, 3))
-    fn_all = np.zeros(n_b)
-    s_all = np.zeros((n_b, 2))
+    fc = np.zeros((n_c, 3))
+    Dall = np.zeros((n_c, 3, 3))
+    dfdz = np.zeros((n_c, 3))
+    dfds = np.zeros((n_c, 3))
+    fn_all = np.zeros(n_c)
+    s_all = np.zeros((n_c, 2))
+    uc_all = np.zeros((n_c, 3))
+    vc_all = np.zeros((n_c, 3))
     vB = np.zeros(nB)
     xtB = np.empty(nB)
     vtB = np.empty(nB)
@@ -344,9 +411,9 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
     ftol = 1e-10 * force_scale
     ttol = 1e-10 * torque_scale
     Rz, Rs, axial, torque = _residual(uB, dd, ds, w, G, xtB, vtB, cv, c_a, dz_t, dzr_t, spin_t, dt, gamma,
-                                      frame, g0, rho, area, sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps,
-                                      rotor_mass, preload, inertia, load_torque, brake, spin_free, fB, Dall, dfdz,
-                                      dfds, fn_all, s_all, vB, Ru, True)
+                                      frame, g0, rho, area, idx, B, sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps,
+                                      rotor_mass, preload, inertia, load_torque, brake, spin_free, fB, fc, Dall,
+                                      dfdz, dfds, fn_all, s_all, uc_all, vc_all, vB, Ru, True)
     lam_last = 1.0
     for its in range(1, MAX_NEWTON + 1):
         res = max(np.max(np.abs(Ru)) / tol_u, abs(Rz) / ftol, abs(Rs) / ttol)
@@ -355,19 +422,17 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
         if res <= 1.0:
             converged = True
             break
-        J, R, active, na = _newton_system(Ru, Rz, Rs, G, Dall, dfdz, dfds, fn_all, frame, rho, rotor_mass, c_a,
-                                          inertia, gamma, dt, brake, spin_free)
+        J, R, active, na, DF, dFz, dFs = _newton_system(Ru, Rz, Rs, G, Dall, dfdz, dfds, fn_all, frame, rho, idx, B,
+                                                        n_b, rotor_mass, c_a, inertia, gamma, dt, brake, spin_free)
         m = 3 * na + 2
         dy = np.linalg.solve(J, -R)
         # inactive nodes: du_I = -Ru_I + G_IA (D_A du_A + dfdz dz + dfds ds)
         df = np.zeros(nB)
-        for ja in range(na):
-            j = active[ja]
-            for d in range(3):
-                val = dfdz[j, d] * dy[m - 2] + dfds[j, d] * dy[m - 1]
-                for cc in range(3):
-                    val += Dall[j, d, cc] * dy[3 * ja + cc]
-                df[3 * j + d] = val
+        if na > 0:
+            dF_A = DF @ dy[:m - 2] + dFz * dy[m - 2] + dFs * dy[m - 1]
+            for ja in range(na):
+                for d in range(3):
+                    df[3 * active[ja] + d] = dF_A[3 * ja + d]
         du = -Ru + G @ df
         for ia in range(na):
             i = active[ia]
@@ -389,10 +454,11 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
             dd_trial = dd + lam * dy[m - 2]
             ds_trial = ds + lam * dy[m - 1] if spin_free else ds
             Rz_t, Rs_t, axial, torque = _residual(u_trial, dd_trial, ds_trial, w, G, xtB, vtB, cv, c_a, dz_t,
-                                                  dzr_t, spin_t, dt, gamma, frame, g0, rho, area, sin_a, cos_a,
-                                                  k, mu_d, fact, decay, tau_cap, eps, rotor_mass, preload, inertia,
-                                                  load_torque, brake, spin_free, fB, Dall, dfdz, dfds, fn_all, s_all,
-                                                  vB, Ru_trial, True)
+                                                  dzr_t, spin_t, dt, gamma, frame, g0, rho, area, idx, B,
+                                                  sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, rotor_mass,
+                                                  preload, inertia,
+                                                  load_torque, brake, spin_free, fB, fc, Dall, dfdz, dfds, fn_all,
+                                                  s_all, uc_all, vc_all, vB, Ru_trial, True)
             for ia in range(na):
                 i = active[ia]
                 for c in range(3):
@@ -446,15 +512,16 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
 
 @njit(cache=True, error_model="numpy")
 def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, istate, K, M, C, free, prescribed,
-               n_b, amp, phase, omega, cosine, beta, gamma, frame, g0, rho, area, sin_a, cos_a, k, mu_d, fact, decay,
+               n_b, amp, phase, omega, cosine, beta, gamma, frame, g0, rho, area, idx, B, sin_a, cos_a, k, mu_d, fact,
+               decay,
                tau_cap, eps, rotor_mass, preload, inertia, load_torque, brake, spin_free, tol_u, charge_rows,
                columns, point_state, point_fn, trajectory):
     """Advance n_steps steps of dt from t0 (cutting a failed step into halves, up to max_level).
 
     Per step: ``columns`` row (time, rotor state, contact sums, cumulative energies), ``point_state``
-    (separated / stick / forward / backward slip, forward = the stator node slipping ahead of the rotor
-    in the +theta direction), ``point_fn`` normal forces [N], ``trajectory`` the interface
-    displacement (n, theta, m components) of node 0. ``energies`` = [electrical input, damping,
+    per contact point (separated / stick / forward / backward slip, forward = the stator slipping ahead of
+    the rotor in the +theta direction), ``point_fn`` their normal forces [N], ``trajectory`` the stator's
+    displacement at contact point 0 (n, theta, m components). ``energies`` = [electrical input, damping,
     friction, output] [J], carried between calls. Returns the time reached (t0 + n_steps dt unless a
     step failed at the smallest size: then istate[I_FAILED] = 1)."""
     n = q.size
@@ -464,27 +531,32 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
     an = np.empty(n)
     rotn = np.empty(6)
     work = np.zeros(2)
+    n_c = rho.size
     fB = np.zeros(nB)
-    Dd = np.zeros((n_b, 3, 3))
-    dfdz = np.zeros((n_b, 3))
-    dfds = np.zeros((n_b, 3))
-    fn_all = np.zeros(n_b)
-    s_all = np.zeros((n_b, 2))
+    fc = np.zeros((n_c, 3))
+    Dd = np.zeros((n_c, 3, 3))
+    dfdz = np.zeros((n_c, 3))
+    dfds = np.zeros((n_c, 3))
+    fn_all = np.zeros(n_c)
+    s_all = np.zeros((n_c, 2))
+    uc_all = np.zeros((n_c, 3))
+    vc_all = np.zeros((n_c, 3))
     n_el = prescribed.size
     volts0 = np.empty(n_el)
     volts1 = np.empty(n_el)
     t = t0
     # friction power at the start of the step (trapezoidal dissipation)
-    _evaluate(q[:nB], v[:nB], rot[0], rot[1], rot[4], frame, g0, rho, area, sin_a, cos_a, k, mu_d, fact, decay,
-              tau_cap, eps, 0.0, fB, Dd, dfdz, dfds, fn_all, s_all, False)
-    p_fric0 = _friction_power(fB, s_all, frame, n_b)
+    axial_now, torque_now = _evaluate(q[:nB], v[:nB], rot[0], rot[1], rot[4], frame, g0, rho, area, idx, B, sin_a,
+                                      cos_a, k, mu_d, fact, decay, tau_cap, eps, 0.0, fB, fc, Dd, dfdz, dfds, fn_all,
+                                      s_all, uc_all, vc_all, False)
+    p_fric0 = _friction_power(fc, s_all, frame)
     for step in range(n_steps):
         # Newmark step, retried as 2^level sub-steps on failure
         level = 0
         ok = False
         its_total = 0
         fB_step0 = fB.copy()
-        axial_step0, torque_step0 = _rotor_load(fB, frame, rho)
+        axial_step0, torque_step0 = axial_now, torque_now
         while not ok:
             fB[:] = fB_step0
             sub = 2 ** level
@@ -511,10 +583,10 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
                 va = vn.copy()
                 aa = an.copy()
                 ra = rotn.copy()
-                conv, its = _step(h, Kinv, tt, qa, va, aa, ra, K, M, C, free,
-                                  prescribed, n_b, amp, phase, omega, cosine, beta, gamma, frame, g0, rho, area,
-                                  sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, rotor_mass, preload, inertia,
-                                  load_torque, brake, spin_free, tol_u, qn, vn, an, rotn, work)
+                conv, its = _step(h, Kinv, tt, qa, va, aa, ra, K, M, C, free, prescribed, n_b, amp, phase, omega,
+                                  cosine, beta, gamma, frame, g0, rho, area, idx, B, sin_a, cos_a, k, mu_d, fact, decay,
+                                  tau_cap, eps, rotor_mass, preload, inertia, load_torque, brake, spin_free, tol_u,
+                                  qn, vn, an, rotn, work)
                 its_total += its
                 if not conv:
                     ok = False
@@ -532,12 +604,12 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
                 fB_old = fB.copy()
                 vm = 0.5 * (va + vn)
                 e_d += h * (vm @ (C @ vm))
-                _evaluate(qn[:nB], vn[:nB], rotn[0], rotn[1], rotn[4], frame, g0, rho, area, sin_a, cos_a, k, mu_d,
-                          fact, decay, tau_cap, eps, 0.0, fB, Dd, dfdz, dfds, fn_all, s_all, False)
-                pf1 = _friction_power(fB, s_all, frame, n_b)
+                axial1, torque1 = _evaluate(qn[:nB], vn[:nB], rotn[0], rotn[1], rotn[4], frame, g0, rho, area, idx,
+                                            B, sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, 0.0, fB, fc, Dd,
+                                            dfdz, dfds, fn_all, s_all, uc_all, vc_all, False)
+                pf1 = _friction_power(fc, s_all, frame)
                 for r in range(nB):
                     e_c -= 0.5 * (fB_old[r] + fB[r]) * (qn[r] - qa[r])
-                axial1, torque1 = _rotor_load(fB, frame, rho)
                 e_rot += 0.5 * (axial0 + axial1) * (rotn[0] - ra[0]) + 0.5 * (torque0 + torque1) * (rotn[3] - ra[3])
                 axial0 = axial1
                 torque0 = torque1
@@ -562,6 +634,7 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
         rot[:] = rotn
         t += dt
         p_fric0 = pf0
+        axial_now, torque_now = axial0, torque0
         energies[0] += e_in
         energies[1] += e_d
         energies[2] += e_f
@@ -573,12 +646,12 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
         normal = 0.0
         drive_num = 0.0
         active = 0
-        for i in range(n_b):
+        for i in range(n_c):
             normal += fn_all[i]
             if fn_all[i] > 0.0:
                 active += 1
                 et = frame[i, 1]
-                drive_num += fn_all[i] * (et[0] * v[3 * i] + et[1] * v[3 * i + 1] + et[2] * v[3 * i + 2])
+                drive_num += fn_all[i] * (et[0] * vc_all[i, 0] + et[1] * vc_all[i, 1] + et[2] * vc_all[i, 2])
             speed = np.sqrt(s_all[i, 0] ** 2 + s_all[i, 1] ** 2)
             if fn_all[i] <= 0.0:
                 point_state[step, i] = SEPARATED
@@ -589,21 +662,18 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
             else:
                 point_state[step, i] = BACKWARD_SLIP
             point_fn[step, i] = fn_all[i]
-        axial, torque = _rotor_load(fB, frame, rho)
-        n0 = frame[0, 0]
-        e0 = frame[0, 1]
-        m0 = frame[0, 2]
-        trajectory[step, 0] = n0[0] * q[0] + n0[1] * q[1] + n0[2] * q[2]
-        trajectory[step, 1] = e0[0] * q[0] + e0[1] * q[1] + e0[2] * q[2]
-        trajectory[step, 2] = m0[0] * q[0] + m0[1] * q[1] + m0[2] * q[2]
+        axial, torque = axial_now, torque_now
+        for r in range(3):
+            trajectory[step, r] = frame[0, r, 0] * uc_all[0, 0] + frame[0, r, 1] * uc_all[0, 1] \
+                + frame[0, r, 2] * uc_all[0, 2]
         stored = 0.5 * (v @ (M @ v)) + 0.5 * (q @ (K @ q)) + 0.5 * rotor_mass * rot[1] ** 2 \
             + 0.5 * inertia * rot[4] ** 2 + preload * rot[0]
         penalty = 0.0
-        for i in range(n_b):
+        for i in range(n_c):
             if fn_all[i] > 0.0:
                 gap = g0[i] + sin_a * rot[0]
                 for c in range(3):
-                    gap += frame[i, 0, c] * q[3 * i + c]
+                    gap += frame[i, 0, c] * uc_all[i, c]
                 penalty += _penalty(-gap, k * area[i])[2]
         stored += penalty
         columns[step, C_TIME] = t
@@ -630,14 +700,14 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
 
 
 @njit(cache=True, error_model="numpy")
-def _friction_power(fB, s_all, frame, n_b):
-    """Power dissipated by friction [W]: -f_t . s summed over the nodes (f_t the tangential force on the
-    stator, s its slip over the rotor)."""
+def _friction_power(fc, s_all, frame):
+    """Power dissipated by friction [W]: -f_t . s summed over the contact points (f_t the tangential force on
+    the stator, s its slip over the rotor)."""
     p = 0.0
-    for i in range(n_b):
+    for i in range(s_all.shape[0]):
         et = frame[i, 1]
         tm = frame[i, 2]
-        ft_t = et[0] * fB[3 * i] + et[1] * fB[3 * i + 1] + et[2] * fB[3 * i + 2]
-        ft_m = tm[0] * fB[3 * i] + tm[1] * fB[3 * i + 1] + tm[2] * fB[3 * i + 2]
+        ft_t = et[0] * fc[i, 0] + et[1] * fc[i, 1] + et[2] * fc[i, 2]
+        ft_m = tm[0] * fc[i, 0] + tm[1] * fc[i, 1] + tm[2] * fc[i, 2]
         p -= ft_t * s_all[i, 0] + ft_m * s_all[i, 1]
     return p
