@@ -247,9 +247,9 @@ def test_a_cone_not_about_the_rotation_axis_is_refused(shared_tmp):
 # ---------------------------------------------------------------- exclude_initial_gap (ANSYS KEYOPT(9) = 1)
 # The cone sits exactly on the design face (no clearance), on a coarse washer (1 mm elements, P1): the
 # straight facets sag by up to h^2/(8 r) ~ 25 um inside the design cone, so without the option the cone
-# overlaps the funnel at rest. The penalty is soft (1e11 Pa/m) against the washer (its radial stiffness is
-# about 100 x k A), so the penetration is the penalty's: N / (k A) with A the funnel's area, 3.9 um,
-# uniform round the ring because the faceting is excluded, and the cone sinks by that / sin(alpha).
+# overlaps the funnel at rest. The penalty is soft (1e11 Pa/m) against the washer (its radial give adds
+# 0.24 %), so the penetration is the penalty's: N / (k A) with A the funnel's area, 3.9 um, uniform round
+# the ring because the faceting is excluded, and the cone sinks by that / sin(alpha).
 SOFT_PENALTY_PA_PER_M, SOFT_DAMPING_PA_S_PER_M = 1e11, 1.2e6     # ~0.5 of critical for the cone's axial mode
 FUNNEL_AREA_M2 = (math.pi * (2 * INNER_RADIUS_M + HEIGHT_M * math.tan(math.radians(ALPHA_DEG)))
                   * HEIGHT_M / math.cos(math.radians(ALPHA_DEG)))
@@ -306,6 +306,11 @@ def test_excluded_initial_gap_on_a_faceted_funnel_gives_p_over_sin_alpha_and_the
     np.testing.assert_allclose(data["funnel_force_N"][last, 2], PRELOAD_N, rtol=1e-3)
     normal_force = PRELOAD_N / math.sin(alpha)
     np.testing.assert_allclose(-data["funnel_torque_N_m"][last, 0], MU * normal_force * FACE_RADIUS_M, rtol=5e-3)
-    # the cone's sink times sin(alpha) is the normal penetration plus the washer's (1 %) radial give
+    # the integral of the pressure (the new time-series column) is that same N
+    np.testing.assert_allclose(data["funnel_normal_force_N"][last], normal_force, rtol=1e-3)
+    # the whole faceted funnel carries it (without the option only the facet middles would) ...
+    assert np.all(data["funnel_area_in_contact_m2"][last] > 0.99 * FUNNEL_AREA_M2)
+    # ... with the penalty's uniform penetration: the cone's sink times sin(alpha), which also holds the
+    # washer's small radial give (measured +0.24 %)
     penetration = (REFERENCE_Z_M - data["cone_position_m"][last, 2].mean()) * math.sin(alpha)
-    np.testing.assert_allclose(penetration, normal_force / (SOFT_PENALTY_PA_PER_M * FUNNEL_AREA_M2), rtol=0.03)
+    np.testing.assert_allclose(penetration, normal_force / (SOFT_PENALTY_PA_PER_M * FUNNEL_AREA_M2), rtol=0.01)
