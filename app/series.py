@@ -24,6 +24,10 @@ dataset                              unit     meaning (one row per accepted step
 ``<contact>_torque_N_m``             N m      torque of a contact on a rotating body
 ``<contact>_dissipated_J``           J        energy the contact's damping and friction have dissipated
                                               since t = 0 (FE tier)
+``<contact>_normal_force_N``         N        a surface contact on a rotating body: total normal force,
+                                              the integral of the contact pressure (motor: N)
+``<contact>_area_in_contact_m2``     m^2      a surface contact on a rotating body (FE tier): area of its
+                                              quadrature points in contact
 ===================================  =======  ==========================================================
 
 Every dataset carries the attribute :data:`UNITS`. The summary's statistics use the same names in
@@ -81,6 +85,14 @@ def contact_closed(contact: str) -> str:
 
 def contact_torque(contact: str) -> str:
     return f"{contact}_torque_N_m"
+
+
+def contact_normal_force(contact: str) -> str:
+    return f"{contact}_normal_force_N"
+
+
+def contact_area(contact: str) -> str:
+    return f"{contact}_area_in_contact_m2"
 
 
 def contact_dissipated(contact: str) -> str:

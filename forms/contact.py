@@ -85,6 +85,15 @@ def cone_normal(d, axis, half_angle_rad):
     return math.cos(half_angle_rad) * e_rho - math.sin(half_angle_rad) * axis
 
 
+def excluding_initial_gap(gap, reference_gap):
+    """Gap [m] measured from the reference configuration, as ANSYS's KEYOPT(9) = 1 ("exclude both
+    initial geometrical penetration or gap"): g_eff = g(x + u, p) - g(x, p_ref), with ``reference_gap``
+    the gap of the undeformed surface to the obstacle at its reference position. It depends on the
+    mesh coordinates only, so the derivative with respect to u (the Newton tangent) is the gap's own.
+    Both signs are removed: every point starts touching, none penetrates."""
+    return gap - reference_gap
+
+
 def normal_pressure(gap, gap_rate, stiffness, damping):
     """Kelvin-Voigt penalty pressure [Pa] (or force per length/area per the caller's stiffness
     unit): k (-g) + c (-dg/dt) while penetrating, clipped at zero so the surfaces never pull."""

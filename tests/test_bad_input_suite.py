@@ -131,7 +131,7 @@ SET_INPUTS = [
     (MOTOR, [f'{_CONE}.shape="plane"'], f"{_CONE}.normal"),
     (MOTOR, [f"{_CONE}.damping=1e6"], f"{_CONE}.damping"),
     (MOTOR, [f"{_ROTOR}.position_m=[0.001, 0.0, 0.01374]"], f"{_ROTOR}.position_m"),
-    (MOTOR, [f"{_ROTOR}.free_axes=[true, true, true]"], f"{_ROTOR}.free_axes"),
+    (MOTOR, [f"{_ROTOR}.free_axes=[true, false, false]"], f"{_ROTOR}.free_axes"),   # (3 free: seat_on refuses)
     (MOTOR, [f"{_ROTOR}.applied_force_N=[0.0, 0.0, 0.98]"], f"{_ROTOR}.applied_force_N"),
     (MOTOR, [f'{_ROTOR}.rotations[0].axis="x"'], f"{_ROTOR}.rotations"),
     (MOTOR, [f"{_ROTOR}.rotations[0].brake_N_m_s_per_rad=-1"], f"{_ROTOR}.rotations[0].brake_N_m_s_per_rad"),
@@ -158,6 +158,15 @@ SET_INPUTS = [
     (MOTOR, ["transient.steady_state.min_cycles=0"], "transient.steady_state.min_cycles"),
     (MOTOR, ["transient.steady_state.period_count=3"], "transient.steady_state.period_count"),
     (MOTOR, ["transient.bodies[0].rotations=[]"], "transient.steady_state.body"),
+    # excluded initial gap and seating (docs/contact.md)
+    (MOTOR, [f"{_CONE}.exclude_initial_gap=false"], f"{_CONE}.exclude_initial_gap"),   # the modal motor's rule
+    (MOTOR, [f"{_CONE}.exclude_initial_gap=1"], f"{_CONE}.exclude_initial_gap"),
+    (MOTOR, [f'{_ROTOR}.seat_on="nowhere"'], f"{_ROTOR}.seat_on"),
+    (MOTOR, ['tier="fe"', f'{_ROTOR}.seat_on="nowhere"'], f"{_ROTOR}.seat_on"),
+    (MOTOR, ['tier="fe"', f"{_ROTOR}.free_axes=[false, true, true]"], f"{_ROTOR}.seat_on"),
+    (MOTOR, ['tier="fe"', f"{_ROTOR}.fixed=true", f'{_SPIN}.motion="fixed"'], f"{_ROTOR}.seat_on"),
+    (STRIP, ['tier="modal"', "transient.contacts[0].exclude_initial_gap=true"],
+     "transient.contacts[0].exclude_initial_gap"),
     # ... and those that need the mesh (the 2D strip: cheap)
     (STRIP, ['transient.contacts[0].shape="cone"', "transient.contacts[0].radius_m=0.01",
              "transient.contacts[0].axis=[0.0, 0.0, 1.0]", "transient.contacts[0].half_angle_deg=15.0"],
@@ -174,6 +183,7 @@ SYNTAX_INPUTS = [(BAR, ["modal.n_modes"], "modal.n_modes"), (BAR, ["modal..n_mod
 # (case, [(old text, new text)], --set overrides, key): edits of the case file itself
 _CONTACTS = "[[transient.contacts]]\nname = \"tip_ball\""
 EDIT_INPUTS = [
+    (MOTOR, [('seat_on = "stator_rotor"', "")], [], f"{_ROTOR}.seat_on"),     # the modal motor always seats
     (BAR, [('material = "pzt4"', 'material = "pzt5"')], [], "regions[0].material"),
     (BAR, [('poling = "+z"', 'poling = "+w"')], [], "regions[0].poling"),
     (BAR, [('poling = "+z"', "poling = [0.0, 0.0, 0.0]")], [], "regions[0].poling"),

@@ -242,3 +242,75 @@ def test_a_cone_not_about_the_rotation_axis_is_refused(shared_tmp):
         build(load_case(folder / "case.toml"), comm, lambda *args: None)
     assert err.value.key == "transient.contacts[0].shape"
     assert "not a body of revolution" in str(err.value)
+
+
+# ---------------------------------------------------------------- exclude_initial_gap (ANSYS KEYOPT(9) = 1)
+# The cone sits exactly on the design face (no clearance), on a coarse washer (1 mm elements, P1): the
+# straight facets sag by up to h^2/(8 r) ~ 25 um inside the design cone, so without the option the cone
+# overlaps the funnel at rest. The penalty is soft (1e11 Pa/m) against the washer (its radial give adds
+# 0.24 %), so the penetration is the penalty's: N / (k A) with A the funnel's area, 3.9 um, uniform round
+# the ring because the faceting is excluded, and the cone sinks by that / sin(alpha).
+SOFT_PENALTY_PA_PER_M, SOFT_DAMPING_PA_S_PER_M = 1e11, 1.2e6     # ~0.5 of critical for the cone's axial mode
+FUNNEL_AREA_M2 = (math.pi * (2 * INNER_RADIUS_M + HEIGHT_M * math.tan(math.radians(ALPHA_DEG)))
+                  * HEIGHT_M / math.cos(math.radians(ALPHA_DEG)))
+
+
+def make_design_case(folder, end_time_s: float, preload_n: float, exclude: bool):
+    comm = MPI.COMM_WORLD
+    if comm.rank == 0:
+        folder.mkdir(parents=True, exist_ok=True)
+        if not (folder / "washer.msh").exists():
+            write_washer_mesh(folder / "washer.msh", mesh_size_m=0.001)
+        text = CASE.format(end_time=end_time_s, checkpoint_every=0, z_ref=REFERENCE_Z_M, preload=preload_n,
+                           rotation=SPIN, radius=FACE_RADIUS_M, alpha=ALPHA_DEG, mu=MU)
+        text = text.replace("stiffness = 1e13\ndamping = 3e7",
+                            f"stiffness = {SOFT_PENALTY_PA_PER_M}\ndamping = {SOFT_DAMPING_PA_S_PER_M}\n"
+                            f"exclude_initial_gap = {'true' if exclude else 'false'}")
+        (folder / "case.toml").write_text(text)
+    comm.barrier()
+    return load_case(folder / "case.toml")
+
+
+@pytest.mark.mpi
+def test_excluded_initial_gap_leaves_a_faceted_funnel_unloaded_at_rest(shared_tmp):
+    """Zero load on the design cone: no force at any step with the option; without it the facets'
+    sag overlaps the cone and the first step already carries a large force."""
+    comm = MPI.COMM_WORLD
+    forces = {}
+    for exclude in (True, False):
+        folder = shared_tmp / f"rest_{exclude}"
+        case = make_design_case(folder, 1e-5, 0.0, exclude)
+        run(case, folder / "out", comm, lambda *args: None)
+        if comm.rank == 0:
+            data = series(folder / "out")
+            forces[exclude] = np.abs(data["funnel_force_N"]).max()
+            if exclude:
+                assert np.all(data["cone_position_m"][:, 2] == REFERENCE_Z_M)
+    if comm.rank == 0:
+        assert forces[True] == 0.0
+        assert forces[False] > 1.0            # the overlap alone pushes harder than the test's 1 N preload
+
+
+@pytest.mark.mpi
+def test_excluded_initial_gap_on_a_faceted_funnel_gives_p_over_sin_alpha_and_the_penalty_penetration(shared_tmp):
+    comm = MPI.COMM_WORLD
+    folder = shared_tmp / "design"
+    case = make_design_case(folder, 2e-3, PRELOAD_N, True)
+    results = run(case, folder / "out", comm, lambda *args: None)
+    assert results["steady_state"]["steady"]
+    if comm.rank != 0:
+        return
+    data = series(folder / "out")
+    alpha = math.radians(ALPHA_DEG)
+    last = data["time_s"] > data["time_s"][-1] - 1e-5
+    np.testing.assert_allclose(data["funnel_force_N"][last, 2], PRELOAD_N, rtol=1e-3)
+    normal_force = PRELOAD_N / math.sin(alpha)
+    np.testing.assert_allclose(-data["funnel_torque_N_m"][last, 0], MU * normal_force * FACE_RADIUS_M, rtol=5e-3)
+    # the integral of the pressure (the new time-series column) is that same N
+    np.testing.assert_allclose(data["funnel_normal_force_N"][last], normal_force, rtol=1e-3)
+    # the whole faceted funnel carries it (without the option only the facet middles would) ...
+    assert np.all(data["funnel_area_in_contact_m2"][last] > 0.99 * FUNNEL_AREA_M2)
+    # ... with the penalty's uniform penetration: the cone's sink times sin(alpha), which also holds the
+    # washer's small radial give (measured +0.24 %)
+    penetration = (REFERENCE_Z_M - data["cone_position_m"][last, 2].mean()) * math.sin(alpha)
+    np.testing.assert_allclose(penetration, normal_force / (SOFT_PENALTY_PA_PER_M * FUNNEL_AREA_M2), rtol=0.01)

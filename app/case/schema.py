@@ -304,12 +304,18 @@ def _check_modal_tier(transient, file: str) -> None:
         check_motor_case(SimpleNamespace(transient=transient), file)
         return
     for i, contact in enumerate(transient.contacts):
+        if getattr(contact, "exclude_initial_gap", False):
+            raise CaseError(file, f"transient.contacts[{i}].exclude_initial_gap",
+                            "not available for tier 'modal' surface contacts yet (use tier 'fe')")
         if getattr(contact, "friction", None) is not None:
             raise CaseError(file, f"transient.contacts[{i}].friction",
                             "friction is not available in tier 'modal' yet (frictionless contacts only; use tier 'fe')")
     if transient.base_motions:
         raise CaseError(file, "transient.base_motions[0]", "base motions are not available in tier 'modal' yet")
     for i, body in enumerate(transient.bodies):
+        if body.seat_on is not None:
+            raise CaseError(file, f"transient.bodies[{i}].seat_on", "seating is not available in tier 'modal' yet "
+                                                                   "(the motor always seats its rotor; use tier 'fe')")
         if body.rotations:
             raise CaseError(file, f"transient.bodies[{i}].rotations",
                             "rotating bodies are not available in tier 'modal' yet")

@@ -25,6 +25,10 @@ def check_motor_case(case, file: str) -> None:
     if contact.damping:
         raise CaseError(file, f"{key}.contacts[0].damping",
                         "contact damping is not available in the modal tier's motor")
+    if not contact.exclude_initial_gap:
+        raise CaseError(file, f"{key}.contacts[0].exclude_initial_gap",
+                        "the modal tier's motor measures the band's gap from the design cone (ANSYS KEYOPT(9) = 1): "
+                        "set it to true")
     if len(cfg.bodies) != 1:
         raise CaseError(file, f"{key}.bodies", "the modal tier's motor has one rigid body, the rotor")
     body = cfg.bodies[0]
@@ -32,6 +36,10 @@ def check_motor_case(case, file: str) -> None:
         raise CaseError(file, f"{key}.bodies[0].position_m", "the rotor's reference point lies on the z axis")
     if body.fixed or (body.free_axes or [True] * 3) != [False, False, True]:
         raise CaseError(file, f"{key}.bodies[0].free_axes", "the rotor translates along z only: [false, false, true]")
+    if body.seat_on != contact.name:
+        raise CaseError(file, f"{key}.bodies[0].seat_on",
+                        "the modal tier's motor starts the rotor seated on the highest crest: "
+                        f"set it to {contact.name!r}")
     if not body.mass_kg > 0:
         raise CaseError(file, f"{key}.bodies[0].mass_kg", "the rotor needs a positive mass")
     if len(body.rotations) != 1 or body.rotations[0].axis != "z":

@@ -106,12 +106,20 @@ class SurfaceContact(ForceColumns):
     body. The obstacle must be a body of revolution about every such axis (a sphere centred on the
     reference point, a plane normal to the axis in 3D, a cone about the axis through the reference
     point): its gap does not change with the angle, and
-    omega x r has no normal component, so the rotation enters through friction only."""
+    omega x r has no normal component, so the rotation enters through friction only.
+
+    ``exclude_initial_gap`` (ANSYS KEYOPT(9) = 1, every obstacle shape): the gap of each quadrature
+    point is measured from its reference gap, the gap of the undeformed surface (u = 0) to the body at
+    its reference position (the case's ``position_m``): g_eff = g(x + u, p) - g(x, p_ref)
+    (:func:`forms.contact.excluding_initial_gap`). Both signs are excluded, as KEYOPT(9) = 1 does: every
+    point of the facet group touches at the reference, none penetrates. This is meant for a surface that
+    is in contact by design but is faceted (a straight-edged mesh of a curved face sags by h^2/(8 r)
+    between its nodes); the nodal gaps of the step controller and of seating are measured the same way."""
 
     def __init__(self, name: str, fe: LinearFE, facet_tags, tag: int, body: str, shape: ObstacleShape,
                  stiffness_Pa_per_m: float, damping_Pa_s_per_m: float = 0.0, friction: Friction | None = None,
                  weight=1.0, fields: MidpointFields | None = None, quadrature_degree: int = 4,
-                 rotation_axes=None):
+                 rotation_axes=None, exclude_initial_gap: bool = False):
         if not stiffness_Pa_per_m > 0:
             raise ValueError(f"contact {name!r}: stiffness must be > 0")
         fields = fields if fields is not None else MidpointFields(fe)
@@ -143,26 +151,17 @@ class SurfaceContact(ForceColumns):
         offset = ufl.as_vector(shape.offset_m or (0.0,) * gdim)
         # y - point, with y = x + u and point = reference + dz + offset (see above)
         relative = (x - self.body_reference - offset) + (u - self.body_displacement)
-        zero = ufl.as_vector((0.0,) * gdim)
         if shape.kind == "cone" and gdim != 3:
             raise ValueError(f"contact {name!r}: a cone obstacle needs a 3D model")
-        if shape.kind == "plane":
-            normal = ufl.as_vector(shape.normal)
-            gap = cf.plane_gap(relative, zero, normal)
-        elif shape.kind == "cone":
-            axis = ufl.as_vector(shape.axis)
-            normal = cf.cone_normal(relative, axis, shape.half_angle_rad)
-            gap = cf.cone_gap(relative, axis, shape.radius_m, shape.half_angle_rad)
-        elif shape.normal:
-            normal = cf.sphere_normal(relative, zero, shape.radius_m)
-            # e = y - (centre + R pole) = (x - pole point at the reference) + (u - dz): the pole
-            # point is summed once in floating point (set_body_reference), so e has no |centre|
-            # or R-sized intermediate.
-            local = (x - self._pole_point) + (u - self.body_displacement)
-            gap = cf.sphere_gap_from_pole(local, ufl.as_vector(shape.normal), shape.radius_m)
-        else:
-            normal = cf.sphere_normal(relative, zero, shape.radius_m)
-            gap = cf.sphere_gap(relative, zero, shape.radius_m)
+        # e = y - (centre + R pole) for a sphere with a pole: (x - pole point at the reference) + (u - dz);
+        # the pole point is summed once in floating point (set_body_reference), so e has no |centre| or
+        # R-sized intermediate.
+        normal, gap = self._gap_and_normal(relative, (x - self._pole_point) + (u - self.body_displacement))
+        self.exclude_initial_gap = bool(exclude_initial_gap)
+        if self.exclude_initial_gap:
+            # the same gap of the undeformed surface (u = 0) against the body at its reference position
+            _, reference_gap = self._gap_and_normal(x - self.body_reference - offset, x - self._pole_point)
+            gap = cf.excluding_initial_gap(gap, reference_gap)
         relative_velocity = v - self.body_velocity
         self.rotation_axes = np.zeros((0, 3)) if rotation_axes is None else np.asarray(rotation_axes, float)
         self._check_revolution(self.rotation_axes)
@@ -201,10 +200,32 @@ class SurfaceContact(ForceColumns):
         self.energy_form = fem.form(0.5 * self.stiffness * penetration**2 * weight * ds)
         self.dissipation_form = fem.form(power * weight * ds)
         self.area_in_contact_form = fem.form(cf.heaviside(-gap) * weight * ds)
+        self.normal_force_form = fem.form(pressure * weight * ds)
+        self.band_area_m2 = fe.comm.allreduce(fem.assemble_scalar(fem.form(weight * ds)), op=MPI.SUM)
         self.residual_vector = create_vector(self.residual_form)
         self.tangent_matrix = create_matrix(self.tangent_form)
         self._coordinates = fe.dof_coordinates()
         self._node_dofs = self._group_dofs_by_node()
+        self._nodal_reference_gap = np.zeros(self._node_dofs.shape[0])
+        self.largest_reference_gap_m = 0.0
+
+    def _gap_and_normal(self, relative, pole_relative):
+        """(outward unit normal, gap [m]) of the obstacle in UFL, at the points ``relative`` = y - point
+        (point = reference + body displacement + offset); ``pole_relative`` = y - (point + R pole) is
+        used instead by a sphere with a pole (its gap without cancellation)."""
+        shape = self.shape
+        zero = ufl.as_vector((0.0,) * len(relative))
+        if shape.kind == "plane":
+            normal = ufl.as_vector(shape.normal)
+            return normal, cf.plane_gap(relative, zero, normal)
+        if shape.kind == "cone":
+            axis = ufl.as_vector(shape.axis)
+            return (cf.cone_normal(relative, axis, shape.half_angle_rad),
+                    cf.cone_gap(relative, axis, shape.radius_m, shape.half_angle_rad))
+        normal = cf.sphere_normal(relative, zero, shape.radius_m)
+        if shape.normal:
+            return normal, cf.sphere_gap_from_pole(pole_relative, ufl.as_vector(shape.normal), shape.radius_m)
+        return normal, cf.sphere_gap(relative, zero, shape.radius_m)
 
     def _check_revolution(self, axes: np.ndarray) -> None:
         shape = self.shape
@@ -265,6 +286,11 @@ class SurfaceContact(ForceColumns):
             offset = np.asarray(self.shape.offset_m) if self.shape.offset_m else 0.0
             self._pole_point.value[:] = (np.asarray(position_m, dtype=float) + offset
                                          + self.shape.radius_m * np.asarray(self.shape.normal))
+        zero = np.zeros(self._coordinates.shape[0])
+        self._nodal_reference_gap = self._raw_nodal_gaps(zero, zero, position_m, np.zeros(len(position_m)))[0]
+        local = float(np.abs(self._nodal_reference_gap).max(initial=0.0))
+        #: largest |gap| of a contact node at the reference [m]: what exclude_initial_gap removes
+        self.largest_reference_gap_m = self.fe.comm.allreduce(local, op=MPI.MAX)
 
     def set_body_state(self, position_m: np.ndarray, velocity_m_per_s: np.ndarray) -> None:
         self.body_displacement.value[:] = np.asarray(position_m) - self.body_reference.value
@@ -310,7 +336,14 @@ class SurfaceContact(ForceColumns):
         return out[(out >= 0).all(axis=1)]
 
     def nodal_gaps(self, u: np.ndarray, v: np.ndarray, body_position, body_velocity):
-        """(gap [m], gap rate [m/s]) at the owned contact nodes for local DOF arrays u, v."""
+        """(gap [m], gap rate [m/s]) at the owned contact nodes for local DOF arrays u, v (with
+        ``exclude_initial_gap``, from each node's reference gap, as the forms)."""
+        gap, rate = self._raw_nodal_gaps(u, v, body_position, body_velocity)
+        if self.exclude_initial_gap:
+            gap = gap - self._nodal_reference_gap
+        return gap, rate
+
+    def _raw_nodal_gaps(self, u: np.ndarray, v: np.ndarray, body_position, body_velocity):
         nodes = self._node_dofs
         if nodes.shape[0] == 0:
             return np.zeros(0), np.zeros(0)
@@ -326,6 +359,39 @@ class SurfaceContact(ForceColumns):
         d = y - point
         dist = np.linalg.norm(d, axis=1)
         return dist - self.shape.radius_m, np.einsum("ij,ij->i", d / dist[:, None], rel_v)
+
+    def smallest_nodal_gap_m(self, u: np.ndarray, body_position) -> float:
+        """Smallest gap [m] of the contact nodes (all ranks) at displacement ``u`` with the body at
+        ``body_position``."""
+        gap, _ = self.nodal_gaps(u, np.zeros_like(u), body_position, np.zeros(len(body_position)))
+        return self.fe.comm.allreduce(float(gap.min(initial=math.inf)), op=MPI.MIN)
+
+    def seat_distance_m(self, u: np.ndarray, body_position, direction, tolerance_m: float = 1e-13) -> float:
+        """Distance s [m] to move the body from ``body_position`` along the unit ``direction`` so that
+        the smallest nodal gap at ``u`` is zero: the body just touches the surface's highest point.
+        Secant iteration on s -> min gap (linear in s for a plane or a cone moved along its normal or
+        axis: one step). ValueError if moving along ``direction`` does not open the contact."""
+        position = np.asarray(body_position, dtype=float)
+        direction = np.asarray(direction, dtype=float)
+
+        def smallest(s):
+            return self.smallest_nodal_gap_m(u, position + s * direction)
+
+        s, g = 0.0, smallest(0.0)
+        if not math.isfinite(g):
+            raise ValueError(f"contact {self.name!r} has no nodes to seat on")
+        step = max(abs(g), 1e-9)
+        for _ in range(50):
+            if abs(g) <= tolerance_m:
+                return s
+            g_next = smallest(s + step)
+            slope = (g_next - g) / step
+            if not slope > 0:
+                raise ValueError(f"contact {self.name!r}: moving body {self.body!r} along {direction.tolist()} "
+                                 "does not open the contact, so it cannot be seated")
+            s, g = s + step, g_next
+            step = -g / slope
+        raise ValueError(f"contact {self.name!r}: seating body {self.body!r} did not converge (gap {g:.3g} m)")
 
     def _cone_gaps(self, x, u_nodes, rel_v, body_position):
         """(gap [m], gap rate [m/s]) of points x + u to the cone (forms.contact.cone_gap), with the
@@ -401,13 +467,18 @@ class SurfaceContact(ForceColumns):
         out = super().columns()
         if self.rotation_axes.size:
             out[S.contact_torque(self.name)] = "N m (on the rigid body, about its rotation axes)"
+            out[S.contact_normal_force(self.name)] = "N"
+            out[S.contact_area(self.name)] = "m^2"
         return out
 
     def row(self, force_N, closed: bool) -> dict:
         gdim = self.fe.gdim
         out = super().row(force_N[:gdim], closed)
         if self.rotation_axes.size:
+            # the fields hold the accepted step's end (mid) state and the body its end state (status())
             out[S.contact_torque(self.name)] = force_N[gdim:]
+            out[S.contact_normal_force(self.name)] = self._scalar(self.normal_force_form)
+            out[S.contact_area(self.name)] = self.area_in_contact_m2()
         return out
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:

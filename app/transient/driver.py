@@ -222,8 +222,29 @@ class TransientModel:
         self.drive.amplitude_V = voltage
         self.drive(0.0)
         z, zd, zdd = self.rigid.initial_state()
+        self._seat_bodies(u0, z)
         state = self.system.consistent_rigid_acceleration(TransientState(0.0, u0, v0, a0, z, zd, zdd))
         return state, voltage
+
+    def _seat_bodies(self, u0: np.ndarray, z: np.ndarray) -> None:
+        """Move each body with ``seat_on`` along its free translation axis until it just touches that
+        contact's surface at the initial displacement ``u0`` (in place on ``z``; it starts at rest there)."""
+        for i, body in enumerate(self.cfg.bodies):
+            if body.seat_on is None:
+                continue
+            contact = next(c for c in self.system.interactions if c.name == body.seat_on)
+            axis = (body.free_axes or [True] * len(body.position_m)).index(True)
+            direction = np.eye(self.gdim)[axis]
+            sl = self.rigid.dofs(body.name)
+            try:
+                distance = contact.seat_distance_m(u0, z[sl], direction)
+            except ValueError as exc:
+                raise CaseError(self.case.source, f"transient.bodies[{i}].seat_on", str(exc)) from None
+            z[sl] += distance * direction
+            excluded = (f" (largest excluded initial gap {contact.largest_reference_gap_m * 1e6:.4g} um)"
+                        if contact.exclude_initial_gap else "")
+            self.log(f"transient: body {body.name!r} seated on {contact.name!r}: moved {distance * 1e6:.6g} um along "
+                     f"axis {axis}{excluded}")
 
     def resume_drive(self, voltage_V: float) -> None:
         """Drive amplitude of a resumed run (saved in the checkpoint: no harmonic solve)."""

@@ -92,6 +92,10 @@ class BodySection:
     applied_force_N: list[float] | None = param(None, unit="N", doc="constant applied force (besides gravity)")
     rotations: list[RotationSection] = param(
         default_factory=list, doc="rotational DOFs [[transient.bodies.rotations]] (none: the body only translates)")
+    seat_on: str | None = param(
+        None, doc="surface contact (name) the body starts seated on: before the first step it moves along its one "
+                  "free translation axis until that contact's smallest nodal gap, over the initial (rest or "
+                  "harmonic) displacement, is zero; position_m stays the contact's reference (docs/contact.md)")
 
     def check(self, file, prefix):
         n = len(self.position_m)
@@ -173,6 +177,11 @@ class SurfaceContactSection:
     half_angle_deg: float | None = param(
         None, gt=0, lt=90, unit="deg", doc="cone: angle between the conical face and its axis")
     friction: SurfaceFrictionSection | None = param(None, doc="Coulomb friction (none: frictionless)")
+    exclude_initial_gap: bool = param(
+        False, doc="measure each point's gap from its gap at the start, the undeformed surface against the body at "
+                   "its position_m (ANSYS KEYOPT(9) = 1, every shape): g_eff = g(x + u, p) - g(x, p_ref). Both initial "
+                   "gaps and penetrations are removed, so every point of the facet group touches at the start: for a "
+                   "faceted surface that is in contact by design (docs/contact.md)")
 
     def check(self, file, prefix):
         if self.shape == "plane" and self.normal is None:
@@ -318,6 +327,9 @@ class TransientSection:
         if self.base_motions and self.initial_state == "harmonic":
             raise CaseError(file, f"{prefix}.initial_state",
                             "base motions start from rest (their amplitude ramps up): use 'rest'")
+        for i, body in enumerate(self.bodies):
+            if body.seat_on is not None:
+                self._check_seat(file, f"{prefix}.bodies[{i}].seat_on", body)
         if self.steady_state is not None:
             body = next((b for b in self.bodies if b.name == self.steady_state.body), None)
             if body is None:
@@ -329,3 +341,15 @@ class TransientSection:
         for i, name in enumerate(contact_names):
             if name in contact_names[:i]:
                 raise CaseError(file, f"{prefix}.contacts[{i}].name", f"duplicate contact name {name!r}")
+
+    def _check_seat(self, file, key, body) -> None:
+        contact = next((c for c in self.contacts if c.name == body.seat_on), None)
+        if contact is None:
+            names = ", ".join(c.name for c in self.contacts) or "none"
+            raise CaseError(file, key, f"unknown contact {body.seat_on!r} (contacts: {names})")
+        if contact.kind != "surface" or contact.body != body.name:
+            raise CaseError(file, key, f"contact {body.seat_on!r} is not a surface contact of body {body.name!r}")
+        free = [] if body.fixed else [k for k, f in enumerate(body.free_axes or [True] * len(body.position_m)) if f]
+        if len(free) != 1:
+            raise CaseError(file, key, f"seating moves the body along its one free translation axis; {body.name!r} "
+                                       f"has {len(free)}")
