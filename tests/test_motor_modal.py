@@ -143,7 +143,9 @@ def motor_runs(tmp_path_factory):
         short = COARSE + ["transient.end_time_s=0.003", "output.plots=false"]
         hard = {name: run_case("cases/wwusm-motor.toml", short + sets, root / name, quiet=True)["results"]["transient"]
                 for name, sets in (("no_preload", ["transient.bodies[0].applied_force_N=[0.0, 0.0, 0.0]"]),
-                                   ("penalty_10x", ["transient.contacts[0].stiffness=4e14"]))}
+                                   ("penalty_10x", ["transient.contacts[0].stiffness=4e14"]),
+                                   ("prescribed_spin", ['transient.bodies[0].rotations[0].motion="constant_rate"',
+                                                        "transient.bodies[0].rotations[0].rate_rad_per_s=1.2"]))}
     finally:
         if old is None:
             os.environ.pop("PIEZODYN_CACHE_DIR")
@@ -196,6 +198,17 @@ def test_hard_cases_finish(motor_runs):
         assert run["cutbacks"] <= run["steps"] // 100, name
     # without preload the first crest throws the rotor off: it flies clear of the ring
     assert hard["no_preload"]["motor"]["fractions"]["separation"] > 0.9
+
+
+def test_prescribed_spin_energy_identity(motor_runs):
+    """A spin prescribed at a constant rate: the constraint takes the contact torque's work as the output, so
+    the scheme's discrete energy identity with the electrode reactions closes to round-off (as for the held and
+    free rotors), and the output power is the friction torque times the speed."""
+    *_, hard = motor_runs
+    m = hard["prescribed_spin"]["motor"]
+    assert m["speed_rad_per_s"] == pytest.approx(1.2, rel=1e-12)
+    assert abs(m["energy_balance_reactions_relative"]) < 1e-6
+    assert m["output_power_W"] == pytest.approx(m["friction_torque_N_m"] * 1.2, rel=1e-9)
 
 
 def test_contact_sampling_converges(motor_runs):

@@ -611,13 +611,18 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
                 for r in range(nB):
                     e_c -= 0.5 * (fB_old[r] + fB[r]) * (qn[r] - qa[r])
                 e_rot += 0.5 * (axial0 + axial1) * (rotn[0] - ra[0]) + 0.5 * (torque0 + torque1) * (rotn[3] - ra[3])
+                if not spin_free:
+                    # a prescribed or held spin: the constraint takes the contact torque's work as the output
+                    e_o += 0.5 * (torque0 + torque1) * (rotn[3] - ra[3])
                 axial0 = axial1
                 torque0 = torque1
                 e_f += 0.5 * h * (pf0 + pf1)
                 pf0 = pf1
-                t_ap0 = load_torque - brake * ra[4]
-                t_ap1 = load_torque - brake * rotn[4]
-                e_o -= 0.5 * h * (t_ap0 * ra[4] + t_ap1 * rotn[4])
+                if spin_free:
+                    # a free spin: the output is the work against the load torque and the brake
+                    t_ap0 = load_torque - brake * ra[4]
+                    t_ap1 = load_torque - brake * rotn[4]
+                    e_o -= 0.5 * h * (t_ap0 * ra[4] + t_ap1 * rotn[4])
                 tt += h
             if not ok:
                 level += 1
