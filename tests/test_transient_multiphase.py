@@ -196,7 +196,7 @@ def test_harmonic_start_needs_a_driven_electrode(tmp_path):
 
 
 @pytest.mark.mpi
-def test_harmonic_start_is_the_harmonic_solution_at_the_electrode_amplitudes_and_phases(tmp_path):
+def test_harmonic_start_is_the_harmonic_solution_at_the_electrode_amplitudes_and_phases(shared_tmp):
     """u(0) = Re X, v(0) = -omega Im X with X the harmonic response to the case's phasors (10 V at 0 deg,
     5 V at 90 deg): each electrode's amplitude and phase counted once."""
     from app.fe.operators import Operators
@@ -204,12 +204,10 @@ def test_harmonic_start_is_the_harmonic_solution_at_the_electrode_amplitudes_and
     from app.transient.driver import PointSampler, build
 
     comm = MPI.COMM_WORLD
-    folder = comm.bcast(tmp_path / "start" if comm.rank == 0 else None, root=0)
     if comm.rank == 0:
-        folder.mkdir()
-        (folder / "case.toml").write_text(CASE.format(a=10.0, b=5.0, start="harmonic"))
+        (shared_tmp / "case.toml").write_text(CASE.format(a=10.0, b=5.0, start="harmonic"))
     comm.barrier()
-    tm = build(load_case(folder / "case.toml"), comm, lambda *args: None)
+    tm = build(load_case(shared_tmp / "case.toml"), comm, lambda *args: None)
     state, voltage = tm.initial_state()
     solver = HarmonicSolver(tm.model, Operators(tm.fe.K, tm.fe.M, tm.fe.C), voltage)   # the case's phasors
     expected = solver.solve(50000.0).displacement_m["end"]

@@ -161,6 +161,15 @@ def _rotor_load(fc, frame, rho):
 
 
 @njit(cache=True, error_model="numpy")
+def _contact_buffers(nB, n_c):
+    """Work arrays of :func:`_evaluate` for nB interface DOFs and n_c contact points: nodal forces fB, point
+    forces fc, their derivatives (own displacement, dz, Omega), normal forces, slips, point displacements and
+    velocities."""
+    return (np.zeros(nB), np.zeros((n_c, 3)), np.zeros((n_c, 3, 3)), np.zeros((n_c, 3)), np.zeros((n_c, 3)),
+            np.zeros(n_c), np.zeros((n_c, 2)), np.zeros((n_c, 3)), np.zeros((n_c, 3)))
+
+
+@njit(cache=True, error_model="numpy")
 def _evaluate(uB, vB, dz, dz_rate, spin, frame, g0, rho, area, idx, B, sin_a, cos_a, k, mu_d, fact, decay, tau_cap,
               eps, cv, fB, fc, Dall, dfdz_all, dfds_all, fn_all, s_all, uc_all, vc_all, want_jacobian):
     """Forces at all contact points (fc, their derivatives with respect to the point's own displacement in
@@ -384,16 +393,7 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
     spin_t = spin0 + (1.0 - gamma) * dt * rot[5] if spin_free else spin0
     ds = gamma * dt * rot[5] if spin_free else 0.0
     spin = spin_t + ds
-    n_c = rho.size
-    fB = np.zeros(nB)
-    fc = np.zeros((n_c, 3))
-    Dall = np.zeros((n_c, 3, 3))
-    dfdz = np.zeros((n_c, 3))
-    dfds = np.zeros((n_c, 3))
-    fn_all = np.zeros(n_c)
-    s_all = np.zeros((n_c, 2))
-    uc_all = np.zeros((n_c, 3))
-    vc_all = np.zeros((n_c, 3))
+    fB, fc, Dall, dfdz, dfds, fn_all, s_all, uc_all, vc_all = _contact_buffers(nB, rho.size)
     vB = np.zeros(nB)
     xtB = np.empty(nB)
     vtB = np.empty(nB)
@@ -456,9 +456,8 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
             Rz_t, Rs_t, axial, torque = _residual(u_trial, dd_trial, ds_trial, w, G, xtB, vtB, cv, c_a, dz_t,
                                                   dzr_t, spin_t, dt, gamma, frame, g0, rho, area, idx, B,
                                                   sin_a, cos_a, k, mu_d, fact, decay, tau_cap, eps, rotor_mass,
-                                                  preload, inertia,
-                                                  load_torque, brake, spin_free, fB, fc, Dall, dfdz, dfds, fn_all,
-                                                  s_all, uc_all, vc_all, vB, Ru_trial, True)
+                                                  preload, inertia, load_torque, brake, spin_free, fB, fc, Dall,
+                                                  dfdz, dfds, fn_all, s_all, uc_all, vc_all, vB, Ru_trial, True)
             for ia in range(na):
                 i = active[ia]
                 for c in range(3):
@@ -513,8 +512,7 @@ def _step(dt, level_inv, t0, q, v, a, rot, K, M, C, free, prescribed, n_b, amp, 
 @njit(cache=True, error_model="numpy")
 def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, istate, K, M, C, free, prescribed,
                n_b, amp, phase, omega, cosine, beta, gamma, frame, g0, rho, area, idx, B, sin_a, cos_a, k, mu_d, fact,
-               decay,
-               tau_cap, eps, rotor_mass, preload, inertia, load_torque, brake, spin_free, tol_u, charge_rows,
+               decay, tau_cap, eps, rotor_mass, preload, inertia, load_torque, brake, spin_free, tol_u, charge_rows,
                columns, point_state, point_fn, trajectory):
     """Advance n_steps steps of dt from t0 (cutting a failed step into halves, up to max_level).
 
@@ -532,15 +530,7 @@ def run_period(t0, n_steps, dt, level_invs, max_level, q, v, a, rot, energies, i
     rotn = np.empty(6)
     work = np.zeros(2)
     n_c = rho.size
-    fB = np.zeros(nB)
-    fc = np.zeros((n_c, 3))
-    Dd = np.zeros((n_c, 3, 3))
-    dfdz = np.zeros((n_c, 3))
-    dfds = np.zeros((n_c, 3))
-    fn_all = np.zeros(n_c)
-    s_all = np.zeros((n_c, 2))
-    uc_all = np.zeros((n_c, 3))
-    vc_all = np.zeros((n_c, 3))
+    fB, fc, Dd, dfdz, dfds, fn_all, s_all, uc_all, vc_all = _contact_buffers(nB, n_c)
     n_el = prescribed.size
     volts0 = np.empty(n_el)
     volts1 = np.empty(n_el)

@@ -23,7 +23,9 @@ starts it again from t = 0 instead of refusing.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -209,45 +211,58 @@ def case_digest(case) -> dict:
 _MISSING = object()
 
 
-def _section_type(cls, key: str):
-    """The dataclass type of field ``key`` of dataclass ``cls`` (through ``X | None``), else None."""
-    import dataclasses
-    import typing
-
+def _section_types(cls, key: str) -> list:
+    """The dataclasses field ``key`` of dataclass ``cls`` holds (``X``, ``X | None``, ``list[X]``, a list of
+    a tagged union), else []."""
     if cls is None or not dataclasses.is_dataclass(cls):
-        return None
+        return []
     hint = typing.get_type_hints(cls).get(key)
-    for tp in (hint, *typing.get_args(hint)):
-        if dataclasses.is_dataclass(tp):
-            return tp
-    return None
+    if hint is typing.Any:
+        # a top-level section owned by another package (lumped, transient): typed Any in Case
+        from app.case.schema import _section_types as owned_sections
+
+        hint = owned_sections().get(key)
+    if typing.get_origin(hint) is list:
+        hint = typing.get_args(hint)[0]
+    return [tp for tp in (hint, *typing.get_args(hint)) if dataclasses.is_dataclass(tp)]
+
+
+def _member(types: list, record):
+    """The one of ``types`` a record (dict) is: the only one, or the tagged-union member of its ``kind``."""
+    if len(types) == 1:
+        return types[0]
+    kind = record.get("kind") if isinstance(record, dict) else None
+    return next((tp for tp in types if typing.get_args(typing.get_type_hints(tp).get("kind")) == (kind,)), None)
 
 
 def _field_default(cls, key: str):
     """The schema default of field ``key`` of ``cls`` as the records store it, or _MISSING."""
-    import dataclasses
-
     if cls is None or not dataclasses.is_dataclass(cls):
         return _MISSING
     for f in dataclasses.fields(cls):
-        if f.name == key:
-            if f.default is not dataclasses.MISSING:
-                return json.loads(json.dumps(jsonable(f.default), default=str))
-            return _MISSING
+        if f.name == key and f.default is not dataclasses.MISSING:
+            return json.loads(json.dumps(jsonable(f.default), default=str))
     return _MISSING
 
 
 def _differences(a, b, prefix="", cls=None) -> list[str]:
-    """Dotted keys where the checkpointed record ``a`` and the resumed case's digest ``b`` differ.
-    A key the record lacks (a later version added it) matches when the resumed case leaves it at its
-    schema default, so a program update does not strand older checkpoints."""
+    """Dotted keys where the checkpointed record ``a`` and the resumed case's digest ``b`` differ, walking
+    sections and lists of sections with their schema classes (``cls``). A key the record lacks (a later
+    version added it) matches when the resumed case leaves it at its schema default, so a program update
+    does not strand older checkpoints."""
     if isinstance(a, dict) and isinstance(b, dict):
         out = []
         for key in sorted(set(a) | set(b)):
             path = f"{prefix}.{key}" if prefix else key
             if key not in a and b[key] == _field_default(cls, key):
                 continue
-            out += _differences(a.get(key), b.get(key), path, _section_type(cls, key))
+            types = _section_types(cls, key)
+            value_a, value_b = a.get(key), b.get(key)
+            if isinstance(value_a, list) and isinstance(value_b, list) and types and len(value_a) == len(value_b):
+                for i, (item_a, item_b) in enumerate(zip(value_a, value_b)):
+                    out += _differences(item_a, item_b, f"{path}[{i}]", _member(types, item_b))
+            else:
+                out += _differences(value_a, value_b, path, _member(types, value_b) if types else None)
         return out
     return [] if a == b else [prefix]
 

@@ -201,7 +201,6 @@ class SurfaceContact(ForceColumns):
         self.dissipation_form = fem.form(power * weight * ds)
         self.area_in_contact_form = fem.form(cf.heaviside(-gap) * weight * ds)
         self.normal_force_form = fem.form(pressure * weight * ds)
-        self.band_area_m2 = fe.comm.allreduce(fem.assemble_scalar(fem.form(weight * ds)), op=MPI.SUM)
         self.residual_vector = create_vector(self.residual_form)
         self.tangent_matrix = create_matrix(self.tangent_form)
         self._coordinates = fe.dof_coordinates()
