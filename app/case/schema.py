@@ -186,6 +186,10 @@ class ReductionSection:
                                  "interpolated (cubic, in angle) from the ring_points nodes; 0: at the nodes "
                                  "themselves, each carrying band area / ring_points (node-sampled, not converged: "
                                  "docs/motor-rotor.md)")
+    enrich_modes: int = param(
+        0, ge=0, le=16, doc="add the full FE model's modes nearest the drive frequency (electrodes held, interface "
+                            "free) to the basis, so its resonance there is the FE model's exactly: 2 for the motor's "
+                            "F(1,4) pair (a drive within a few bandwidths of it makes the wave steep in the detuning)")
 
 
 @dataclass(frozen=True)

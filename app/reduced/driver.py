@@ -115,7 +115,8 @@ class ReducedScene:
             damping_Hz = case.damping.reference_frequency_Hz or cfg.drive.frequency_Hz
             ops = assemble_operators(model, damping_frequency_Hz=damping_Hz)
             self.basis = reduce_model(ops.K, ops.M, ops.C, model.W, fixed, np.array(interface, dtype=np.int64),
-                                      electrodes, n_modes=red.n_modes, cutoff_Hz=self.cutoff_Hz)
+                                      electrodes, n_modes=red.n_modes, cutoff_Hz=self.cutoff_Hz,
+                                      n_enrich=red.enrich_modes, enrich_near_Hz=cfg.drive.frequency_Hz)
             # loads: gravity + downforce on the FE body, distributed like its mass (as the FE tier)
             acceleration = gravity + force / model.total_mass_kg()
             self.fq = np.zeros(self.basis.size)

@@ -32,7 +32,7 @@ from app.reduced import ring_kernel as rk
 from app.reduced.craig_bampton import ReducedBasis, harmonic_response
 from app.series import TimeSeriesWriter
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2      # 2: enrichment frequencies stored
 MAX_CUTBACK_LEVEL = 4
 #: interface displacement tolerance of the Newton iteration [m] (1e-8 of a micrometre wave)
 NEWTON_TOL_M = 1e-14
@@ -51,10 +51,22 @@ class RingModel:
     node_xyz: np.ndarray             # (n_points, 3) reference positions of the band nodes [m]
     band_area_m2: float
     reduction_wall_s: float
+    enrichment_frequencies_Hz: np.ndarray   # the full model's modes in the basis (reduction.enrich_modes) [Hz]
 
     @property
     def n_points(self) -> int:
         return self.node_xyz.shape[0]
+
+    def resonances_Hz(self, near_Hz: float, count: int = 2) -> np.ndarray:
+        """The reduced stator's ``count`` natural frequencies nearest ``near_Hz`` with the electrodes held (short
+        circuit, as the driven transient sees them) [Hz], ascending."""
+        import scipy.linalg
+
+        n_b, n_e = 3 * self.n_points, len(self.electrodes)
+        keep = np.r_[0:n_b, n_b + n_e:self.K.shape[0]]
+        eigenvalues = scipy.linalg.eigh(self.K[np.ix_(keep, keep)], self.M[np.ix_(keep, keep)], eigvals_only=True)
+        frequencies = np.sqrt(np.abs(eigenvalues)) / (2 * math.pi)
+        return np.sort(frequencies[np.argsort(np.abs(frequencies - near_Hz))[:count]])
 
     def basis(self) -> ReducedBasis:
         rows = {name: self.charge_rows[i] for i, name in enumerate(self.electrodes)}
@@ -87,7 +99,7 @@ def load_or_build(case, comm, log) -> RingModel:
         with np.load(path, allow_pickle=False) as f:
             model = RingModel(f["K"], f["M"], f["C"], [str(e) for e in f["electrodes"]], f["charge_rows"],
                               f["mode_frequencies_Hz"], f["node_xyz"], float(f["band_area_m2"]),
-                              float(f["reduction_wall_s"]))
+                              float(f["reduction_wall_s"]), f["enrichment_frequencies_Hz"])
         log(f"modal tier (motor): reduced stator from the cache {path}")
         return model
     model = build_ring_model(case, comm, log)
@@ -96,7 +108,8 @@ def load_or_build(case, comm, log) -> RingModel:
         tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
         np.savez(tmp, K=model.K, M=model.M, C=model.C, electrodes=np.array(model.electrodes),
                  charge_rows=model.charge_rows, mode_frequencies_Hz=model.mode_frequencies_Hz,
-                 node_xyz=model.node_xyz, band_area_m2=model.band_area_m2, reduction_wall_s=model.reduction_wall_s)
+                 node_xyz=model.node_xyz, band_area_m2=model.band_area_m2, reduction_wall_s=model.reduction_wall_s,
+                 enrichment_frequencies_Hz=model.enrichment_frequencies_Hz)
         os.replace(tmp, path)
     return model
 
@@ -181,15 +194,18 @@ def build_ring_model(case, comm, log) -> RingModel:
         None if red.n_modes is not None else red.cutoff_factor * cfg.drive.frequency_Hz)
     start = time.perf_counter()
     basis = reduce_model(ops.K, ops.M, ops.C, model.W, fixed, interface, electrodes, n_modes=red.n_modes,
-                         cutoff_Hz=cutoff)
+                         cutoff_Hz=cutoff, n_enrich=red.enrich_modes, enrich_near_Hz=cfg.drive.frequency_Hz)
     wall = time.perf_counter() - start
     ops.destroy()
+    enriched = basis.enrichment_frequencies_Hz
     log(f"modal tier (motor): {n_points} band nodes ({basis.n_interface} interface DOFs), {len(electrodes)} "
-        f"electrodes, {basis.n_modes} fixed-interface modes up to {basis.mode_frequencies_Hz.max():.0f} Hz, "
-        f"{basis.size} coordinates ({wall:.1f} s)")
+        f"electrodes, {basis.n_modes} fixed-interface modes up to {basis.mode_frequencies_Hz.max():.0f} Hz"
+        + (f", the full model's modes at {', '.join(f'{f:.1f}' for f in enriched)} Hz" if enriched.size else "")
+        + f", {basis.size} coordinates ({wall:.1f} s)")
     rows = np.array([basis.charge_rows[n] for n in basis.electrodes])
     out = RingModel(basis.K, basis.M, basis.C if basis.C is not None else np.zeros_like(basis.K),
-                    list(basis.electrodes), rows, basis.mode_frequencies_Hz, xyz[chosen], band_area, wall)
+                    list(basis.electrodes), rows, basis.mode_frequencies_Hz, xyz[chosen], band_area, wall,
+                    enriched)
     basis.destroy()
     return out
 
@@ -465,7 +481,9 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
                              "contact_sampling": "interpolated" if case.reduction.contact_points else "nodal",
                              "interface_dofs": 3 * n_b, "modes": int(ring.mode_frequencies_Hz.size),
                              "size": n, "highest_mode_Hz": float(ring.mode_frequencies_Hz.max()),
-                             "band_area_m2": ring.band_area_m2},
+                             "band_area_m2": ring.band_area_m2,
+                             "enrichment_modes_Hz": ring.enrichment_frequencies_Hz.tolist(),
+                             "stator_resonances_near_drive_Hz": ring.resonances_Hz(f_drive).tolist()},
                "motor": point, "time_series": h5_path.name, "outputs": [h5_path.name, state_path.name]}
     if comm.rank == 0:
         ring_csv = out_dir / "motor_ring.csv"
