@@ -49,14 +49,15 @@ def _tip_dof(model):
     return model.comm.bcast(g, root=owner), d
 
 
-def _basis(model, ops, n_modes):
+def _basis(model, ops, n_modes, **enrichment):
     from app.reduced.craig_bampton import reduce_model
 
     fixed = np.concatenate([model.support_dofs, model.grounded_dofs]
                            + [model.electrode_dofs[n] for n in model.electrodes_of("ground")])
     tip, _ = _tip_dof(model)
     electrodes = {n: model.electrode_dofs[n] for n in model.electrodes_of("voltage")}
-    return reduce_model(ops.K, ops.M, ops.C, model.W, fixed, np.array([tip]), electrodes, n_modes=n_modes)
+    return reduce_model(ops.K, ops.M, ops.C, model.W, fixed, np.array([tip]), electrodes, n_modes=n_modes,
+                        **enrichment)
 
 
 def _short_circuit_frequencies(basis):
@@ -89,6 +90,40 @@ def test_reduced_frequencies_bound_and_converge_to_fe(transducer):
         m.vector.destroy()
     assert errors[-1] < 1e-5
     assert errors[0] > errors[1] > errors[2] or errors[1] < 1e-9
+
+
+@pytest.mark.mpi
+def test_enrichment_reproduces_the_fe_modes_near_the_drive(transducer):
+    """reduction.enrich_modes: the full model's modes nearest the drive, put in the basis, come back from the
+    reduced eigenproblem exactly (Rayleigh-Ritz on a span holding them), on any partition, where the plain 4-mode
+    basis is measurably high; the harmonic response 0.1 % below resonance then matches the FE one far more closely.
+    Measured (1 and 2 ranks): frequencies 3e-14 against 8.3e-5; tip displacement 1.0e-5 against 2.1e-2."""
+    from app.fe.operators import electrical_state
+    from app.harmonic import HarmonicSolver
+    from app.modal import solve_modes
+    from app.reduced.craig_bampton import harmonic_response
+
+    model, ops = transducer
+    fe = solve_modes(ops, electrical_state(model, "short"), 20100.0, 2, 10.0, prefix="test_cb_enrich_fe_")
+    fe_f = np.array([m.frequency_Hz for m in fe])
+    for m in fe:
+        m.vector.destroy()
+    solver = HarmonicSolver(model, ops, 1.0, prefix="test_cb_enrich_harmonic_")
+    f_near = 0.999 * fe_f[np.argmin(abs(fe_f - 20100.0))]
+    tip_fe = solver.solve(f_near).displacement_m["tip"]
+    solver.destroy()
+    errors = {}
+    for n_enrich in (0, 2):
+        basis = _basis(model, ops, 4, n_enrich=n_enrich, enrich_near_Hz=20100.0)
+        red = _short_circuit_frequencies(basis)
+        errors[n_enrich] = max(np.min(abs(red - f)) / f for f in fe_f)
+        if n_enrich:
+            assert basis.enrichment_frequencies_Hz == pytest.approx(fe_f, rel=1e-12)
+        q = harmonic_response(basis, f_near, {"hot": 1.0})
+        errors[f"tip {n_enrich}"] = abs(q[0] - tip_fe) / abs(tip_fe)
+        basis.destroy()
+    assert errors[2] < 1e-9 < 1e-6 < errors[0]
+    assert errors["tip 2"] < 0.01 * errors["tip 0"]
 
 
 @pytest.mark.mpi
