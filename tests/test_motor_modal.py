@@ -206,6 +206,15 @@ def test_free_rotor_turns_with_the_wave(motor_runs):
         assert (root / "free" / name).is_file()
     summary = json.loads((root / "free" / "summary.json").read_text())
     assert summary["results"]["transient"]["motor"]["speed_rpm"] == pytest.approx(m["speed_rpm"])
+    # the FE tier's contact-area series, by the same name: the band area of the closed contact points
+    import h5py
+
+    with h5py.File(root / "free" / "transient.h5", "r") as f:
+        area = f["stator_rotor_area_in_contact_m2"][()]
+        points = f["stator_rotor_points_in_contact"][()]
+    band = free["reduction"]["band_area_m2"]
+    assert 0 < area.max() <= band
+    assert area == pytest.approx(points * band / free["reduction"]["contact_points"], rel=1e-12)
 
 
 def test_hard_cases_finish(motor_runs):

@@ -509,7 +509,8 @@ def motor_units(body: str, contact: str, electrodes: list[str]) -> dict[str, str
     units = {S.TIME: "s", S.STEP: "s", S.DRIVE: "V", S.body_position(body): "m", S.body_velocity(body): "m/s",
              S.body_angle(body): "rad", S.body_angular_velocity(body): "rad/s", S.contact_force(contact): "N",
              S.contact_closed(contact): "1", f"{contact}_torque_N_m": "N m", f"{contact}_normal_force_N": "N",
-             f"{contact}_nodes_in_contact": "1", f"{contact}_drive_speed_m_per_s": "m/s",
+             f"{contact}_points_in_contact": "1", f"{contact}_area_in_contact_m2": "m^2",
+             f"{contact}_drive_speed_m_per_s": "m/s",
              f"{contact}_dissipated_J": "J", "electrical_input_J": "J", "damping_dissipated_J": "J",
              "output_work_J": "J", "stored_energy_J": "J", "electrode_reaction_work_J": "J", "contact_work_J": "J"}
     units.update({S.electrode_voltage(e): "V" for e in electrodes})
@@ -538,7 +539,9 @@ def motor_block(columns, geo, body, contact, electrodes, amplitudes, phases, ome
     block[S.contact_closed(contact)] = (columns[:, rk.C_ACTIVE] > 0).astype(float)
     block[f"{contact}_torque_N_m"] = columns[:, rk.C_TORQUE]
     block[f"{contact}_normal_force_N"] = columns[:, rk.C_NORMAL]
-    block[f"{contact}_nodes_in_contact"] = columns[:, rk.C_ACTIVE]
+    block[f"{contact}_points_in_contact"] = columns[:, rk.C_ACTIVE]
+    # the FE tier's name and meaning: the band area whose contact points are closed (points carry equal areas)
+    block[f"{contact}_area_in_contact_m2"] = columns[:, rk.C_ACTIVE] * float(geo.area[0])
     block[f"{contact}_drive_speed_m_per_s"] = columns[:, rk.C_DRIVE_SPEED]
     block[f"{contact}_dissipated_J"] = columns[:, rk.C_E_FRIC]
     block["electrical_input_J"] = columns[:, rk.C_E_EL]
@@ -612,7 +615,7 @@ def operating_point(history, geo: Geometry, case, spin_free: bool) -> dict:
         "rotor_axial_vibration_m": float(np.ptp(cols[:, rk.C_DZ])),
         "fractions": {"separation": float(counts[0]), "stick": float(counts[1]), "forward_slip": float(forward),
                       "backward_slip": float(backward)},
-        "nodes_in_contact_mean": float(np.mean(cols[:, rk.C_ACTIVE])),
+        "points_in_contact_mean": float(np.mean(cols[:, rk.C_ACTIVE])),
         "drive_speed_m_per_s": float(np.mean(cols[:, rk.C_DRIVE_SPEED])),
         "contact_point_amplitude_m": {"normal": float(np.ptp(path[:, 0]) / 2),
                                       "tangential": float(np.ptp(path[:, 1]) / 2),
