@@ -9,7 +9,8 @@ ring, the contact point's path) in summary.json and ``motor_ring.csv``.
 
 The reduced model depends only on the stator, its electrodes, its damping, the basis settings and the band; it
 is kept in a cache (``PIEZODYN_CACHE_DIR``, default ``~/.cache/piezodyn``) keyed by those sections, so a sweep
-over load torque, preload, voltage or rotor data builds it once.
+over load torque, preload, voltage or rotor data builds it once. Checkpoints at period ends and ``--resume``:
+app/reduced/motor_restart.py.
 """
 
 from __future__ import annotations
