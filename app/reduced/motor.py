@@ -488,7 +488,9 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
                                               steady.means if steady is not None else [], last_row, history)
                 counters = {"periods": periods, "steps": int(istate[rk.I_STEPS]),
                             "cutbacks": int(istate[rk.I_CUTBACKS]), "steady": reached_steady}
-                checkpoint.write_arrays(t, arrays, counters, rows_of=lambda: series.rows_written,
+                # the record's time is the run's own clock, the one end_time_s bounds (a warm start's run begins
+                # at its state's time); the state's own time is in the arrays
+                checkpoint.write_arrays(periods * period, arrays, counters, rows_of=lambda: series.rows_written,
                                         meta={restart.MODEL_KEY: restart.MODEL_FILE})
                 checkpoint_wall += time.perf_counter() - mark
     finally:
