@@ -153,7 +153,7 @@ def test_motor_run_resumes_on_two_ranks(one_go, tmp_path, point, mpi):
 def test_motor_resume_errors_are_one_line(capsys, one_go, tmp_path):
     """Another case (a changed preload, named by its key), no checkpoint, a damaged checkpoint record, state file,
     reduced stator or time series: exit 2, one line naming the file and the key, no traceback. A finished run
-    resumed takes no step and writes the same summary."""
+    resumed takes no step and writes the same summary. (And a run shorter than one drive period.)"""
     from test_bad_input_suite import assert_one_line, cli_main
 
     if MPI.COMM_WORLD.size > 1:
@@ -177,6 +177,10 @@ def test_motor_resume_errors_are_one_line(capsys, one_go, tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert_one_line(*resume(empty), str(empty), "--resume", "no checkpoint")
+    # the loop runs whole periods: a run shorter than one is refused before it starts
+    assert_one_line(*cli_main(capsys, "run", CASES / CASE, "--out", tmp_path / "short", "--quiet", *sets,
+                              "--set", "transient.end_time_s=2e-5", "--set", "transient.output_interval_s=1e-5"), CASE,
+                    "transient.end_time_s", "one drive period")
 
     checkpoint = out / "checkpoint"
     series = out / "transient.h5"

@@ -320,6 +320,9 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
     file = case.source
     check_motor_case(case, file)
     cfg = case.transient
+    if math.floor(cfg.end_time_s * cfg.drive.frequency_Hz + 1e-9) < 1:      # the loop runs whole periods
+        raise CaseError(file, "transient.end_time_s", f"{cfg.end_time_s:g} s is shorter than one drive period "
+                                                      f"({1 / cfg.drive.frequency_Hz:.6g} s)")
     out_dir = Path(out_dir)
     setup_start = time.perf_counter()
     digest = restart.run_digest(case, warm_start)
@@ -496,9 +499,6 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
     finally:
         series.close()
     wall = time.perf_counter() - start
-    if not history:
-        raise CaseError(file, "transient.end_time_s", f"{cfg.end_time_s:g} s is shorter than one drive period "
-                                                      f"({period:.6g} s)")
     state_path = out_dir / "motor_state.npz"
     if comm.rank == 0:
         atomic_write(state_path, lambda fh: np.savez(fh, q=q, v=v, a=a, rot=rot, t=t, cosine=cosine))
