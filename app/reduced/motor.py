@@ -336,6 +336,10 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
                 "starting it again")
         restart.mark_started(out_dir, comm, digest)
         ring = load_or_build(case, comm, log)
+        if comm.size > 1:
+            # every rank runs the loop, and the checkpoints are collective: a reduction just built on several ranks
+            # may differ between them in round-off, so all take rank 0's (the one checkpointed and written)
+            ring = comm.bcast(ring, root=0)
         restart.save_ring(out_dir, comm, ring)
     geo = ring_geometry(ring, case)
     contact, body = cfg.contacts[0], cfg.bodies[0]
@@ -443,7 +447,8 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
         steady = SteadyWatch(cfg.steady_state, 0.02 * (wave_speed if spin_free else torque_bound))
     max_periods = int(math.floor(cfg.end_time_s / period + 1e-9))
     log(f"transient (modal tier, motor): {cfg.initial_state} start, {amplitudes.max():.4g} V at {f_drive:.2f} Hz, "
-        f"preload {preload:.4g} N, {per_period} steps per period, up to {max_periods} periods")
+        f"preload {preload:.4g} N, {per_period} steps per period, up to {max_periods} periods"
+        + (f" (resumed after {int(data['periods'])})" if found is not None else ""))
     window = cfg.steady_state.window_cycles if cfg.steady_state is not None else 20
     # per period of the last `window`: (columns, point_state, point_fn, trajectory, the row before the period)
     history = []
