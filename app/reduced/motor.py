@@ -9,7 +9,8 @@ ring, the contact point's path) in summary.json and ``motor_ring.csv``.
 
 The reduced model depends only on the stator, its electrodes, its damping, the basis settings and the band; it
 is kept in a cache (``PIEZODYN_CACHE_DIR``, default ``~/.cache/piezodyn``) keyed by those sections, so a sweep
-over load torque, preload, voltage or rotor data builds it once.
+over load torque, preload, voltage or rotor data builds it once. Checkpoints at period ends and ``--resume``:
+app/reduced/motor_restart.py.
 """
 
 from __future__ import annotations
@@ -27,7 +28,10 @@ from mpi4py import MPI
 
 from app import series as S
 from app.errors import CaseError, NumericalFailure
+from app.files import atomic_write, replace_file
+from app.killpoint import kill_point
 from app.motor.rotor_case import check_motor_case, is_motor_case  # noqa: F401 (the runner's entry points)
+from app.reduced import motor_restart as restart
 from app.reduced import ring_kernel as rk
 from app.reduced.craig_bampton import ReducedBasis, harmonic_response
 from app.series import TimeSeriesWriter
@@ -96,20 +100,15 @@ def load_or_build(case, comm, log) -> RingModel:
     path = _cache_dir() / f"motor-{_cache_key(case)}.npz"
     found = path.is_file() if comm is None else comm.bcast(path.is_file(), root=0)   # one verdict for all ranks
     if found:
-        with np.load(path, allow_pickle=False) as f:
-            model = RingModel(f["K"], f["M"], f["C"], [str(e) for e in f["electrodes"]], f["charge_rows"],
-                              f["mode_frequencies_Hz"], f["node_xyz"], float(f["band_area_m2"]),
-                              float(f["reduction_wall_s"]), f["enrichment_frequencies_Hz"])
+        model = restart.read_ring(path, RingModel)
         log(f"modal tier (motor): reduced stator from the cache {path}")
         return model
     model = build_ring_model(case, comm, log)
     if comm.rank == 0:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
-        np.savez(tmp, K=model.K, M=model.M, C=model.C, electrodes=np.array(model.electrodes),
-                 charge_rows=model.charge_rows, mode_frequencies_Hz=model.mode_frequencies_Hz,
-                 node_xyz=model.node_xyz, band_area_m2=model.band_area_m2, reduction_wall_s=model.reduction_wall_s,
-                 enrichment_frequencies_Hz=model.enrichment_frequencies_Hz)
+        tmp = path.with_suffix(f".tmp{os.getpid()}.npz")     # per process: sweep points may build it at once
+        with open(tmp, "wb") as fh:
+            restart.write_ring(fh, model)
         os.replace(tmp, path)
     return model
 
@@ -325,19 +324,38 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
     The state at the end (stator coordinates, rotor, time) is written to ``motor_state.npz``; ``warm_start``
     names such a file of an earlier run on the same reduced model to continue from (time and drive phase go
     on; a prescribed or held spin takes this case's rate): a continuation, used by the sampling study
-    (bench/bench_motor_sampling.py) to skip the start's transient."""
+    (bench/bench_motor_sampling.py) to skip the start's transient.
+
+    Checkpoints at period ends (app/reduced/motor_restart.py); with ``resume`` the run continues from the
+    checkpoint in ``out_dir`` (same case except the end time, the checkpoint interval and the outputs) with the
+    checkpoint's reduced stator, and repeats the interrupted run's periods bit for bit."""
     from app.blas import limit_blas_threads
 
     limit_blas_threads()
     file = case.source
-    if resume:
-        raise CaseError(file, "--resume", "the modal tier's motor runs have no checkpoints (a point takes seconds "
-                                          "to minutes: run it again)")
     check_motor_case(case, file)
     cfg = case.transient
+    if math.floor(cfg.end_time_s * cfg.drive.frequency_Hz + 1e-9) < 1:      # the loop runs whole periods
+        raise CaseError(file, "transient.end_time_s", f"{cfg.end_time_s:g} s is shorter than one drive period "
+                                                      f"({1 / cfg.drive.frequency_Hz:.6g} s)")
     out_dir = Path(out_dir)
     setup_start = time.perf_counter()
-    ring = load_or_build(case, comm, log)
+    digest = restart.run_digest(case, warm_start)
+    found = restart.find(out_dir, comm, case, digest, RingModel) if resume else None
+    if found is not None:
+        meta, data, ring = found
+        log(f"modal tier (motor): reduced stator from the checkpoint {out_dir / 'checkpoint'}")
+    else:
+        if resume:
+            log(f"transient (modal tier, motor): {out_dir} holds a run killed before its first checkpoint: "
+                "starting it again")
+        restart.mark_started(out_dir, comm, digest)
+        ring = load_or_build(case, comm, log)
+        if comm.size > 1:
+            # every rank runs the loop, and the checkpoints are collective: a reduction just built on several ranks
+            # may differ between them in round-off, so all take rank 0's (the one checkpointed and written)
+            ring = comm.bcast(ring, root=0)
+        restart.save_ring(out_dir, comm, ring)
     geo = ring_geometry(ring, case)
     contact, body = cfg.contacts[0], cfg.bodies[0]
     rotation = body.rotations[0]
@@ -390,7 +408,7 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
     dz0 = -float(gaps.min()) / geo.sin_a
     rot = np.array([dz0, 0.0, -preload / body.mass_kg, rotation.angle_rad, spin0, 0.0])
     t_start = 0.0
-    if warm_start is not None:
+    if warm_start is not None and found is None:
         with np.load(warm_start) as saved:
             if saved["q"].shape != q.shape or bool(saved["cosine"]) != cosine:
                 raise CaseError(file, "warm start", f"{warm_start} is the state of another reduced model or drive")
@@ -400,6 +418,16 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
             rot[4], rot[5] = spin0, 0.0
     energies = np.zeros(7)
     istate = np.zeros(rk.N_ISTATE, np.int64)
+    if found is None:
+        if cosine:
+            kill_point("harmonic_start")
+        resumed_rows, seq = None, 0
+    else:
+        q, v, a, rot, energies, istate = (np.array(data[k]) for k in ("q", "v", "a", "rot", "energies", "istate"))
+        t_start = float(data["t_s"])
+        resumed_rows, seq = int(meta["rows"]), int(meta["seq"])
+        log(f"transient (modal tier, motor): resuming at t = {t_start * 1e3:.6g} ms, period {int(data['periods'])} "
+            f"({resumed_rows} time-series rows kept)")
     n_b = ring.n_points
     kernel_args = (ring.K, ring.M, ring.C, free, prescribed, n_b, amplitudes, phases, omega, cosine, beta, gamma,
                    geo.frame, geo.g0, geo.rho, geo.area, geo.idx, geo.B, geo.sin_a, geo.cos_a, contact.stiffness,
@@ -424,7 +452,9 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
 
     h5_path = out_dir / S.TIME_SERIES_FILE
     units = motor_units(body.name, contact.name, names)
-    series = TimeSeriesWriter(h5_path, units, comm)
+    series = _open_series(h5_path, units, comm, resumed_rows)
+    checkpoint = restart.writer(out_dir, comm, digest, float(amplitudes.max()), seq)
+    every = restart.interval_periods(cfg.checkpoint_interval_steps, per_period)
     steady = None
     if cfg.steady_state is not None:
         torque_bound = mu_d * fact * preload / geo.sin_a * float(np.mean(geo.rho))
@@ -432,59 +462,87 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
         steady = SteadyWatch(cfg.steady_state, 0.02 * (wave_speed if spin_free else torque_bound))
     max_periods = int(math.floor(cfg.end_time_s / period + 1e-9))
     log(f"transient (modal tier, motor): {cfg.initial_state} start, {amplitudes.max():.4g} V at {f_drive:.2f} Hz, "
-        f"preload {preload:.4g} N, {per_period} steps per period, up to {max_periods} periods")
+        f"preload {preload:.4g} N, {per_period} steps per period, up to {max_periods} periods"
+        + (f" (resumed after {int(data['periods'])})" if found is not None else ""))
     window = cfg.steady_state.window_cycles if cfg.steady_state is not None else 20
-    history = []          # per period: (columns, point_state, point_fn, trajectory) of the last `window` periods
+    # per period of the last `window`: (columns, point_state, point_fn, trajectory, the row before the period)
+    history = []
     t = t_start
-    last_row = np.zeros(rk.N_COLUMNS)       # the state before the first step: energies 0, the stored energy
-    last_row[rk.C_TIME] = t
-    gaps = geo.g0 + geo.sin_a * rot[0] + np.einsum("ij,ij->i", geo.frame[:, 0, :],
-                                                   geo.displacement(q[:3 * n_b].reshape(-1, 3)))
-    penalty0 = sum(rk._penalty(-g, contact.stiffness * A)[2] for g, A in zip(gaps, geo.area) if g < 0)
-    last_row[rk.C_E_STORED] = (0.5 * v @ ring.M @ v + 0.5 * q @ ring.K @ q + 0.5 * rotation.inertia_kg_m2 * rot[4]**2
-                               + 0.5 * body.mass_kg * rot[1]**2 + preload * rot[0] + penalty0)
-    start = time.perf_counter()
-    reached_steady = False
-    periods = 0
-    while periods < max_periods:
-        t = one_period(t)
-        if istate[rk.I_FAILED]:
-            series.close()
-            raise NumericalFailure(f"modal tier (motor): a step failed at t = {t:.6e} s after "
-                                   f"{MAX_CUTBACK_LEVEL} halvings of dt")
-        periods += 1
-        series.write_block(motor_block(columns, geo, body, contact.name, names, amplitudes, phases, omega, cosine,
-                                       cfg.bodies[0].position_m[2]))
-        history.append((columns.copy(), point_state.copy(), point_fn.copy(), trajectory.copy(), last_row))
-        last_row = columns[-1].copy()
-        if len(history) > window:
-            history.pop(0)
+    if found is None:
+        last_row = np.zeros(rk.N_COLUMNS)       # the state before the first step: energies 0, the stored energy
+        last_row[rk.C_TIME] = t
+        gaps = geo.g0 + geo.sin_a * rot[0] + np.einsum("ij,ij->i", geo.frame[:, 0, :],
+                                                       geo.displacement(q[:3 * n_b].reshape(-1, 3)))
+        penalty0 = sum(rk._penalty(-g, contact.stiffness * A)[2] for g, A in zip(gaps, geo.area) if g < 0)
+        last_row[rk.C_E_STORED] = (0.5 * v @ ring.M @ v + 0.5 * q @ ring.K @ q
+                                   + 0.5 * rotation.inertia_kg_m2 * rot[4]**2 + 0.5 * body.mass_kg * rot[1]**2
+                                   + preload * rot[0] + penalty0)
+        reached_steady = False
+        periods = 0
+    else:
+        last_row = np.array(data["last_row"])
+        history = restart.history_of(data)
+        reached_steady = bool(data["steady"])
+        periods = int(data["periods"])
         if steady is not None:
-            watched = columns[:, rk.C_SPIN] if spin_free else columns[:, rk.C_TORQUE]
-            if steady.add(float(np.mean(watched))):
-                reached_steady = True
-                break
-    series.close()
+            steady.means = [float(m) for m in data["steady_means"]]
+    start = time.perf_counter()
+    checkpoint_wall = 0.0
+    try:
+        while periods < max_periods and not reached_steady:
+            t = one_period(t)
+            if istate[rk.I_FAILED]:
+                raise NumericalFailure(f"modal tier (motor): a step failed at t = {t:.6e} s after "
+                                       f"{MAX_CUTBACK_LEVEL} halvings of dt")
+            periods += 1
+            series.write_block(motor_block(columns, geo, body, contact.name, names, amplitudes, phases, omega,
+                                           cosine, cfg.bodies[0].position_m[2]))
+            kill_point("series_block")
+            history.append((columns.copy(), point_state.copy(), point_fn.copy(), trajectory.copy(), last_row))
+            last_row = columns[-1].copy()
+            if len(history) > window:
+                history.pop(0)
+            if steady is not None:
+                watched = columns[:, rk.C_SPIN] if spin_free else columns[:, rk.C_TORQUE]
+                reached_steady = steady.add(float(np.mean(watched)))
+            if reached_steady or periods == max_periods or (every and periods % every == 0):
+                mark = time.perf_counter()
+                arrays = restart.state_arrays(q, v, a, rot, energies, istate, t, periods, reached_steady,
+                                              steady.means if steady is not None else [], last_row, history)
+                counters = {"periods": periods, "steps": int(istate[rk.I_STEPS]),
+                            "cutbacks": int(istate[rk.I_CUTBACKS]), "steady": reached_steady}
+                # the record's time is the run's own clock, the one end_time_s bounds (a warm start's run begins
+                # at its state's time); the state's own time is in the arrays
+                checkpoint.write_arrays(periods * period, arrays, counters, rows_of=lambda: series.rows_written,
+                                        meta={restart.MODEL_KEY: restart.MODEL_FILE})
+                checkpoint_wall += time.perf_counter() - mark
+    finally:
+        series.close()
     wall = time.perf_counter() - start
     state_path = out_dir / "motor_state.npz"
     if comm.rank == 0:
-        np.savez(state_path, q=q, v=v, a=a, rot=rot, t=t, cosine=cosine)
+        atomic_write(state_path, lambda fh: np.savez(fh, q=q, v=v, a=a, rot=rot, t=t, cosine=cosine))
     point = operating_point(history, geo, case, spin_free)
+    simulated = t - t_start                 # in this process (a resumed run: from the checkpoint)
     results = {"tier": "modal", "scene": "motor", "steps": int(istate[rk.I_STEPS]),
                "newton_iterations": int(istate[rk.I_NEWTON]), "cutbacks": int(istate[rk.I_CUTBACKS]),
                "periods": periods, "steps_per_period": per_period, "simulated_time_s": t, "wall_time_s": wall,
                "setup_wall_s": setup_wall, "reduction_wall_s": ring.reduction_wall_s,
-               "wall_s_per_simulated_ms": wall / (t * 1e3) if t > 0 else 0.0,
+               "wall_s_per_simulated_ms": wall / (simulated * 1e3) if simulated > 0 else None,
+               "resumed_from_s": t_start if found is not None else None,
+               "checkpoint": f"{checkpoint.dir.name}/checkpoint.json", "checkpoints_written": checkpoint.written,
+               "checkpoint_wall_s": checkpoint_wall,
                "drive_frequency_Hz": f_drive, "initial_state": cfg.initial_state,
                "steady": reached_steady if steady is not None else None,
                "reduction": {"ring_points": n_b, "contact_points": geo.n_points,
                              "contact_sampling": "interpolated" if case.reduction.contact_points else "nodal",
                              "interface_dofs": 3 * n_b, "modes": int(ring.mode_frequencies_Hz.size),
                              "size": n, "highest_mode_Hz": float(ring.mode_frequencies_Hz.max()),
-                             "band_area_m2": ring.band_area_m2,
+                             "band_area_m2": ring.band_area_m2, "from_checkpoint": found is not None,
                              "enrichment_modes_Hz": ring.enrichment_frequencies_Hz.tolist(),
                              "stator_resonances_near_drive_Hz": ring.resonances_Hz(f_drive).tolist()},
-               "motor": point, "time_series": h5_path.name, "outputs": [h5_path.name, state_path.name]}
+               "motor": point, "time_series": h5_path.name,
+               "outputs": [h5_path.name, state_path.name, *restart.checkpoint_files(out_dir, checkpoint)]}
     if comm.rank == 0:
         ring_csv = out_dir / "motor_ring.csv"
         write_csv(ring_csv, point.pop("_ring"))
@@ -500,9 +558,30 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
         point.pop("_ring")
         point.pop("_path")
     log(f"transient (modal tier, motor): {periods} periods, {results['steps']} steps, {results['cutbacks']} cut-backs, "
-        f"{wall:.1f} s wall; speed {point['speed_rpm']:.2f} rpm, torque {point['friction_torque_N_m']:.4g} N m, "
+        f"{wall:.1f} s wall ({checkpoint.written} checkpoints {checkpoint_wall:.2f} s); "
+        f"speed {point['speed_rpm']:.2f} rpm, torque {point['friction_torque_N_m']:.4g} N m, "
         f"efficiency {100 * point['efficiency']:.2f} %, steady {results['steady']}")
     return results
+
+
+def _open_series(path: Path, units: dict, comm, resume_rows: int | None) -> TimeSeriesWriter:
+    """Collective: the time-series writer (rank 0 writes); a resumed run keeps the first ``resume_rows`` rows of
+    the file, the ones its checkpoint names (a one-line error when the file is missing, short or unreadable)."""
+    writer, why = None, None
+    if comm.rank == 0:
+        if resume_rows and not path.is_file():
+            why = f"is missing: the checkpoint continues its first {resume_rows} rows"
+        else:
+            try:
+                writer = TimeSeriesWriter(path, units, None, resume_rows=resume_rows)
+            except (OSError, ValueError) as exc:
+                why = f"cannot be continued ({exc})"
+    why = comm.bcast(why, root=0)
+    if why:
+        if writer is not None:
+            writer.close()
+        raise CaseError(str(path), None, why)
+    return writer if writer is not None else TimeSeriesWriter(path, units, comm)
 
 
 def motor_units(body: str, contact: str, electrodes: list[str]) -> dict[str, str]:
@@ -631,7 +710,7 @@ def write_csv(path: Path, rows: dict) -> None:
     lines = [",".join(keys)]
     for i in range(len(rows[keys[0]])):
         lines.append(",".join(f"{rows[k][i]:.8g}" for k in keys))
-    path.write_text("\n".join(lines) + "\n")
+    replace_file(path, ("\n".join(lines) + "\n").encode())      # whole or not at all: a killed run
 
 
 def check_model(case, comm) -> None:
@@ -657,7 +736,8 @@ def table_rows(results: dict) -> list[tuple[str, str, str]]:
     return [("simulated time / periods", f"{results['simulated_time_s'] * 1e3:.4g} / {results['periods']}", "ms / -"),
             ("steps / cut-backs", f"{results['steps']} / {results['cutbacks']}", "-"),
             ("steady state reached", str(results["steady"]), "-"),
-            ("wall time per simulated ms", f"{results['wall_s_per_simulated_ms']:.4g}", "s"),
+            ("wall time per simulated ms", "-" if results["wall_s_per_simulated_ms"] is None
+             else f"{results['wall_s_per_simulated_ms']:.4g}", "s"),       # None: a finished run resumed
             ("rotor speed", f"{p['speed_rpm']:.4g} ({p['speed_rad_per_s']:.4g} rad/s)", "rpm"),
             ("load torque / friction torque",
              f"{p['load_torque_N_m'] * 1e3:.4g} / {p['friction_torque_N_m'] * 1e3:.4g}",

@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import typing
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,11 +61,11 @@ class CheckpointWriter:
     at the end of a run. ``flush`` is called first so that the time series on disk has exactly
     ``rows`` rows when the checkpoint names them."""
 
-    def __init__(self, out_dir: Path, layout: CellLayout, interval_steps: int, voltage_V: float, case_digest: dict,
-                 flush=None, seq: int = 0):
+    def __init__(self, out_dir: Path, layout: CellLayout | None, interval_steps: int, voltage_V: float,
+                 case_digest: dict, flush=None, seq: int = 0, comm=None):
         self.dir = Path(out_dir) / CHECKPOINT_DIR
-        self.layout = layout
-        self.comm = comm = layout.comm
+        self.layout = layout        # None: no FE fields (the motor's modal tier): ``comm`` then, write_arrays only
+        self.comm = comm = layout.comm if layout is not None else comm
         self.interval_steps = int(interval_steps)
         self.voltage_V = float(voltage_V)
         self.case_digest = case_digest
@@ -311,10 +312,18 @@ def read_checkpoint(out_dir: Path, comm, case, digest: dict, needs: tuple[str, .
     if float(meta["t_s"]) > case.transient.end_time_s * (1 + 1e-12):
         raise CaseError(file, "transient.end_time_s", f"{case.transient.end_time_s:g} s is before the checkpoint's "
                                                       f"time {float(meta['t_s']):g} s in {pointer}")
-    data = None
+    data, why = None, None
     if comm.rank == 0:
-        with np.load(directory / f"state-{meta['seq']}.npz") as npz:
-            data = {k: np.array(npz[k]) for k in npz.files}
+        state = directory / f"state-{meta['seq']}.npz"
+        try:
+            with np.load(state) as npz:
+                data = {k: np.array(npz[k]) for k in npz.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            # written whole before the JSON names it: damaged afterwards (disk, hand)
+            why = (str(state), None, f"cannot be read (truncated or corrupt: {exc})")
+    why = comm.bcast(why, root=0)
+    if why:
+        raise CaseError(*why)
     data = comm.bcast(data, root=0)
     return meta, data
 
