@@ -298,24 +298,19 @@ def ring_geometry(ring: RingModel, case) -> Geometry:
 
 
 class SteadyWatch:
-    """Cycle means of the watched quantity; steady once it changed by less than the tolerance over the
-    window (relative to the larger of its size and ``floor``)."""
+    """Cycle means of the watched quantity (the kernel gives them per period); the FE tier's steady-state test
+    (:func:`app.transient.steady.window_is_steady`), with ``floor`` as the smallest scale."""
 
     def __init__(self, section, floor: float):
-        self.window, self.tol, self.min_cycles = section.window_cycles, section.relative_tolerance, section.min_cycles
-        self.floor = floor
+        self.section, self.floor = section, floor
         self.means: list[float] = []
 
     def add(self, mean: float) -> bool:
+        from app.transient.steady import window_is_steady
+
         self.means.append(mean)
-        k = len(self.means)
-        if k < max(self.min_cycles, self.window + 1):
-            return False
-        recent = self.means[-self.window - 1:]
-        if not any(recent):         # a held rotor thrown clear of the crests carries no torque: not a steady state
-            return False
-        change = max(recent) - min(recent)
-        return change <= self.tol * max(abs(mean), self.floor)
+        s = self.section
+        return window_is_steady(self.means, s.window_cycles, s.relative_tolerance, s.min_cycles, self.floor)
 
 
 def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path | None = None) -> dict:

@@ -29,6 +29,20 @@ import math
 import numpy as np
 
 
+def window_is_steady(means, window_cycles: int, relative_tolerance: float, min_cycles: int,
+                     floor: float = 0.0) -> bool:
+    """The steady-state test on a list of cycle means (both tiers use it): at least ``min_cycles`` and
+    ``window_cycles`` + 1 means, not all zero, and the last window_cycles + 1 within ``relative_tolerance`` of the
+    larger of their largest magnitude and ``floor`` (a scale below which a change counts as noise, e.g. a
+    few % of the wave's speed for a rotor near standstill)."""
+    if len(means) < max(min_cycles, window_cycles + 1):
+        return False
+    window = np.asarray(means[-(window_cycles + 1):], dtype=float)
+    scale = float(np.max(np.abs(window)))
+    # all zero is no steady state: a rotor thrown off the stator carries no torque while it flies
+    return bool(scale > 0 and np.ptp(window) <= relative_tolerance * max(scale, floor))
+
+
 class SteadyStateWatch:
     """Cycle means of a rotor's speed and contact torque, and the steady-state test."""
 
@@ -88,14 +102,10 @@ class SteadyStateWatch:
         return self.steady
 
     def _test(self) -> None:
-        n = len(self.means)
-        if self.steady or n < max(self.min_cycles, self.window_cycles + 1):
-            return
-        column = 0 if self.free else 1
-        window = np.array([m[column] for m in self.means[-(self.window_cycles + 1):]])
-        scale = float(np.max(np.abs(window)))
-        # all zero is no steady state: a rotor thrown off the stator carries no torque while it flies
-        self.steady = bool(scale > 0 and np.ptp(window) <= self.relative_tolerance * scale)
+        if not self.steady:
+            column = 0 if self.free else 1
+            self.steady = window_is_steady([m[column] for m in self.means], self.window_cycles,
+                                           self.relative_tolerance, self.min_cycles)
 
     # ------------------------------------------------------------ checkpoints and results
     def snapshot(self) -> dict:
