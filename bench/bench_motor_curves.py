@@ -10,12 +10,14 @@ by an FE run of the case, see BENCHMARKS.md) times the steps the modal tier took
 the same curves.
 
     .venv/bin/python bench/bench_motor_curves.py --out /tmp/motor_curves [--points 8] [--fe-step-s 2.0]
-        [--chain] [--set reduction.contact_points=0 ...]
+        [--chain] [--preloads 4.116] [--set reduction.contact_points=0 ...]
 
 ``--chain`` runs the load points from the highest load down, each continuing from the state the previous point
 ended in (``motor_state.npz``; the stall point's for the first), instead of each starting from the harmonic
 state: the start's transient (the wave decaying from its free amplitude, 300-700 periods) is then paid once per
-preload (docs/motor-rotor.md, "Contact sampling").
+preload (docs/motor-rotor.md, "Contact sampling"). ``--chain-up`` chains the other way: the no-load point from the
+harmonic state, then each higher load from the previous one's end state. Where the motor has two branches (the
+coarse stator at 5 mN/V, docs/motor-rotor.md, "Why 4.116 N collapses") the two directions follow different ones.
 """
 
 from __future__ import annotations
@@ -72,23 +74,29 @@ def main() -> None:
     parser.add_argument("--fe-step-s", type=float, default=None, help="FE-tier wall time per step of this case")
     parser.add_argument("--chain", action="store_true",
                         help="each load point continues from the previous one's end state (highest load first)")
+    parser.add_argument("--chain-up", action="store_true",
+                        help="as --chain, but from the no-load point (run from the harmonic state) up")
+    parser.add_argument("--preloads", nargs="*", type=float, default=list(PRELOADS_N), metavar="N",
+                        help="axial preloads [N] (default: the paper's two)")
     parser.add_argument("--set", nargs="*", default=[], help="further --set overrides for every point")
     args = parser.parse_args()
+    if args.chain and args.chain_up:
+        parser.error("--chain and --chain-up are two directions: give one")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     start = time.perf_counter()
-    for preload in PRELOADS_N:
+    for preload in args.preloads:
         base = [f"transient.bodies[0].applied_force_N=[0.0, 0.0, {-preload!r}]"] + args.set
         stall = point(out / f"P{preload}_stall", base + ['transient.bodies[0].rotations[0].motion="fixed"'])
         stall_torque = stall["friction_torque_N_m"]
         stall.update(preload_N=preload, load_torque_N_m=stall_torque)
         print(f"P = {preload} N: stall torque {stall_torque * 1e3:.4g} mN m ({stall['wall_s']:.0f} s)", flush=True)
-        previous = out / f"P{preload}_stall" / "motor_state.npz"
+        previous = None if args.chain_up else out / f"P{preload}_stall" / "motor_state.npz"
         for k in (reversed(range(args.points)) if args.chain else range(args.points)):
             load = stall_torque * k / args.points
             sets = base + [f"transient.bodies[0].rotations[0].torque_N_m={-load!r}"]
-            row = point(out / f"P{preload}_T{k}", sets, previous if args.chain else None)
+            row = point(out / f"P{preload}_T{k}", sets, previous if args.chain or args.chain_up else None)
             previous = out / f"P{preload}_T{k}" / "motor_state.npz"
             row["preload_N"] = preload
             rows.append(row)
@@ -105,12 +113,17 @@ def main() -> None:
     from app.motor.plots import CURVE_PLOT, speed_torque_plot
 
     curves = {}
-    for preload in PRELOADS_N:
+    for preload in args.preloads:
         mine = sorted((r for r in rows if r["preload_N"] == preload), key=lambda r: r["load_torque_N_m"])
         curves[f"preload {preload} N"] = {key: [r[key] for r in mine] for key in
                                           ("load_torque_N_m", "speed_rpm", "output_power_W", "efficiency")}
         curves[f"preload {preload} N"]["torque_N_m"] = curves[f"preload {preload} N"].pop("load_torque_N_m")
-    speed_torque_plot(out / CURVE_PLOT, curves, "WW-USM, modal tier: speed-torque at 400 Vpp, 36.065 kHz")
+    from app.runner import load_for_run
+
+    case = load_for_run(CASE, args.set)
+    vpp = 2 * max(e.amplitude_V or 0.0 for e in case.electrodes.values())
+    speed_torque_plot(out / CURVE_PLOT, curves, f"WW-USM, modal tier: speed-torque at {vpp:.4g} Vpp, "
+                                                f"{case.transient.drive.frequency_Hz / 1e3:.5g} kHz")
     steps = sum(r["steps"] for r in rows)
     report = {"points": len(rows), "wall_s": total, "steps": steps, "cutbacks": sum(r["cutbacks"] for r in rows)}
     if args.fe_step_s:
