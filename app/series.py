@@ -41,6 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
+from app.errors import CaseError
+
 TIME_SERIES_FILE = "transient.h5"
 UNITS = "units"
 DESCRIPTION = "description"
@@ -116,7 +118,9 @@ class TimeSeriesWriter:
     datasets are resizable and chunked and the file is flushed after every block, so a run that is
     killed leaves a readable file up to the last flush. ``units`` (and optionally ``descriptions``)
     map each name to its unit; ``attrs`` are file attributes; ``resume_rows`` continues an existing
-    file after its first rows (a resumed run: rows written after the checkpoint are dropped)."""
+    file after its first rows (a resumed run: rows written after the checkpoint are dropped). Collective
+    with ``comm``: a file that cannot continue (missing, shorter than the checkpoint, unreadable) is a
+    one-line CaseError on every rank."""
 
     def __init__(self, path: Path, units: dict[str, str], comm=None, block_rows: int = 2000,
                  resume_rows: int | None = None, descriptions: dict[str, str] | None = None,
@@ -130,22 +134,32 @@ class TimeSeriesWriter:
         self._rows: list[dict] = []
         self._file = None
         self.rows_written = 0
-        if resume_rows is not None and self.active:
-            self._reopen(resume_rows)
+        if resume_rows is not None:
+            why = self._reopen(resume_rows) if self.active else None
+            if comm is not None:
+                why = comm.bcast(why, root=0)
+            if why:
+                self.close()
+                raise CaseError(str(self.path), None, why)
 
-    def _reopen(self, rows: int) -> None:
-        if rows == 0 and not self.path.exists():
-            return
+    def _reopen(self, rows: int) -> str | None:
+        """Keep the file's first ``rows`` rows; the reason it cannot, or None."""
+        if not self.path.exists():
+            return f"is missing: the checkpoint continues its first {rows} rows" if rows else None
         import h5py
 
-        self._file = h5py.File(self.path, "a")
-        for name in self._file:
-            ds = self._file[name]
-            if ds.shape[0] < rows:
-                raise ValueError(f"{self.path}: {name} has {ds.shape[0]} rows, the checkpoint needs {rows}")
-            ds.resize(rows, axis=0)
+        try:
+            self._file = h5py.File(self.path, "a")
+            for name in self._file:
+                ds = self._file[name]
+                if ds.shape[0] < rows:
+                    return f"{name} has {ds.shape[0]} rows, the checkpoint needs {rows}"
+                ds.resize(rows, axis=0)
+        except (OSError, ValueError) as exc:
+            return f"cannot be continued ({exc})"
         self.rows_written = rows
         self._file.flush()
+        return None
 
     def _create(self, shapes: dict[str, tuple]) -> None:
         import h5py

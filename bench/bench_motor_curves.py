@@ -47,13 +47,9 @@ def point(out: Path, sets: list[str], warm_start: Path | None = None) -> dict:
     if warm_start is None:
         tr = run_case(CASE, sets, out, quiet=True)["results"]["transient"]
     else:
-        from mpi4py import MPI
+        from app.reduced.motor import run_continued
 
-        from app.reduced import motor
-        from app.runner import load_for_run
-
-        out.mkdir(parents=True, exist_ok=True)
-        tr = motor.run(load_for_run(CASE, sets), out, MPI.COMM_WORLD, lambda *_: None, warm_start=warm_start)
+        tr = run_continued(CASE, sets, out, warm_start)
     wall = time.perf_counter() - start
     m = tr["motor"]
     row = {"load_torque_N_m": m["load_torque_N_m"], "speed_rpm": m["speed_rpm"],

@@ -46,10 +46,7 @@ def cycle_means(h5_path: Path, name: str, per_period: int, column: int | None = 
 
 def point(out: Path, ring: int, points: int, rpm: float | None, periods: int, window: int, extra: list[str],
           warm_start: Path | None) -> dict:
-    from mpi4py import MPI
-
-    from app.reduced import motor
-    from app.runner import load_for_run
+    from app.reduced.motor import run_continued
 
     sets = [f"reduction.ring_points={ring}", f"reduction.contact_points={points}",
             f"transient.end_time_s={periods * PERIOD_S * (1 + 1e-6)!r}",
@@ -60,8 +57,7 @@ def point(out: Path, ring: int, points: int, rpm: float | None, periods: int, wi
         sets += ['transient.bodies[0].rotations[0].motion="constant_rate"',
                  f"transient.bodies[0].rotations[0].rate_rad_per_s={rpm * 2 * math.pi / 60!r}"]
     start = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
-    tr = motor.run(load_for_run(CASE, sets), out, MPI.COMM_WORLD, lambda *_: None, warm_start=warm_start)
+    tr = run_continued(CASE, sets, out, warm_start)
     wall = time.perf_counter() - start
     m = tr["motor"]
     per = tr["steps_per_period"]

@@ -15,13 +15,16 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("PIEZODYN_CACHE_DIR", os.path.join(tempfile.gettempdir(), "piezodyn-test-cache"))
 
 
-def run_cli(*args, mpi: int = 0, timeout: float = 600, cwd=None):
-    """Run ``python -m app ...`` (optionally under mpirun) and return the CompletedProcess."""
+def run_cli(*args, mpi: int = 0, timeout: float = 600, cwd=None, kill_at: str | None = None):
+    """Run ``python -m app ...`` (optionally under mpirun) and return the CompletedProcess. ``kill_at``:
+    PIEZODYN_KILL_AT=<event>:<n>, the run SIGKILLs itself at the n-th <event> (app/killpoint.py)."""
     cmd = [sys.executable, "-m", "app", *map(str, args)]
     if mpi:
         cmd = ["mpirun", "-n", str(mpi), *cmd]
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                OMPI_MCA_rmaps_base_oversubscribe="1", PYTHONPATH=str(ROOT))
+    if kill_at is not None:
+        env["PIEZODYN_KILL_AT"] = kill_at
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd or ROOT, env=env)
 
 

@@ -13,7 +13,6 @@ partition than the serial reference), to the FE tier's solver tolerance."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
 from pathlib import Path
 
@@ -148,15 +147,7 @@ KILL_POINTS_FAST = ["harmonic_start:1", "checkpoint_tmp:1", "series_block:5", "f
 
 
 def kill_and_resume(point: str, out: Path, reference: Path, mpi: int = 0) -> None:
-    env_before = os.environ.get("PIEZODYN_KILL_AT")
-    os.environ["PIEZODYN_KILL_AT"] = point
-    try:
-        killed = run_cli("run", CASES / CASE, "--out", out, "--quiet", *_sets(KILL_SETS), mpi=mpi)
-    finally:
-        if env_before is None:
-            del os.environ["PIEZODYN_KILL_AT"]
-        else:
-            os.environ["PIEZODYN_KILL_AT"] = env_before
+    killed = run_cli("run", CASES / CASE, "--out", out, "--quiet", *_sets(KILL_SETS), mpi=mpi, kill_at=point)
     assert killed.returncode != 0, f"{point}: the run was not killed"
     assert not (out / "summary.json").exists()
     assert_readable_outputs(out)

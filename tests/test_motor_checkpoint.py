@@ -17,7 +17,6 @@ periods before the checkpoint, and the summary's window spans it.
 from __future__ import annotations
 
 import json
-import os
 import shutil
 from pathlib import Path
 
@@ -112,15 +111,7 @@ KILL_POINTS = [
 
 
 def kill_and_resume(point: str, out: Path, reference: Path, mpi: int = 0, resume_mpi: int | None = None) -> None:
-    env_before = os.environ.get("PIEZODYN_KILL_AT")
-    os.environ["PIEZODYN_KILL_AT"] = point
-    try:
-        killed = run_cli("run", CASES / CASE, "--out", out, "--quiet", *_cli_sets(SETS), mpi=mpi)
-    finally:
-        if env_before is None:
-            del os.environ["PIEZODYN_KILL_AT"]
-        else:
-            os.environ["PIEZODYN_KILL_AT"] = env_before
+    killed = run_cli("run", CASES / CASE, "--out", out, "--quiet", *_cli_sets(SETS), mpi=mpi, kill_at=point)
     assert killed.returncode != 0, f"{point}: the run was not killed"
     assert not (out / "summary.json").exists()
     assert_readable_outputs(out)

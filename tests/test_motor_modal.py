@@ -247,10 +247,7 @@ def test_contact_sampling_converges(motor_runs):
     against 1024 points 0.005 %). docs/motor-rotor.md, "Contact sampling"."""
     import os
 
-    from mpi4py import MPI
-
     from app.reduced import motor
-    from app.runner import load_for_run
 
     root, *_ = motor_runs
     old = os.environ.get("PIEZODYN_CACHE_DIR")
@@ -263,10 +260,8 @@ def test_contact_sampling_converges(motor_runs):
                              f"transient.end_time_s={periods * 2.7728e-5!r}", "output.plots=false",
                              f"transient.steady_state.window_cycles={periods - 20}",
                              "transient.steady_state.relative_tolerance=1e-9"]
-            out = root / f"sampling_{points}"
-            out.mkdir()
-            result = motor.run(load_for_run("cases/wwusm-motor.toml", sets), out, MPI.COMM_WORLD, lambda *_: None,
-                               warm_start=root / "free" / "motor_state.npz")
+            result = motor.run_continued("cases/wwusm-motor.toml", sets, root / f"sampling_{points}",
+                                         root / "free" / "motor_state.npz")
             assert result["periods"] == periods and result["cutbacks"] == 0
             speed[points] = result["motor"]["speed_rad_per_s"]
     finally:
@@ -290,10 +285,7 @@ def test_motor_depends_on_preload_per_volt(motor_runs):
     2e-5, 1.5e-4, 1e-4; separation 0.92 against 0.06 at the unscaled voltage)."""
     import os
 
-    from mpi4py import MPI
-
     from app.reduced import motor
-    from app.runner import load_for_run
 
     root, *_ = motor_runs
     old = os.environ.get("PIEZODYN_CACHE_DIR")
@@ -309,10 +301,8 @@ def test_motor_depends_on_preload_per_volt(motor_runs):
                              f"electrodes.A.amplitude_V={200.0 * s_volt!r}",
                              f"electrodes.B.amplitude_V={200.0 * s_volt!r}",
                              f"transient.contacts[0].friction.regularisation_speed_m_per_s={1e-4 * s_volt!r}"]
-            out = root / f"homogeneity_{name}"
-            out.mkdir()
-            runs[name] = motor.run(load_for_run("cases/wwusm-motor.toml", sets), out, MPI.COMM_WORLD,
-                                   lambda *_: None)["motor"]
+            runs[name] = motor.run_continued("cases/wwusm-motor.toml", sets, root / f"homogeneity_{name}",
+                                             None)["motor"]
     finally:
         if old is None:
             os.environ.pop("PIEZODYN_CACHE_DIR")

@@ -4,7 +4,6 @@ run killed with SIGKILL leaves a readable time series and a checkpoint it can re
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -289,15 +288,7 @@ def assert_readable_outputs(out: Path) -> None:
 
 def kill_and_resume(point: str, out: Path, reference: Path, mpi: int = 0) -> None:
 
-    env_before = os.environ.get("PIEZODYN_KILL_AT")
-    os.environ["PIEZODYN_KILL_AT"] = point
-    try:
-        killed = run_cli("run", CASES / CASE, "--out", out, "--quiet", *_cli_sets(KILL_SETS), mpi=mpi)
-    finally:
-        if env_before is None:
-            del os.environ["PIEZODYN_KILL_AT"]
-        else:
-            os.environ["PIEZODYN_KILL_AT"] = env_before
+    killed = run_cli("run", CASES / CASE, "--out", out, "--quiet", *_cli_sets(KILL_SETS), mpi=mpi, kill_at=point)
     assert killed.returncode != 0, f"{point}: the run was not killed"
     assert not (out / "summary.json").exists()
     assert_readable_outputs(out)

@@ -447,7 +447,7 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
 
     h5_path = out_dir / S.TIME_SERIES_FILE
     units = motor_units(body.name, contact.name, names)
-    series = _open_series(h5_path, units, comm, resumed_rows)
+    series = TimeSeriesWriter(h5_path, units, comm, resume_rows=resumed_rows)
     checkpoint = restart.writer(out_dir, comm, digest, float(amplitudes.max()), seq)
     every = restart.interval_periods(cfg.checkpoint_interval_steps, per_period)
     steady = None
@@ -559,24 +559,15 @@ def run(case, out_dir, comm, log, resume: bool = False, warm_start: str | Path |
     return results
 
 
-def _open_series(path: Path, units: dict, comm, resume_rows: int | None) -> TimeSeriesWriter:
-    """Collective: the time-series writer (rank 0 writes); a resumed run keeps the first ``resume_rows`` rows of
-    the file, the ones its checkpoint names (a one-line error when the file is missing, short or unreadable)."""
-    writer, why = None, None
-    if comm.rank == 0:
-        if resume_rows and not path.is_file():
-            why = f"is missing: the checkpoint continues its first {resume_rows} rows"
-        else:
-            try:
-                writer = TimeSeriesWriter(path, units, None, resume_rows=resume_rows)
-            except (OSError, ValueError) as exc:
-                why = f"cannot be continued ({exc})"
-    why = comm.bcast(why, root=0)
-    if why:
-        if writer is not None:
-            writer.close()
-        raise CaseError(str(path), None, why)
-    return writer if writer is not None else TimeSeriesWriter(path, units, comm)
+def run_continued(case_path: str | Path, overrides: list[str], out_dir: str | Path,
+                  warm_start: str | Path | None, comm=MPI.COMM_WORLD) -> dict:
+    """One motor point continued from ``warm_start`` (an earlier run's ``motor_state.npz``; None: from the case's
+    start), silently, into ``out_dir``: the benches' chained and settled points. Returns the transient results."""
+    from app.runner import load_for_run
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    return run(load_for_run(case_path, overrides), out, comm, lambda *_: None, warm_start=warm_start)
 
 
 def motor_units(body: str, contact: str, electrodes: list[str]) -> dict[str, str]:

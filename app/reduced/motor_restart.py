@@ -26,7 +26,6 @@ summary is the one-go run's.
 from __future__ import annotations
 
 import dataclasses
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +39,7 @@ from app.transient.checkpoint import (  # noqa: F401 (mark_started: the motor's 
     case_digest,
     mark_started,
     read_checkpoint,
+    read_on_root,
 )
 
 #: the arrays of a state file (see the module docstring); the history_* arrays are stacked per period
@@ -94,18 +94,7 @@ def find(out_dir: Path, comm, case, digest: dict, cls):
         raise CaseError(str(pointer), "seq", f"the state file state-{meta['seq']}.npz has no {missing[0]!r} "
                                              "(not a motor checkpoint of this version)")
     path = Path(out_dir) / CHECKPOINT_DIR / str(meta[MODEL_KEY])
-    ring, why = None, None
-    if comm.rank == 0:
-        try:
-            ring = read_ring(path, cls)
-        except KeyError as exc:
-            why = f"has no {exc.args[0]!r} (not a motor's reduced stator of this version)"
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-            why = f"cannot be read (truncated or corrupt: {exc})"
-    why = comm.bcast(why, root=0)
-    if why:
-        raise CaseError(str(path), None, why)
-    return meta, data, comm.bcast(ring, root=0)
+    return meta, data, read_on_root(path, comm, lambda p: read_ring(p, cls), "a motor's reduced stator")
 
 
 def save_ring(out_dir: Path, comm, ring) -> None:

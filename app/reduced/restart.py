@@ -20,7 +20,6 @@ run repeats the interrupted run's steps bit for bit, on any number of ranks.
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,7 +29,7 @@ from petsc4py import PETSc
 
 from app.errors import CaseError
 from app.files import atomic_write
-from app.transient.checkpoint import CHECKPOINT_DIR, CellLayout
+from app.transient.checkpoint import CHECKPOINT_DIR, CellLayout, load_arrays, read_on_root
 
 MODEL_FILE = "reduced-model.npz"
 MODEL_KEY = "reduced_model"
@@ -89,20 +88,15 @@ def load_model(out_dir: Path, model, layout: CellLayout) -> SavedModel:
     """Collective: the reduced model of the checkpoint in ``out_dir`` with T on ``model``'s partition."""
     comm = layout.comm
     path = Path(out_dir) / CHECKPOINT_DIR / MODEL_FILE
-    data, why = None, None
-    if comm.rank == 0:
-        try:
-            with np.load(path) as npz:
-                data = {k: np.array(npz[k]) for k in npz.files}
-            missing = [k for k in SavedModel.__dataclass_fields__ if k not in data]
-            if missing:
-                why = f"has no {missing[0]!r} (not a reduced model of this version)"
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-            why = f"cannot be read (truncated or corrupt: {exc})"
-    why = comm.bcast(why, root=0)
-    if why:
-        raise CaseError(str(path), None, why)
-    data = comm.bcast(data, root=0)
+
+    def reader(p):
+        arrays = load_arrays(p)
+        missing = [k for k in SavedModel.__dataclass_fields__ if k not in arrays]
+        if missing:
+            raise KeyError(missing[0])
+        return arrays
+
+    data = read_on_root(path, comm, reader, "a reduced model")
     W = model.W
     n_owned = _owned_size(W)
     columns = []

@@ -312,20 +312,33 @@ def read_checkpoint(out_dir: Path, comm, case, digest: dict, needs: tuple[str, .
     if float(meta["t_s"]) > case.transient.end_time_s * (1 + 1e-12):
         raise CaseError(file, "transient.end_time_s", f"{case.transient.end_time_s:g} s is before the checkpoint's "
                                                       f"time {float(meta['t_s']):g} s in {pointer}")
-    data, why = None, None
+    # written whole before the JSON names it: unreadable only when damaged afterwards (disk, hand)
+    data = read_on_root(directory / f"state-{meta['seq']}.npz", comm, load_arrays, "a checkpoint state")
+    return meta, data
+
+
+def load_arrays(path: Path) -> dict:
+    """Every array of an npz file, by name (loaded, the file closed)."""
+    with np.load(path) as npz:
+        return {k: np.array(npz[k]) for k in npz.files}
+
+
+def read_on_root(path: Path, comm, reader, what: str):
+    """Collective: ``reader(path)`` on rank 0, its value on every rank. A KeyError from the reader (an entry
+    missing: a file of another version; ``what`` names its content) or an unreadable file is a one-line
+    CaseError naming the file, raised on every rank."""
+    value, why = None, None
     if comm.rank == 0:
-        state = directory / f"state-{meta['seq']}.npz"
         try:
-            with np.load(state) as npz:
-                data = {k: np.array(npz[k]) for k in npz.files}
+            value = reader(path)
+        except KeyError as exc:
+            why = f"has no {exc.args[0]!r} (not {what} of this version)"
         except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-            # written whole before the JSON names it: damaged afterwards (disk, hand)
-            why = (str(state), None, f"cannot be read (truncated or corrupt: {exc})")
+            why = f"cannot be read (truncated or corrupt: {exc})"
     why = comm.bcast(why, root=0)
     if why:
-        raise CaseError(*why)
-    data = comm.bcast(data, root=0)
-    return meta, data
+        raise CaseError(str(path), None, why)
+    return comm.bcast(value, root=0)
 
 
 def _check_pointer(directory: Path, case, needs: tuple[str, ...] = ()) -> dict:
