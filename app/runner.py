@@ -18,7 +18,6 @@ from app.errors import CaseError
 from app.files import write_json_atomic
 from app.mpi_log import PhaseTimer, make_log
 from app.progress import silenced
-from app.tiers import TIERS
 
 
 def versions() -> dict:
@@ -64,10 +63,19 @@ def _output_dir_problem(path: Path, resume: bool) -> str | None:
 def load_for_run(case_path: str | Path, overrides: list[str] | None, resume: bool = False) -> Case:
     """Load and check a case for ``run`` (and ``validate``): the schema, and the CLI rules."""
     case = load_case(case_path, overrides)
+    check_scene(case)
     if resume and "transient" not in case.analyses:
         raise CaseError(str(case_path), "--resume", f"only a transient analysis can be resumed; this case runs "
                                                     f"{', '.join(case.analyses)}")
     return case
+
+
+def check_scene(case: Case) -> None:
+    """The case's ``scene`` names a registered scene (app/scenes/)."""
+    from app.scenes import SCENES
+
+    if case.scene is not None and case.scene not in SCENES:
+        raise CaseError(case.source, "scene", f"unknown scene {case.scene!r} (scenes: {', '.join(SCENES)})")
 
 
 def check_case(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, log=None) -> None:
@@ -105,7 +113,7 @@ def run_case(case_path: str | Path, overrides: list[str] | None = None, out_dir:
     summary = {"case": to_dict(case), "versions": versions(), "mpi_size": comm.size, "results": {},
                "outputs": []}
     with silenced(quiet):  # --quiet: no progress output either
-        TIERS[case.tier].run(case, out, comm, log, timer, summary, resume)
+        TIER_RUNNERS[case.tier](case, out, comm, log, timer, summary, resume)
     summary["wall_time_s"] = timer.seconds
     summary["outputs"].append("summary.json")
     if comm.rank == 0:
@@ -212,6 +220,9 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
             results["transient"] = transient_driver.run(case, out, comm, log, resume=resume)
         summary["outputs"] += results["transient"].pop("outputs", [])
     print_table(results, log)
+
+
+TIER_RUNNERS = {"fe": run_fe, "modal": run_fe, "lumped": run_lumped}
 
 
 def write_modes(model, modal, out: Path, summary: dict) -> None:

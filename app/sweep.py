@@ -110,7 +110,7 @@ def toml_value(value) -> str:
 def build_points(case_path: str | Path, params: list[tuple[str, list]], sets: list[str] | None = None) -> list[dict]:
     """Validate every grid point (the whole case schema, as ``validate`` does before building a mesh);
     returns [{index, values: {key: value}, overrides, case}] in grid order."""
-    from app.case.schema import load_case
+    from app.runner import load_for_run
 
     keys = [k for k, _ in params]
     if len(set(keys)) != len(keys):
@@ -119,7 +119,7 @@ def build_points(case_path: str | Path, params: list[tuple[str, list]], sets: li
     for index, combo in enumerate(itertools.product(*[v for _, v in params])):
         values = dict(zip(keys, combo))
         overrides = list(sets or []) + [f"{k}={toml_value(v)}" for k, v in values.items()]
-        case = load_case(case_path, overrides)
+        case = load_for_run(case_path, overrides)
         _check_geometry_parameters(case)
         points.append({"index": index, "values": values, "overrides": overrides, "case": case})
     return points

@@ -27,11 +27,11 @@ from scipy.integrate import solve_ivp
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from app.case.lumped import LumpedSection, SolverSection  # noqa: E402
 from app.case.validate import from_dict  # noqa: E402
 from app.lumped import kernel as K  # noqa: E402
 from app.lumped.model import IONE, ISIN, force_rows, gap_rows, system_matrix  # noqa: E402
 from app.lumped.parameters import derive_parameters  # noqa: E402
-from app.lumped.schema import LumpedSection, SolverSection  # noqa: E402
 from app.lumped.simulate import initial_state_from_section, simulate  # noqa: E402
 
 N_PHYS = IONE  # 11 physical states

@@ -94,10 +94,28 @@ def excluding_initial_gap(gap, reference_gap):
     return gap - reference_gap
 
 
-def normal_pressure(gap, gap_rate, stiffness, damping):
+def normal_pressure(gap, gap_rate, stiffness, damping, rounding=0.0):
     """Kelvin-Voigt penalty pressure [Pa] (or force per length/area per the caller's stiffness
-    unit): k (-g) + c (-dg/dt) while penetrating, clipped at zero so the surfaces never pull."""
-    return heaviside(-gap) * macaulay(-stiffness * gap - damping * gap_rate)
+    unit): k (-g) + c (-dg/dt) while penetrating, clipped at zero so the surfaces never pull.
+
+    ``rounding`` d0 > 0 [m] (a number) rounds the kink at first touch: the elastic part is k d^2 / (2 d0) for
+    a penetration d = -g below d0 and k (d - d0 / 2) beyond (C^1, so a Newton iteration does not cycle when a
+    point opens and closes within a step). The scalar twin: :func:`forms.contact_law.penalty_pressure`."""
+    if not rounding:
+        return heaviside(-gap) * macaulay(-stiffness * gap - damping * gap_rate)
+    penetration = -gap
+    elastic = ufl.conditional(ufl.lt(penetration, rounding), stiffness * penetration**2 / (2 * rounding),
+                              stiffness * (penetration - 0.5 * rounding))
+    return heaviside(-gap) * macaulay(elastic - damping * gap_rate)
+
+
+def penalty_energy_density(gap, stiffness, rounding=0.0):
+    """Elastic energy per area [J/m^2] the penalty stores at gap g (the integral of its elastic part)."""
+    penetration = macaulay(-gap)
+    if not rounding:
+        return 0.5 * stiffness * penetration**2
+    return ufl.conditional(ufl.lt(penetration, rounding), stiffness * penetration**3 / (6 * rounding),
+                           stiffness * (0.5 * penetration**2 - 0.5 * rounding * penetration + rounding**2 / 6))
 
 
 def friction_coefficient(slip_speed, mu_dynamic, static_ratio, decay_s_per_m):

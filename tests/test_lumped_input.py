@@ -10,11 +10,11 @@ from pathlib import Path
 import pytest
 
 from app.case.loader import apply_overrides, read_toml
+from app.case.lumped import CIRCUIT_KEYS, LumpedSection
 from app.case.validate import from_dict
 from app.errors import CaseError
 from app.lumped.driver import compute, run
 from app.lumped.parameters import derive_parameters
-from app.lumped.schema import CIRCUIT_KEYS, LumpedSection
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
 

@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from app.case.lumped import LumpedSection
 from app.case.validate import from_dict
 from app.lumped import kernel as K
 from app.lumped.model import ID2, ID3, IW, IX, IZ
@@ -20,7 +21,6 @@ from app.lumped.parameters import (
     hertz_secant_stiffness_N_per_m,
     restitution_from_damping_ratio,
 )
-from app.lumped.schema import LumpedSection
 from app.lumped.simulate import initial_state_from_section, simulate
 
 

@@ -1,4 +1,4 @@
-"""Tiers as a registry (app/tiers.py): each tier's analyses, required and foreign sections are
+"""Tiers as a registry (app/case/options.py): each tier's analyses, required and foreign sections are
 checked when the case is loaded, before any mesh is built; bad input names the key."""
 
 from __future__ import annotations
@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 from conftest import CASES
 
+from app.case.options import TIERS
 from app.case.schema import load_case
 from app.errors import CaseError
-from app.tiers import TIERS
 
 
 @pytest.mark.parametrize("case, overrides, key", [

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from app.case.transient import BodySection, PointContactSection, TransientSection
 from app.transient.control import StepSizes
 from app.transient.impacts import closed_intervals, period_average, run_statistics
-from app.transient.schema import BodySection, PointContactSection, TransientSection
 from app.transient.stepper import run_scene
 from demos.demo_ball_drop import BallDrop, build_ball_drop
 from forms.newmark import TimeScheme

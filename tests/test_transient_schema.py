@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import pytest
 
+from app.case.transient import TransientSection
 from app.case.validate import from_dict
 from app.errors import CaseError
-from app.transient.schema import TransientSection
+from app.transient.forces import friction_of
 
 
 def _section(**changes):
@@ -80,10 +81,10 @@ def test_friction_and_rotations_from_a_case():
     section = from_dict(TransientSection, _section(bodies=bodies, contacts=contacts), "case.toml", "transient")
     surface, point = section.contacts
     assert type(surface).__name__ == "SurfaceContactSection" and type(point).__name__ == "PointContactSection"
-    friction = surface.friction.friction()
+    friction = friction_of(surface.friction)
     assert (friction.mu_dynamic, friction.static_ratio, friction.decay_s_per_m, friction.shear_cap_Pa) == \
         (0.2, 1.5, 10.0, 1e6)
-    assert point.friction.friction().shear_cap_Pa == 5.0 and point.contact_offset_m == 0.01
+    assert friction_of(point.friction).shear_cap_Pa == 5.0 and point.contact_offset_m == 0.01
     assert section.bodies[0].rotations[0].inertia_kg_m2 == 1e-3
 
 

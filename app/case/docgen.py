@@ -112,8 +112,8 @@ def render() -> str:
     ]
     for name, (params_cls, _) in BUILDERS.items():
         sections.append((params_cls, f"[geometry.parameters] for builder = \"{name}\""))
-    for cls_path, title in (("app.lumped.schema:LumpedSection", "[lumped]"),
-                            ("app.transient.schema:TransientSection", "[transient]")):
+    for cls_path, title in (("app.case.lumped:LumpedSection", "[lumped]"),
+                            ("app.case.transient:TransientSection", "[transient]")):
         module, _, attr = cls_path.partition(":")
         try:
             cls = getattr(__import__(module, fromlist=[attr]), attr)

@@ -224,10 +224,6 @@ class Case:
     source: str = param("", doc="set by the loader: path of the case file")
 
     def check(self, file, prefix):
-        from app.scenes import SCENES
-
-        if self.scene is not None and self.scene not in SCENES:
-            raise CaseError(file, "scene", f"unknown scene {self.scene!r} (scenes: {', '.join(SCENES)})")
         if self.tier == "lumped" and self.scene not in (None, "percussion-drill"):
             raise CaseError(file, "scene", "the lumped tier is the percussion drill model: scene = 'percussion-drill'")
         if self.tier in ("fe", "modal"):
@@ -241,7 +237,7 @@ class Case:
                                     f"unknown material {region.material!r}; defined: {', '.join(self.materials)}")
                 if isinstance(region.poling, list) and (len(region.poling) != 3 or not any(region.poling)):
                     raise CaseError(file, f"regions[{i}].poling", "a poling vector needs 3 non-zero-norm entries")
-        from app.tiers import TIERS
+        from app.case.options import TIERS
 
         runnable = TIERS[self.tier].analyses
         for i, analysis in enumerate(self.analyses or []):
@@ -281,21 +277,11 @@ class Case:
 
 
 def _section_types():
-    """Sections owned by other packages (lumped, transient), imported lazily."""
-    types = {}
-    try:
-        from app.lumped.schema import LumpedSection
+    """The sections with a module of their own in app/case/ (typed ``Any`` in :class:`Case`)."""
+    from app.case.lumped import LumpedSection
+    from app.case.transient import TransientSection
 
-        types["lumped"] = LumpedSection
-    except ImportError:
-        pass
-    try:
-        from app.transient.schema import TransientSection
-
-        types["transient"] = TransientSection
-    except ImportError:
-        pass
-    return types
+    return {"lumped": LumpedSection, "transient": TransientSection}
 
 
 def _check_modal_tier(transient, file: str) -> None:
@@ -342,12 +328,9 @@ def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
     for name, cls in sections.items():
         if name in raw:
             extra[name] = from_dict(cls, raw.pop(name), file, name)
-    for name in ("lumped", "transient"):
-        if name in raw and name not in sections:
-            raise CaseError(file, name, "this section is not supported by this build")
     case = from_dict(Case, raw, file)
     materials = {name: resolve(m, file, f"materials.{name}") for name, m in case.materials.items()}
-    from app.tiers import TIERS, check_tier
+    from app.case.options import TIERS, check_tier
 
     default = list(TIERS[case.tier].default_analyses) if case.tier in TIERS else []
     analyses = case.analyses if case.analyses is not None else default

@@ -128,11 +128,6 @@ class SurfaceFrictionSection:
     regularisation_speed_m_per_s: float = param(
         1e-4, gt=0, unit="m/s", doc="slip speed below which the law is viscous (stick regularisation)")
 
-    def friction(self):
-        from app.transient.contact import Friction
-
-        return Friction(self.mu_dynamic, self.static_ratio, self.decay_s_per_m, self.shear_cap_Pa,
-                        self.regularisation_speed_m_per_s)
 
 
 @dataclass(frozen=True)
@@ -147,11 +142,6 @@ class LinkFrictionSection:
     regularisation_speed_m_per_s: float = param(
         1e-4, gt=0, unit="m/s", doc="slip speed below which the law is viscous (stick regularisation)")
 
-    def friction(self):
-        from app.transient.contact import Friction
-
-        return Friction(self.mu_dynamic, self.static_ratio, self.decay_s_per_m, self.force_cap_N,
-                        self.regularisation_speed_m_per_s)
 
 
 # [[transient.contacts]] is a tagged union on `kind`: one dataclass per kind (app.case.validate

@@ -6,10 +6,10 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from app.case.lumped import LumpedSection
 from app.errors import NumericalFailure
 from app.lumped.outputs import plot_spec, write_time_series
 from app.lumped.parameters import derive_parameters
-from app.lumped.schema import LumpedSection
 from app.lumped.simulate import initial_state_from_section, simulate
 from app.lumped.stats import run_statistics
 from app.plots import time_series_outputs

@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass
 
 from scipy.optimize import brentq
 
-from app.lumped.schema import ContactSection, LumpedSection, load_circuit
+from app.case.lumped import ContactSection, LumpedSection, load_circuit
 
 DEFAULT_TIP_AMPLITUDE_m = 15e-6
 CONTACT_NAMES = ("tip_ball", "ball_stem", "stem_rock")

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from app.case.lumped import InitialSection, SolverSection
 from app.lumped import kernel as K
 from app.lumped.model import (
     ICOS,
@@ -29,7 +30,6 @@ from app.lumped.model import (
     shortest_period_s,
 )
 from app.lumped.parameters import LumpedParameters
-from app.lumped.schema import InitialSection, SolverSection
 
 
 @dataclass

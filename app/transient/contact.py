@@ -24,21 +24,12 @@ from petsc4py import PETSc
 from app import series as S
 from app.compat import is_mixed
 from app.transient.fe import LinearFE, displacement_of
-from app.transient.interactions import ForceColumns, friction_force, pad3, velocity_map
+from app.transient.forces import ForceColumns, friction_force, pad3, velocity_map
 from forms import contact as cf
+from forms.contact_law import FrictionLaw
 
-
-@dataclass(frozen=True)
-class Friction:
-    """Regularised Coulomb friction (ANSYS names in brackets): kinetic coefficient [MU], static to
-    kinetic ratio [FACT], exponential decay with slip speed [DC, s/m], shear stress cap [TAUMAX, Pa]
-    and the slip speed below which the law is viscous (regularisation) [m/s]."""
-
-    mu_dynamic: float
-    static_ratio: float = 1.0
-    decay_s_per_m: float = 0.0
-    shear_cap_Pa: float = 1e20
-    regularisation_speed_m_per_s: float = 1e-4
+# Regularised Coulomb friction parameters: the law's own record (forms/contact_law.py), shared by every tier.
+Friction = FrictionLaw
 
 
 @dataclass(frozen=True)
@@ -119,7 +110,7 @@ class SurfaceContact(ForceColumns):
     def __init__(self, name: str, fe: LinearFE, facet_tags, tag: int, body: str, shape: ObstacleShape,
                  stiffness_Pa_per_m: float, damping_Pa_s_per_m: float = 0.0, friction: Friction | None = None,
                  weight=1.0, fields: MidpointFields | None = None, quadrature_degree: int = 4,
-                 rotation_axes=None, exclude_initial_gap: bool = False):
+                 rotation_axes=None, exclude_initial_gap: bool = False, rounding_m: float = 0.0):
         if not stiffness_Pa_per_m > 0:
             raise ValueError(f"contact {name!r}: stiffness must be > 0")
         fields = fields if fields is not None else MidpointFields(fe)
@@ -175,11 +166,14 @@ class SurfaceContact(ForceColumns):
                     else omega[0] * ufl.as_vector((-lever[1], lever[0])))
             relative_velocity = relative_velocity - spin
         gap_rate = ufl.dot(relative_velocity, normal)
-        pressure = cf.normal_pressure(gap, gap_rate, self.stiffness, self.damping)
+        self.rounding_m = float(rounding_m)
+        pressure = cf.normal_pressure(gap, gap_rate, self.stiffness, self.damping, self.rounding_m)
         traction = pressure * normal
         # dissipated power per area: damping (p minus its elastic part, times the penetration rate:
         # c rate^2, or the elastic energy lost while the clipped pressure is zero) + friction
-        power = (pressure - self.stiffness * cf.macaulay(-gap)) * (-gap_rate)
+        elastic = (self.stiffness * cf.macaulay(-gap) if not self.rounding_m
+                   else cf.normal_pressure(gap, 0.0 * gap_rate, self.stiffness, 0.0, self.rounding_m))
+        power = (pressure - elastic) * (-gap_rate)
         if friction is not None and friction.mu_dynamic > 0:     # mu = 0: no friction term (UFL zero)
             friction_traction = cf.friction_traction(
                 normal, relative_velocity, pressure, friction.mu_dynamic, friction.static_ratio,
@@ -196,8 +190,7 @@ class SurfaceContact(ForceColumns):
         self.tangent_form = fem.form(tangent)
         if omega is not None:
             self._rotation_forms(traction, omega, lever, test, ds, weight, fe)
-        penetration = cf.macaulay(-gap)
-        self.energy_form = fem.form(0.5 * self.stiffness * penetration**2 * weight * ds)
+        self.energy_form = fem.form(cf.penalty_energy_density(gap, self.stiffness, self.rounding_m) * weight * ds)
         self.dissipation_form = fem.form(power * weight * ds)
         self.area_in_contact_form = fem.form(cf.heaviside(-gap) * weight * ds)
         self.normal_force_form = fem.form(pressure * weight * ds)
@@ -551,7 +544,7 @@ class PointContact(ForceColumns):
     With ``friction``, the contact point sits ``contact_offset_m`` from the upper body's reference
     point against the normal (a disc or ball of that radius on the lower body); the slip is the
     tangential part of the relative velocity there, v_up + omega_up x r_up - (v_lo + omega_lo x r_lo),
-    and the regularised Coulomb force (:func:`app.transient.interactions.friction_force`, the cap
+    and the regularised Coulomb force (:func:`app.transient.forces.friction_force`, the cap
     a force) acts on the upper body with its torque about each body's rotation axes. The lever arm
     of the lower body follows the current positions; its change within a step is left out of the
     tangent (Newton then converges linearly in that term, the residual is exact)."""

@@ -13,7 +13,7 @@ An interaction (a penalty surface contact, a node contact, a rigid-rigid link, .
 
 :data:`INTERACTIONS` maps the case's ``kind`` (``[[transient.contacts]]``) to a builder, so the
 driver, the coupled system, the controller and the energy account iterate one list. A new kind is a
-class implementing :class:`Interaction`, a schema dataclass in :mod:`app.transient.schema` and one
+class implementing :class:`Interaction`, a schema dataclass in :mod:`app.case.transient` and one
 entry here.
 """
 
@@ -24,8 +24,9 @@ from typing import Protocol
 
 import numpy as np
 
-from app import series as S
 from app.errors import CaseError
+from app.transient.contact import NodeContact, ObstacleShape, PointContact, SurfaceContact
+from app.transient.forces import friction_of
 
 
 class Interaction(Protocol):
@@ -63,19 +64,6 @@ class Interaction(Protocol):
         """Time-series values of one record."""
 
 
-class ForceColumns:
-    """The columns every contact writes: the force on the rigid body (the upper body of a link) and
-    the closed flag."""
-
-    name: str
-
-    def columns(self) -> dict[str, str]:
-        return S.contact_columns(self.name)
-
-    def row(self, force_N, closed: bool) -> dict:
-        return {S.contact_force(self.name): force_N, S.contact_closed(self.name): float(closed)}
-
-
 @dataclass
 class BuildContext:
     """What a builder may need: the case, the transient FE model and the shared mid-point fields."""
@@ -98,7 +86,6 @@ def _vector(section, key: str, value, ctx: BuildContext, prefix: str):
 
 def build_surface(section, prefix: str, ctx: BuildContext):
     from app.fe.model import facet_group_tag
-    from app.transient.contact import ObstacleShape, SurfaceContact
 
     tag = facet_group_tag(ctx.model.mesh_data.facet_names, section.facets, ctx.file, f"{prefix}.facets")
     if section.shape == "cone":
@@ -116,7 +103,7 @@ def build_surface(section, prefix: str, ctx: BuildContext):
                      else ObstacleShape("sphere", radius_m=section.radius_m, normal=tuple(normal or ())))
         except ValueError as exc:
             raise CaseError(ctx.file, f"{prefix}.normal", str(exc)) from None
-    friction = section.friction.friction() if section.friction is not None else None
+    friction = friction_of(section.friction)
     axes = ctx.rigid.body(section.body).axis_vectors if ctx.rigid is not None else None
     try:
         return SurfaceContact(section.name, ctx.fe, ctx.model.mesh_data.facet_tags, tag, section.body, shape,
@@ -128,12 +115,11 @@ def build_surface(section, prefix: str, ctx: BuildContext):
 
 
 def build_node(section, prefix: str, ctx: BuildContext):
-    from app.transient.contact import NodeContact
 
     if section.node_point not in ctx.case.points:
         raise CaseError(ctx.file, f"{prefix}.node_point", f"unknown point {section.node_point!r} (see [points])")
     try:
-        friction = section.friction.friction() if section.friction is not None else None
+        friction = friction_of(section.friction)
         return NodeContact(section.name, ctx.fe, ctx.case.points[section.node_point].coordinates_m, section.body,
                            section.radius_m, section.normal, section.stiffness, section.damping, fields=ctx.fields,
                            friction=friction)
@@ -142,10 +128,9 @@ def build_node(section, prefix: str, ctx: BuildContext):
 
 
 def build_point(section, prefix: str, ctx: BuildContext):
-    from app.transient.contact import PointContact
 
     _vector(section, "direction", section.direction, ctx, prefix)
-    friction = section.friction.friction() if section.friction is not None else None
+    friction = friction_of(section.friction)
     return PointContact(section.name, section.lower, section.upper, section.direction, section.touch_distance_m,
                         section.stiffness, section.damping, friction=friction,
                         contact_offset_m=section.contact_offset_m)
@@ -159,51 +144,3 @@ def build_interactions(sections, ctx: BuildContext) -> list:
     return [INTERACTIONS[s.kind](s, f"transient.contacts[{i}]", ctx) for i, s in enumerate(sections)]
 
 
-# ------------------------------------------------------------------ friction of lumped interactions
-def friction_force(slip: np.ndarray, normal_force_N: float, friction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Regularised Coulomb force [N] opposing the tangential slip velocity ``slip`` (3-vector, m/s),
-    the law of :func:`forms.contact.friction_traction` with forces instead of tractions:
-
-        F = -min(mu(|s|) N, cap) s / sqrt(|s|^2 + eps^2),  mu = mu_d (1 + (FACT - 1) exp(-DC |s|)).
-
-    Returns (F, dF/ds (3 x 3), dF/dN (3))."""
-    eps = friction.regularisation_speed_m_per_s
-    speed_sq = float(slip @ slip)
-    speed = np.sqrt(speed_sq + 1e-30)
-    reg = np.sqrt(speed_sq + eps * eps)
-    decay = np.exp(-friction.decay_s_per_m * speed)
-    mu = friction.mu_dynamic * (1 + (friction.static_ratio - 1) * decay)
-    shear = mu * normal_force_N
-    if shear > friction.shear_cap_Pa:
-        shear, d_shear_d_speed, d_shear_d_N = friction.shear_cap_Pa, 0.0, 0.0
-    else:
-        d_shear_d_speed = -normal_force_N * friction.mu_dynamic * (friction.static_ratio - 1) \
-            * friction.decay_s_per_m * decay
-        d_shear_d_N = mu
-    direction = slip / reg
-    force = -shear * direction
-    d_force_d_slip = (-shear * (np.eye(3) / reg - np.outer(slip, slip) / reg**3)
-                      - d_shear_d_speed * np.outer(direction, slip / speed))
-    return force, d_force_d_slip, -d_shear_d_N * direction
-
-
-def skew(r: np.ndarray) -> np.ndarray:
-    """[r]x with [r]x w = r x w."""
-    return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
-
-
-def pad3(v) -> np.ndarray:
-    out = np.zeros(3)
-    v = np.asarray(v, dtype=float)
-    out[: v.size] = v
-    return out
-
-
-def velocity_map(rigid, name: str, lever_m: np.ndarray) -> np.ndarray:
-    """(3 x n_dofs) map from the body's generalised rates to the velocity of the point at
-    ``lever_m`` (3-vector from its reference point): v + omega x r. Its transpose maps a force at
-    that point to the generalised force (force, torques about the body's axes)."""
-    body = rigid.body(name)
-    translation = np.eye(3)[:, : rigid.gdim]
-    rotation = -skew(lever_m) @ body.axis_vectors.T
-    return np.hstack([translation, rotation])

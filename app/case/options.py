@@ -1,14 +1,14 @@
-"""Model tiers as a registry keyed by the case's ``tier``: what each tier runs, the sections it
-needs and the sections it cannot use, checked when the case is validated (before any mesh).
+"""The options table: what each model tier (the case's ``tier``) runs, the sections it needs and the
+sections it cannot use, checked when the case is read (before any mesh), so a case that asks a tier for
+something it lacks gets one line naming the key, from ``validate`` as from ``run``.
 
-A new tier is one :class:`Tier` entry here plus its runner
-function; ``app.runner.run_case`` dispatches through :data:`TIERS`.
+Data only (the case layer builds no engine object): the runner maps each tier to the engine that runs it
+(``app.runner.TIER_RUNNERS``). A new tier is one :class:`Tier` entry here and one runner entry there.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from importlib import import_module
 
 from app.errors import CaseError
 
@@ -17,41 +17,35 @@ from app.errors import CaseError
 class Tier:
     """``analyses``: what the tier can run (first ``default_analyses`` when the case lists none);
     ``requires``: sections every case of the tier needs; ``analysis_sections``: sections an
-    analysis needs; ``foreign``: sections of other tiers, an error here (they would be ignored);
-    ``runner``: ``"module:function"`` called as ``f(case, out, comm, log, timer, summary, resume)``."""
+    analysis needs; ``foreign``: sections of other tiers, an error here (they would be ignored)."""
 
     name: str
     doc: str
     analyses: tuple[str, ...]
     default_analyses: tuple[str, ...]
-    runner: str
     requires: tuple[str, ...] = ()
     analysis_sections: dict[str, tuple[str, ...]] = field(default_factory=dict)
     foreign: tuple[str, ...] = ()
-
-    def run(self, *args):
-        module, _, function = self.runner.partition(":")
-        return getattr(import_module(module), function)(*args)
 
 
 TIERS: dict[str, Tier] = {
     "fe": Tier(
         "fe", "full finite-element model (dolfinx)",
         analyses=("modal", "harmonic", "circuit", "transient"), default_analyses=("modal",),
-        runner="app.runner:run_fe", requires=("geometry",),
+        requires=("geometry",),
         analysis_sections={"transient": ("transient",)},
         foreign=("lumped",)),
     "modal": Tier(
         "modal", "modal-reduced FE: the transient on a Craig-Bampton basis (docs/reduced.md); the "
                  "frequency-domain analyses on the FE model",
         analyses=("modal", "harmonic", "circuit", "transient"), default_analyses=("transient",),
-        runner="app.runner:run_fe", requires=("geometry",),
+        requires=("geometry",),
         analysis_sections={"transient": ("transient",)},
         foreign=("lumped",)),
     "lumped": Tier(
         "lumped", "lumped-parameter drill model (transducer modes + rigid bodies)",
         analyses=("lumped",), default_analyses=("lumped",),
-        runner="app.runner:run_lumped", requires=("lumped",),
+        requires=("lumped",),
         foreign=("geometry", "transient")),
 }
 
