@@ -12,7 +12,7 @@ normal case) it costs one dictionary look-up. Events (where they are called):
 - ``fields_written``: right after a field output (app/transient/fields.py);
 - ``checkpoint_state``: the checkpoint's state file is written, its JSON not yet;
 - ``checkpoint_tmp``: the checkpoint JSON is half written to its temporary file
-  (app/transient/checkpoint.py);
+  (app/loop/checkpoint.py);
 - ``harmonic_start``: during the harmonic start, after the steady-state solve, before the first
   output (app/transient/driver.py, app/reduced/driver.py, app/reduced/motor.py).
 

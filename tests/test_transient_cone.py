@@ -1,5 +1,5 @@
 """A rigid cone in a conical funnel (app/transient/contact.py, shape "cone"), the viscous brake on a
-free rotation (app/transient/rigid.py) and the steady-state stop (app/transient/steady.py).
+free rotation (app/transient/rigid.py) and the steady-state stop (app/loop/steady.py).
 
 The funnel is a steel washer whose inner face is a 15 deg cone 0.3 mm high (the motor's wedge face
 in miniature); the rigid cone, free to move along its axis only, is pressed in by a dead load P and

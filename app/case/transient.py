@@ -269,6 +269,13 @@ class SteadyStateSection:
     window_cycles: int = param(20, ge=2, doc="periods over which the cycle mean may change by the tolerance")
     relative_tolerance: float = param(0.005, gt=0, lt=1, doc="largest relative change of the cycle mean")
     min_cycles: int = param(40, ge=1, doc="periods always run before the test applies")
+    speed_floor_rad_per_s: float | None = param(
+        None, ge=0, unit="rad/s", doc="a free rotor: the speed scale below which a change counts as noise (a rotor "
+                                      "near standstill); default: the scene's (motor: 2 % of the speed a 1 um "
+                                      "tangential wave gives), else 0")
+    torque_floor_N_m: float | None = param(
+        None, ge=0, unit="N m", doc="a held or prescribed rotor: the torque scale below which a change counts as "
+                                    "noise; default: the scene's (motor: 2 % of the Coulomb bound), else 0")
 
 
 @dataclass(frozen=True)

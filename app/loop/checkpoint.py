@@ -1,24 +1,23 @@
-"""Checkpoints of a transient run, and resuming from them.
+"""Checkpoints of a transient run, and resuming from them: one module for every tier.
 
-A checkpoint holds everything needed to continue a run bit-identically: the FE displacement,
-velocity and acceleration, the rigid-body states, t, the step controller (cap after cut-backs,
-counters), whether the last step changed the contact set (the next dt depends on it), the run
-statistics, the drive voltage and the number of HDF5 time-series rows written. The contact state
-itself (which contacts are closed) is a function of the saved fields, so it is recomputed.
+A checkpoint holds everything needed to continue a run bit-identically: the engine's state arrays (the FE
+fields per input cell, or the reduced coordinates, the lumped state ...) and its JSON-able record (step
+controller, counters, drive), the loop's own state (the steady-state watch) and the number of time-series
+rows on disk. Whatever else the next steps depend on is a function of these, recomputed on resume.
 
-FE fields are stored per cell, keyed by the mesh's original (input) cell index: row c holds the
-values of the DOFs of input cell c in the element's DOF order. That layout does not depend on the
-MPI partition (which is not reproducible from run to run on several ranks), so a run can resume
-on any number of ranks; on the same single rank it continues bit-identically.
+Layout in ``DIR/checkpoint/``: ``state-<seq>.npz`` (the arrays) and ``checkpoint.json`` (the record), both
+written by rank 0 through a temporary file, fsync and a rename, the JSON last. The JSON names the ``seq``
+of a complete state file, so a run killed at any moment leaves either the previous or the new checkpoint,
+never a mix; the older state file is removed after the JSON points past it. An engine may add files of
+its own once per run (the modal tier's reduced model); the record names them under ``files``.
 
-Layout in ``DIR/checkpoint/``: ``state-<seq>.npz`` and ``checkpoint.json``, both written by rank 0
-through a temporary file, fsync and a rename, the JSON last. The JSON names the ``seq`` of a
-complete state file, so a run killed at any moment leaves either the previous or the new
-checkpoint, never a mix. The older state file is removed after the JSON points past it.
+A fresh run first writes ``run.json`` (the case digest) and removes any older checkpoint, so a run killed
+before its first checkpoint (e.g. during the harmonic start) is known: ``--resume`` then starts it again
+from t = 0 instead of refusing.
 
-A fresh run first writes ``run.json`` (the case digest) and removes any older checkpoint, so a run
-killed before its first checkpoint (e.g. during the harmonic start) is known: ``--resume`` then
-starts it again from t = 0 instead of refusing.
+Format 2 (this one) records ``tier``, ``engine`` (the engine's record) and ``loop``; format 1, written by
+piezodyn before the one run loop, is read for the FE tier (its record maps one to one) and refused with one
+line for the other tiers, whose state arrays changed.
 """
 
 from __future__ import annotations
@@ -35,42 +34,60 @@ import numpy as np
 from app.errors import CaseError
 from app.files import atomic_write, json_bytes, jsonable, write_json_atomic
 from app.killpoint import kill_point
-from app.transient.state import TransientState
 
 CHECKPOINT_DIR = "checkpoint"
 POINTER = "checkpoint.json"
 MARKER = "run.json"
-FORMAT = 1
+FORMAT = 2
 
 
 @dataclass
-class Resumed:
-    """What a run continues from: the state, the stepper snapshot (controller, statistics, last
-    contact change), the drive voltage [V], the number of time-series rows to keep and the
-    checkpoint's sequence number."""
+class Found:
+    """A checkpoint to resume from: its record (``t_s``, ``rows``, ``seq``, ``tier``, ``engine``, ``loop``,
+    ``files``) and its state arrays (every rank holds them)."""
 
-    state: TransientState
-    stepper: dict
-    voltage_V: float
-    rows: int
-    seq: int
+    record: dict
+    arrays: dict
+    pointer: Path           # the checkpoint's JSON (for messages)
+
+    @property
+    def t_s(self) -> float:
+        return float(self.record["t_s"])
+
+    @property
+    def rows(self) -> int:
+        return int(self.record["rows"])
+
+    @property
+    def seq(self) -> int:
+        return int(self.record["seq"])
+
+    @property
+    def engine(self) -> dict:
+        return self.record["engine"]
+
+    @property
+    def loop(self) -> dict:
+        return self.record.get("loop") or {}
+
+    def file(self, out_dir: Path, key: str) -> Path:
+        """An engine file of the checkpoint (``files`` names it)."""
+        return Path(out_dir) / CHECKPOINT_DIR / str(self.record["files"][key])
 
 
 class CheckpointWriter:
-    """``write(state, stepper_snapshot, rows)`` every ``interval_steps`` accepted steps (``due``) and
-    at the end of a run. ``flush`` is called first so that the time series on disk has exactly
-    ``rows`` rows when the checkpoint names them."""
+    """Collective ``write(t_s, arrays, engine_record, loop_record, rows)``; ``due(steps)`` every
+    ``interval_steps`` accepted steps. ``files``: engine files of the checkpoint directory (key -> name)."""
 
-    def __init__(self, out_dir: Path, layout: CellLayout | None, interval_steps: int, voltage_V: float,
-                 case_digest: dict, flush=None, seq: int = 0, comm=None):
+    def __init__(self, out_dir: Path, comm, interval_steps: int, tier: str, case_digest: dict, seq: int = 0,
+                 files: dict | None = None):
         self.dir = Path(out_dir) / CHECKPOINT_DIR
-        self.layout = layout        # None: no FE fields (the motor's modal tier): ``comm`` then, write_arrays only
-        self.comm = comm = layout.comm if layout is not None else comm
+        self.comm = comm
         self.interval_steps = int(interval_steps)
-        self.voltage_V = float(voltage_V)
+        self.tier = tier
         self.case_digest = case_digest
-        self.flush = flush
         self.seq = seq
+        self.files_ = dict(files or {})
         self.written = 0
         if comm.rank == 0:
             self.dir.mkdir(parents=True, exist_ok=True)
@@ -79,35 +96,32 @@ class CheckpointWriter:
     def due(self, steps: int) -> bool:
         return self.interval_steps > 0 and steps % self.interval_steps == 0
 
+    def steps_to_next(self, steps: int) -> int:
+        """Accepted steps until the next checkpoint is due (a large number when only the end writes one)."""
+        if self.interval_steps <= 0:
+            return 2**62
+        return self.interval_steps - steps % self.interval_steps
+
     def files(self) -> list[str]:
         """The checkpoint's files, relative to the output directory."""
-        names = [MARKER, POINTER] + ([self._state_file(self.seq).name] if self.seq else [])
+        names = [MARKER, POINTER] + ([self._state_file(self.seq).name] if self.seq else []) + list(self.files_.values())
         return [f"{CHECKPOINT_DIR}/{n}" for n in names if (self.dir / n).exists() or n != MARKER]
 
     def _state_file(self, seq: int) -> Path:
         return self.dir / f"state-{seq}.npz"
 
-    def write(self, state: TransientState, stepper: dict, rows_of=None) -> None:
-        """Collective. ``rows_of()`` returns the number of time-series rows on disk (after flush)."""
-        fields = {k: self.layout.gather(getattr(state, k)) for k in ("u", "v", "a")}
-        arrays = dict(z=state.z, zd=state.zd, zdd=state.zdd, **fields) if self.comm.rank == 0 else None
-        self.write_arrays(state.t, arrays, stepper, rows_of)
-
-    def write_arrays(self, t_s: float, arrays: dict | None, stepper: dict, rows_of=None, meta: dict | None = None
-                     ) -> None:
-        """Collective: a checkpoint at time ``t_s`` [s] of ``arrays`` (name -> array, rank 0's are
-        stored) and the JSON-able ``stepper`` snapshot; ``meta``: more entries for the JSON."""
-        if self.flush is not None:
-            self.flush()
-        rows = int(rows_of()) if rows_of is not None else 0
-        rows = self.comm.bcast(rows, root=0)
+    def write(self, t_s: float, arrays: dict | None, engine: dict, loop: dict, rows: int) -> None:
+        """Collective: a checkpoint at time ``t_s`` [s] of ``arrays`` (rank 0's are stored), the engine's and
+        the loop's JSON-able records, and ``rows`` time-series rows on disk (flushed before)."""
+        rows = self.comm.bcast(int(rows), root=0)
         seq = self.seq + 1
         if self.comm.rank == 0:
             path = self._state_file(seq)
             atomic_write(path, lambda fh: np.savez(fh, **arrays), sync=True)
             kill_point("checkpoint_state")
             record = {"format": FORMAT, "seq": seq, "t_s": t_s, "mpi_size": self.comm.size, "rows": rows,
-                      "voltage_V": self.voltage_V, "stepper": stepper, "case": self.case_digest, **(meta or {})}
+                      "tier": self.tier, "engine": engine, "loop": loop, "files": self.files_,
+                      "case": self.case_digest}
             atomic_write(self.dir / POINTER, lambda fh: _write_json(fh, record), sync=True)
             old = self._state_file(self.seq)
             if self.seq and old.exists():
@@ -134,9 +148,20 @@ def mark_started(out_dir: Path, comm, digest: dict) -> None:
         meta = {"format": FORMAT, "case": digest}
         # the record first: killed in between, the directory still holds a consistent older run
         write_json_atomic(directory / MARKER, meta, sync=True, indent=1)
-        for old in [directory / POINTER, *directory.glob("*.npz*")]:     # states, a reduced model
+        for old in [directory / POINTER, *directory.glob("*.npz*")]:     # states, engine files
             old.unlink(missing_ok=True)
     comm.barrier()
+
+
+def write_engine_file(out_dir: Path, comm, name: str, writer) -> str:
+    """Rank 0 writes an engine file of the checkpoint directory once per run (``writer(fh)``, atomically);
+    returns its name for :class:`CheckpointWriter`'s ``files``."""
+    if comm.rank == 0:
+        directory = Path(out_dir) / CHECKPOINT_DIR
+        directory.mkdir(parents=True, exist_ok=True)
+        atomic_write(directory / name, writer, sync=True)
+    comm.barrier()
+    return name
 
 
 def _read_json(path: Path) -> tuple[dict | None, str | None]:
@@ -154,47 +179,6 @@ def _read_json(path: Path) -> tuple[dict | None, str | None]:
     return meta, None
 
 
-class CellLayout:
-    """Partition-independent storage of a FE Function's local array: per input cell, the values of
-    its DOFs. ``gather`` collects the owned cells on rank 0 (n_cells_global x DOFs per cell);
-    ``scatter`` fills a local array (owned + ghost DOFs) from that table."""
-
-    def __init__(self, space):
-        msh = space.mesh
-        comm = msh.comm
-        tdim = msh.topology.dim
-        imap = msh.topology.index_map(tdim)
-        self.comm = comm
-        self.n_owned = imap.size_local
-        n_local = imap.size_local + imap.num_ghosts
-        self.n_global = imap.size_global
-        self.original = np.asarray(msh.topology.original_cell_index, dtype=np.int64)[:n_local]
-        dofmap = space.dofmap
-        bs = dofmap.bs
-        cells = np.asarray(dofmap.list.array, dtype=np.int64).reshape(n_local, -1)
-        self.dofs = (cells[:, :, None] * bs + np.arange(bs)).reshape(n_local, -1)
-        index_map = dofmap.index_map
-        self.local_size = (index_map.size_local + index_map.num_ghosts) * dofmap.index_map_bs
-
-    def gather(self, values: np.ndarray) -> np.ndarray | None:
-        own = slice(0, self.n_owned)
-        parts = self.comm.gather((self.original[own], values[self.dofs[own]]), root=0)
-        if self.comm.rank != 0:
-            return None
-        table = np.zeros((self.n_global, self.dofs.shape[1]))
-        for index, rows in parts:
-            table[index] = rows
-        return table
-
-    def scatter(self, table: np.ndarray) -> np.ndarray:
-        if table.shape != (self.n_global, self.dofs.shape[1]):
-            raise ValueError(f"checkpoint field has shape {table.shape}, the mesh needs "
-                             f"{(self.n_global, self.dofs.shape[1])}")
-        out = np.zeros(self.local_size)
-        out[self.dofs] = table[self.original]
-        return out
-
-
 def case_digest(case) -> dict:
     """The parts of the resolved case a resumed run must share with the checkpointed one (all of it
     except the end time, the checkpoint interval and the output options)."""
@@ -203,9 +187,11 @@ def case_digest(case) -> dict:
     data = json.loads(json.dumps(jsonable(to_dict(case)), default=str))   # as the records store it
     data.pop("output", None)
     data.pop("source", None)
-    transient = data.get("transient", {})
+    transient = data.get("transient") or {}
     for key in ("end_time_s", "checkpoint_interval_steps"):
         transient.pop(key, None)
+    lumped = data.get("lumped") or {}
+    lumped.pop("duration_s", None)
     return data
 
 
@@ -219,7 +205,7 @@ def _section_types(cls, key: str) -> list:
         return []
     hint = typing.get_type_hints(cls).get(key)
     if hint is typing.Any:
-        # a top-level section owned by another package (lumped, transient): typed Any in Case
+        # a top-level section with a module of its own (lumped, transient): typed Any in Case
         from app.case.schema import _section_types as owned_sections
 
         hint = owned_sections().get(key)
@@ -241,8 +227,16 @@ def _field_default(cls, key: str):
     if cls is None or not dataclasses.is_dataclass(cls):
         return _MISSING
     for f in dataclasses.fields(cls):
-        if f.name == key and f.default is not dataclasses.MISSING:
+        if f.name != key:
+            continue
+        if f.default is not dataclasses.MISSING:
             return json.loads(json.dumps(jsonable(f.default), default=str))
+        if f.default_factory is not dataclasses.MISSING:
+            from app.case.validate import to_dict
+
+            value = f.default_factory()
+            value = to_dict(value) if dataclasses.is_dataclass(value) else value
+            return json.loads(json.dumps(jsonable(value), default=str))
     return _MISSING
 
 
@@ -268,35 +262,16 @@ def _differences(a, b, prefix="", cls=None) -> list[str]:
     return [] if a == b else [prefix]
 
 
-def load_checkpoint(out_dir: Path, layout: CellLayout, case, digest: dict) -> Resumed | None:
-    """Read the checkpoint of ``out_dir`` on every rank; None when the run was killed before its
-    first checkpoint (start again from t = 0); CaseError (exit 2) when there is none, it is
-    unreadable, belongs to a different case or mesh, or lies after the case's end time."""
-    found = read_checkpoint(out_dir, layout.comm, case, digest)
-    if found is None:
-        return None
-    meta, data = found
-    pointer = Path(out_dir) / CHECKPOINT_DIR / POINTER
-    try:
-        u, v, a = (layout.scatter(data[k]) for k in ("u", "v", "a"))
-    except ValueError as exc:
-        raise CaseError(str(pointer), "mesh", str(exc)) from None
-    state = TransientState(float(meta["t_s"]), u, v, a, data["z"], data["zd"], data["zdd"])
-    return Resumed(state, meta["stepper"], float(meta["voltage_V"]), int(meta["rows"]), int(meta["seq"]))
-
-
-def read_checkpoint(out_dir: Path, comm, case, digest: dict, needs: tuple[str, ...] = ()
-                    ) -> tuple[dict, dict] | None:
-    """(JSON record, arrays of its state file) of the checkpoint of ``out_dir`` on every rank, or
-    None when the run was killed before its first checkpoint; CaseError as ``load_checkpoint``.
-    ``needs``: more files of the checkpoint directory the record must name under these keys
-    (checked to exist, e.g. the modal tier's reduced model)."""
+def read_checkpoint(out_dir: Path, comm, case, digest: dict, tier: str) -> Found | None:
+    """The checkpoint of ``out_dir`` on every rank, or None when the run was killed before its first
+    checkpoint (start again from t = 0). CaseError (exit 2, one line, the same on every rank) when there is
+    none, it is unreadable, belongs to a different case (named by its first differing key, before anything
+    about the tier's files) or tier, lies after the case's end time, or names an engine file that is
+    missing."""
     file = case.source
     directory = Path(out_dir) / CHECKPOINT_DIR
     pointer = directory / POINTER
-    verdict = None
-    if comm.rank == 0:
-        verdict = _check_pointer(directory, case, needs)
+    verdict = _check_pointer(directory, tier) if comm.rank == 0 else None
     verdict = comm.bcast(verdict, root=0)
     if "error" in verdict:
         raise CaseError(*verdict["error"])
@@ -309,12 +284,15 @@ def read_checkpoint(out_dir: Path, comm, case, digest: dict, needs: tuple[str, .
                                           "transient.checkpoint_interval_steps and output.* may change on resume)")
     if verdict["started_only"]:
         return None
-    if float(meta["t_s"]) > case.transient.end_time_s * (1 + 1e-12):
-        raise CaseError(file, "transient.end_time_s", f"{case.transient.end_time_s:g} s is before the checkpoint's "
-                                                      f"time {float(meta['t_s']):g} s in {pointer}")
+    if "refused" in verdict:
+        raise CaseError(*verdict["refused"])
+    end = case.transient.end_time_s if case.transient is not None else case.lumped.duration_s
+    key = "transient.end_time_s" if case.transient is not None else "lumped.duration_s"
+    if float(meta["t_s"]) > end * (1 + 1e-12):
+        raise CaseError(file, key, f"{end:g} s is before the checkpoint's time {float(meta['t_s']):g} s in {pointer}")
     # written whole before the JSON names it: unreadable only when damaged afterwards (disk, hand)
-    data = read_on_root(directory / f"state-{meta['seq']}.npz", comm, load_arrays, "a checkpoint state")
-    return meta, data
+    arrays = read_on_root(directory / f"state-{meta['seq']}.npz", comm, load_arrays, "a checkpoint state")
+    return Found(meta, arrays, pointer)
 
 
 def load_arrays(path: Path) -> dict:
@@ -341,29 +319,60 @@ def read_on_root(path: Path, comm, reader, what: str):
     return comm.bcast(value, root=0)
 
 
-def _check_pointer(directory: Path, case, needs: tuple[str, ...] = ()) -> dict:
-    """Rank 0: {"meta", "started_only"} of the checkpoint in ``directory``, or {"error": CaseError
-    arguments} (the verdict is broadcast, so every rank raises the same error)."""
+def _format_1(meta: dict, pointer: Path) -> tuple[dict | None, tuple | None]:
+    """A format-1 record (piezodyn before the one run loop) as format 2, or the one-line refusal: the FE tier's
+    maps one to one; the modal tier's state arrays and the motor's changed."""
+    stepper = meta.get("stepper")
+    if "reduced_model" in meta or not isinstance(stepper, dict) or "controller" not in stepper:
+        return None, (str(pointer), "format", "a checkpoint of an earlier version of the modal tier (before the one "
+                                              "run loop): its state cannot be continued; run the case again")
+    stepper = dict(stepper)
+    steady = stepper.pop("steady_state", None)
+    out = dict(meta)
+    out.update({"format": FORMAT, "tier": "fe", "engine": {"voltage_V": meta["voltage_V"], "stepper": stepper},
+                "loop": {"steady_state": steady}, "files": {}})
+    return out, None
+
+
+def _check_pointer(directory: Path, tier: str) -> dict:
+    """Rank 0: {"meta", "started_only"} of the checkpoint in ``directory``, or {"error": CaseError arguments}
+    (the verdict is broadcast, so every rank raises the same error). A record of another tier or format that
+    cannot be continued is returned as "refused", raised after the case comparison (which names what the user
+    changed, e.g. the tier)."""
     pointer, marker = directory / POINTER, directory / MARKER
     out_dir = str(directory.parent)
     if pointer.exists():
         meta, why = _read_json(pointer)
         if meta is None:
             return {"error": (str(pointer), None, f"checkpoint {why}")}
-        if meta.get("format") != FORMAT:
+        if "case" not in meta or not isinstance(meta["case"], dict):
+            return {"error": (str(pointer), "case", "missing in the checkpoint")}
+        refused = None
+        if meta.get("format") == 1:
+            missing = [k for k in ("seq", "t_s", "rows", "voltage_V", "stepper") if k not in meta]
+            if missing:
+                return {"error": (str(pointer), missing[0], "missing in the checkpoint")}
+            meta, refused = _format_1(meta, pointer)
+            if meta is None:
+                return {"meta": {"case": _read_json(pointer)[0]["case"]}, "started_only": False, "refused": refused}
+        elif meta.get("format") != FORMAT:
             return {"error": (str(pointer), "format", f"unknown checkpoint format {meta.get('format')!r}")}
-        missing = [k for k in ("seq", "t_s", "rows", "voltage_V", "stepper", "case") if k not in meta]
+        missing = [k for k in ("seq", "t_s", "rows", "tier", "engine", "files") if k not in meta]
         if missing:
             return {"error": (str(pointer), missing[0], "missing in the checkpoint")}
+        if meta["tier"] != tier:
+            refused = (str(pointer), "tier", f"the checkpoint is a run of tier {meta['tier']!r}, this case runs "
+                                             f"tier {tier!r}")
         state = directory / f"state-{meta['seq']}.npz"
-        if not state.is_file():
+        if refused is None and not state.is_file():
             return {"error": (str(pointer), "seq", f"the state file {state.name} it names is missing")}
-        for key in needs:
-            if key not in meta:
-                return {"error": (str(pointer), key, "missing in the checkpoint")}
-            if not (directory / str(meta[key])).is_file():
-                return {"error": (str(pointer), key, f"the file {meta[key]} it names is missing")}
-        return {"meta": meta, "started_only": False}
+        for key, name in (meta.get("files") or {}).items():
+            if refused is None and not (directory / str(name)).is_file():
+                return {"error": (str(pointer), f"files.{key}", f"the file {name} it names is missing")}
+        verdict = {"meta": meta, "started_only": False}
+        if refused is not None:
+            verdict["refused"] = refused
+        return verdict
     if marker.exists():
         meta, why = _read_json(marker)
         if meta is None or "case" not in meta:

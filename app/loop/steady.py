@@ -46,14 +46,16 @@ def window_is_steady(means, window_cycles: int, relative_tolerance: float, min_c
 class SteadyStateWatch:
     """Cycle means of a rotor's speed and contact torque, and the steady-state test."""
 
-    def __init__(self, body: str, speed_index: int, torque_sources: list[tuple[str, int]], free: bool,
-                 frequency_Hz: float, window_cycles: int, relative_tolerance: float, min_cycles: int):
-        """``speed_index``: the first angle's position in the packed rigid rates; ``torque_sources``:
-        (contact name, index of the torque about the first axis in that contact's reported force
-        vector) of the contacts acting on the body; ``free``: watch the speed (else the torque)."""
-        self.body, self.speed_index, self.torque_sources, self.free = body, speed_index, torque_sources, free
+    def __init__(self, body: str, speed_column: str, torque_columns: list[str], free: bool, frequency_Hz: float,
+                 window_cycles: int, relative_tolerance: float, min_cycles: int, floor: float = 0.0):
+        """``speed_column``: the time-series column of the body's angular velocities (its first axis is watched);
+        ``torque_columns``: the torque columns of the contacts acting on the body (their first axis, summed);
+        ``free``: watch the speed (else the torque); ``floor``: the scale below which a change of the watched
+        quantity counts as noise (rad/s or N m, see :func:`window_is_steady`)."""
+        self.body, self.speed_column, self.torque_columns, self.free = body, speed_column, torque_columns, free
         self.period_s = 1.0 / frequency_Hz
         self.window_cycles, self.relative_tolerance, self.min_cycles = window_cycles, relative_tolerance, min_cycles
+        self.floor = float(floor)
         self.cycle = 0                     # index of the open period
         self.integral = np.zeros(2)        # (speed, torque) integrated over the open period so far
         self.last = None                   # (t, speed, torque) of the last sample
@@ -61,20 +63,30 @@ class SteadyStateWatch:
         self.steady = False
         self.skip_cycle = -1               # the period the count started in (entered late)
 
+    def update_block(self, block: dict) -> bool:
+        """Add the accepted steps of a time-series block (rows of ``time_s``, the speed and torque columns);
+        True once the run is steady (the rows after the period that made it steady are not looked at)."""
+        from app import series as S
+
+        t = block[S.TIME]
+        speed = np.asarray(block[self.speed_column]).reshape(t.size, -1)[:, 0]
+        torque = np.zeros(t.size)
+        for name in self.torque_columns:
+            torque = torque + np.asarray(block[name]).reshape(t.size, -1)[:, 0]
+        for k in range(t.size):
+            if self.update(float(t[k]), float(speed[k]), float(torque[k])):
+                break
+        return self.steady
+
     @property
     def watched(self) -> str:
         return "speed" if self.free else "torque"
 
-    def _values(self, rec: dict) -> np.ndarray:
-        speed = float(rec["velocity_m_per_s"][self.speed_index])
-        forces = rec["contact_force_N"]
-        torque = sum(float(forces[name][k]) for name, k in self.torque_sources)
-        return np.array([speed, torque])
-
-    def update(self, rec: dict) -> bool:
-        """Add an accepted step's record; True once the run is steady."""
-        t1 = float(rec["time_s"])
-        y1 = self._values(rec)
+    def update(self, t_s: float, speed: float, torque: float) -> bool:
+        """Add an accepted step (its time [s], the watched body's speed [rad/s] and contact torque [N m]);
+        True once the run is steady."""
+        t1 = float(t_s)
+        y1 = np.array([speed, torque])
         if self.last is None:
             # The first record starts the count (the contact torque of the initial state is not
             # evaluated): the period it falls in is entered late, so its mean is left out.
@@ -105,7 +117,7 @@ class SteadyStateWatch:
         if not self.steady:
             column = 0 if self.free else 1
             self.steady = window_is_steady([m[column] for m in self.means], self.window_cycles,
-                                           self.relative_tolerance, self.min_cycles)
+                                           self.relative_tolerance, self.min_cycles, self.floor)
 
     # ------------------------------------------------------------ checkpoints and results
     def snapshot(self) -> dict:
@@ -126,6 +138,6 @@ class SteadyStateWatch:
         column = 0 if self.free else 1
         return {"body": self.body, "watched": self.watched, "steady": self.steady, "cycles": len(self.means),
                 "window_cycles": self.window_cycles, "relative_tolerance": self.relative_tolerance,
-                "min_cycles": self.min_cycles,
+                "min_cycles": self.min_cycles, "floor": self.floor,
                 "cycle_mean_speed_rad_per_s": last[0], "cycle_mean_torque_N_m": last[1],
                 "cycle_means": [m[column] for m in self.means]}

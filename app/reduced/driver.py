@@ -31,7 +31,7 @@ from app.reduced import restart
 from app.reduced.craig_bampton import ReducedBasis, harmonic_response, reduce_model
 from app.reduced.surface import SURFACE_KEYS, SurfaceContactSpec, kernel_surface_arrays, surface_nodes
 from app.series import TimeSeriesWriter
-from app.transient.checkpoint import POINTER, CellLayout, CheckpointWriter, case_digest, mark_started, read_checkpoint
+from app.loop.checkpoint import POINTER, CellLayout, CheckpointWriter, case_digest, mark_started, read_checkpoint
 from app.transient.driver import plot_spec
 from app.transient.fields import FieldSeriesExport
 

@@ -299,14 +299,14 @@ def ring_geometry(ring: RingModel, case) -> Geometry:
 
 class SteadyWatch:
     """Cycle means of the watched quantity (the kernel gives them per period); the FE tier's steady-state test
-    (:func:`app.transient.steady.window_is_steady`), with ``floor`` as the smallest scale."""
+    (:func:`app.loop.steady.window_is_steady`), with ``floor`` as the smallest scale."""
 
     def __init__(self, section, floor: float):
         self.section, self.floor = section, floor
         self.means: list[float] = []
 
     def add(self, mean: float) -> bool:
-        from app.transient.steady import window_is_steady
+        from app.loop.steady import window_is_steady
 
         self.means.append(mean)
         s = self.section

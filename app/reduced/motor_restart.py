@@ -1,6 +1,6 @@
 """Checkpoints and ``--resume`` of the motor in the modal tier (app/reduced/motor.py).
 
-The files are the drill's (app/reduced/restart.py, app/transient/checkpoint.py): in ``DIR/checkpoint/``,
+The files are the drill's (app/reduced/restart.py, app/loop/checkpoint.py): in ``DIR/checkpoint/``,
 ``run.json`` (the case, written when a fresh run starts), ``reduced-model.npz`` (written once),
 ``state-<seq>.npz`` and ``checkpoint.json`` naming it (rank 0, temporary file, fsync, rename, the JSON last).
 A run killed at any moment leaves the previous checkpoint or the new one, and a time series with at least the
@@ -33,7 +33,7 @@ import numpy as np
 from app.errors import CaseError
 from app.files import atomic_write
 from app.reduced.restart import MODEL_FILE, MODEL_KEY
-from app.transient.checkpoint import (  # noqa: F401 (mark_started: the motor's entry point)
+from app.loop.checkpoint import (  # noqa: F401 (mark_started: the motor's entry point)
     CHECKPOINT_DIR,
     CheckpointWriter,
     case_digest,
@@ -71,7 +71,7 @@ def read_ring(path: Path, cls):
 
 
 def run_digest(case, warm_start) -> dict:
-    """The record a resumed run must match: the case (app.transient.checkpoint.case_digest) and, for a run
+    """The record a resumed run must match: the case (app.loop.checkpoint.case_digest) and, for a run
     continued from another run's end state (``warm_start``, the benches' API), that file: a run killed before its
     first checkpoint starts again from it, not from the case's initial state."""
     digest = case_digest(case)
@@ -99,7 +99,7 @@ def find(out_dir: Path, comm, case, digest: dict, cls):
 
 def save_ring(out_dir: Path, comm, ring) -> None:
     """Collective: store the reduced stator of a fresh run in its checkpoint directory (once; after
-    app.transient.checkpoint.mark_started: killed before it is complete, the run is one killed before its first
+    app.loop.checkpoint.mark_started: killed before it is complete, the run is one killed before its first
     checkpoint, which --resume starts again)."""
     if comm.rank == 0:
         atomic_write(Path(out_dir) / CHECKPOINT_DIR / MODEL_FILE, lambda fh: write_ring(fh, ring), sync=True)

@@ -1,5 +1,5 @@
 """Checkpoints and ``--resume`` of the modal tier: the FE tier's checkpoint files
-(:mod:`app.transient.checkpoint`: ``run.json``, ``checkpoint.json``, ``state-<seq>.npz``, written
+(:mod:`app.loop.checkpoint`: ``run.json``, ``checkpoint.json``, ``state-<seq>.npz``, written
 through temporary files and renames, the JSON last) plus the reduced model, written once.
 
 Why the reduced model is part of the checkpoint (``checkpoint/reduced-model.npz``, written once when
@@ -29,7 +29,7 @@ from petsc4py import PETSc
 
 from app.errors import CaseError
 from app.files import atomic_write
-from app.transient.checkpoint import CHECKPOINT_DIR, CellLayout, load_arrays, read_on_root
+from app.loop.checkpoint import CHECKPOINT_DIR, CellLayout, load_arrays, read_on_root
 
 MODEL_FILE = "reduced-model.npz"
 MODEL_KEY = "reduced_model"

@@ -14,7 +14,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -25,28 +24,13 @@ from app import series as S
 from app.compat import petsc_vector
 from app.errors import CaseError
 from app.killpoint import kill_point
-from app.progress import SimulatedTimeProgress as Progress
-from app.series import TimeSeriesWriter
-from app.transient.checkpoint import (
-    POINTER,
-    CellLayout,
-    CheckpointWriter,
-    case_digest,
-    load_checkpoint,
-    mark_started,
-)
 from app.transient.contact import MidpointFields
-from app.transient.control import StepController, StepSizes
 from app.transient.coupled import CoupledSystem
 from app.transient.fe import LinearFE
-from app.transient.fields import FieldSeriesExport
-from app.transient.impacts import statistics_from_file
 from app.transient.interactions import BuildContext, build_interactions
 from app.transient.motions import DirichletData, build_motions
 from app.transient.rigid import RigidBody, RigidSet, constant_rate_motion
 from app.transient.state import TransientState
-from app.transient.steady import SteadyStateWatch
-from app.transient.stepper import TimeStepper
 from forms.kinematics import volume_weight
 
 
@@ -330,7 +314,7 @@ class PointSampler:
         return out
 
 
-def _units(tm: TransientModel, case) -> dict[str, str]:
+def units(tm: TransientModel, case) -> dict[str, str]:
     units = {S.TIME: "s", S.STEP: "s", S.DRIVE: "V"}
     for name in case.points:
         units[S.point_displacement(name)] = "m"
@@ -367,154 +351,4 @@ def build(case, comm, log) -> TransientModel:
             vector = getattr(c, key, None)
             if vector is not None and not np.any(np.asarray(vector, dtype=float)):
                 raise CaseError(file, f"transient.contacts[{i}].{key}", "must not be the zero vector")
-    tm = TransientModel(case, comm, log)
-    tm.steady_watch = steady_state_watch(tm, case)
-    return tm
-
-
-def run(case, out_dir, comm, log, resume: bool = False) -> dict:
-    """Run the transient analysis of ``case`` into ``out_dir``; with ``resume`` continue from the
-    checkpoint in ``out_dir`` (same case except the end time) and append to its time series."""
-    cfg = case.transient
-    out_dir = Path(out_dir)
-    tm = build(case, comm, log)
-    digest = case_digest(case)
-    layout = CellLayout(tm.model.W)
-    resumed = load_checkpoint(out_dir, layout, case, digest) if resume else None
-    if resumed is not None:
-        state, voltage = resumed.state, resumed.voltage_V
-        tm.resume_drive(voltage)
-        log(f"transient: resuming at t = {state.t * 1e3:.6g} ms from {out_dir / 'checkpoint'} "
-            f"({resumed.rows} time-series rows kept)")
-    else:
-        if resume:
-            log(f"transient: {out_dir} holds a run killed before its first checkpoint: starting it again")
-        mark_started(out_dir, comm, digest)
-        state, voltage = tm.initial_state()
-    t_start = state.t
-    log(f"transient: {cfg.initial_state} start, drive {voltage:.4g} V at {cfg.drive.frequency_Hz:.2f} Hz, "
-        f"{len(tm.rigid.bodies)} rigid bodies, {len(cfg.contacts)} contacts, {cfg.end_time_s * 1e3:.4g} ms")
-    h5_path = out_dir / S.TIME_SERIES_FILE
-    series = TimeSeriesWriter(h5_path, _units(tm, case), comm,
-                              resume_rows=resumed.rows if resumed is not None else None)
-    system, model = tm.system, tm.model
-    contact_names = system.contact_names
-    interactions = system.interactions
-    multi_phase = len(tm.drive.electrodes) > 1
-
-    fields = None
-    if case.output.fields:
-        bodies = [(b.name, tm.rigid.dofs(b.name), b.position_m) for b in tm.rigid.bodies]
-        fields = FieldSeriesExport(out_dir / "transient_fields.xdmf", model, lambda: system.solution_vector,
-                                   cfg.output_interval_s, bodies=bodies, resume_from_s=t_start if resumed else None)
-        if not resumed:
-            system.show_state(state)
-            fields.write(state.t, state.z)
-
-    sampler = PointSampler(model)
-
-    def on_step(rec):
-        if fields is not None:
-            fields.write(rec["time_s"], rec["position_m"])
-        row = {S.TIME: rec["time_s"], S.STEP: rec["dt_s"], S.DRIVE: tm.drive.voltage_V(rec["time_s"])}
-        if multi_phase:
-            for name, value in tm.drive.electrode_voltages_V(rec["time_s"]).items():
-                row[S.electrode_voltage(name)] = value
-        for name, value in sampler.values(system.solution_array).items():
-            row[S.point_displacement(name)] = value
-        for b in tm.rigid.bodies:
-            sl = tm.rigid.dofs(b.name)
-            row[S.body_position(b.name)] = rec["position_m"][sl]
-            row[S.body_velocity(b.name)] = rec["velocity_m_per_s"][sl]
-            if b.rotation_axes:
-                rot = tm.rigid.rotation_dofs(b.name)
-                row[S.body_angle(b.name)] = rec["position_m"][rot]
-                row[S.body_angular_velocity(b.name)] = rec["velocity_m_per_s"][rot]
-        for j, c in enumerate(interactions):
-            row.update(c.row(rec["contact_force_N"][c.name], bool(rec["contact_closed"][j])))
-            row[S.contact_dissipated(c.name)] = rec["dissipated_J"][c.name]
-        series.write(row)
-        kill_point("step")
-
-    s = cfg.steps
-    sizes = StepSizes(open_s=s.open_s, closed_s=s.closed_s, change_s=s.change_s, min_s=s.min_s)
-    progress = Progress(comm, t_start, cfg.end_time_s)
-    watch = tm.steady_watch
-    stepper = TimeStepper(system, StepController(sizes), progress=progress, watch=watch)
-    if resumed is not None:
-        stepper.restore(resumed.stepper)
-    checkpoint = CheckpointWriter(out_dir, layout, cfg.checkpoint_interval_steps, voltage, digest, flush=series.flush,
-                                  seq=resumed.seq if resumed is not None else 0)
-    start = time.perf_counter()
-    try:
-        final = stepper.run(state, cfg.end_time_s, on_step=on_step,
-                            checkpoint=_SeriesCheckpoint(checkpoint, series))
-    finally:
-        progress.close()
-        series.close()
-        if fields is not None:
-            fields.close()
-    wall = time.perf_counter() - start
-    results = dict(stepper.stats.as_dict())
-    simulated = final.t - t_start
-    results.update({"simulated_time_s": final.t, "resumed_from_s": t_start if resumed else None,
-                    "wall_s_per_simulated_ms": wall / (simulated * 1e3) if simulated > 0 else None,
-                    "drive_voltage_V": voltage, "drive_frequency_Hz": cfg.drive.frequency_Hz,
-                    "initial_state": cfg.initial_state, "time_series": h5_path.name,
-                    "checkpoint": f"{checkpoint.dir.name}/{POINTER}", "checkpoints_written": checkpoint.written,
-                    "fields": (fields.path.name if fields is not None else None),
-                    "field_outputs": (fields.written if fields is not None else 0)})
-    log(f"transient: {results['steps']} steps, {results['newton_iterations']} Newton iterations, "
-        f"{results['cutbacks']} cut-backs, {results['factorisations']} factorisations, {wall:.1f} s wall")
-    if watch is not None:
-        results["steady_state"] = watch.results()
-        log(f"transient: {'steady' if watch.steady else 'not steady'} after {len(watch.means)} periods: "
-            f"cycle-mean speed {results['steady_state']['cycle_mean_speed_rad_per_s']} rad/s, "
-            f"contact torque {results['steady_state']['cycle_mean_torque_N_m']} N m")
-    # Contact summary and statistics from the whole time series (a resumed run's too), rank 0.
-    summaries = statistics_from_file(h5_path, case) if comm.rank == 0 else None
-    results["contacts"], results["statistics"] = comm.bcast(summaries, root=0)
-    results["scene"] = case.scene
-    results["plot"] = plot_spec(case, tm.drive_point, [b.name for b in tm.rigid.bodies if b.free_axes_mask.any()],
-                                contact_names)
-    if case.output.plots and comm.rank == 0:
-        from app.plots import time_series_outputs
-
-        results["plots"] = time_series_outputs(out_dir, results)
-    results["outputs"] = [h5_path.name, *checkpoint.files(), *(fields.files() if fields is not None else []),
-                          *results.get("plots", [])]
-    system.destroy()
-    return results
-
-
-def steady_state_watch(tm: TransientModel, case) -> SteadyStateWatch | None:
-    """The watch of ``[transient.steady_state]`` (None without it): the body's first rotation, its
-    speed if free, else the torque about it of the surface contacts on the body."""
-    cfg = case.transient.steady_state
-    if cfg is None:
-        return None
-    rigid = tm.rigid
-    body = rigid.body(cfg.body)
-    first = rigid.rotation_dofs(cfg.body).start
-    free = bool(rigid.free_mask[first])
-    sources = [(c.name, tm.gdim) for c in tm.system.interactions
-               if c.kind == "surface" and c.body == cfg.body and c.rotation_axes.size]
-    if not free and not sources:
-        raise CaseError(case.source, "transient.steady_state.body",
-                        f"the rotation of body {body.name!r} is prescribed and no surface contact acts on it: "
-                        "no torque to watch")
-    return SteadyStateWatch(cfg.body, first, sources, free, case.transient.drive.frequency_Hz, cfg.window_cycles,
-                            cfg.relative_tolerance, cfg.min_cycles)
-
-
-class _SeriesCheckpoint:
-    """The checkpoint writer as the stepper sees it: the row count comes from the time series."""
-
-    def __init__(self, writer: CheckpointWriter, series: TimeSeriesWriter):
-        self.writer, self.series = writer, series
-
-    def due(self, steps: int) -> bool:
-        return self.writer.due(steps)
-
-    def write(self, state, snapshot) -> None:
-        self.writer.write(state, snapshot, rows_of=lambda: self.series.rows_written)
+    return TransientModel(case, comm, log)

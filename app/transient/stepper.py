@@ -96,30 +96,29 @@ class EnergyAccount:
 
 
 class TimeStepper:
-    """Advances a :class:`CoupledSystem` from a state to an end time with adaptive dt.
+    """Advances a :class:`CoupledSystem` one accepted step at a time with adaptive dt (:meth:`step`), in
+    FESTIM's ``iterate()`` order: update loads (inside the solve, at the step's own times) -> solve -> check
+    the convergence reason (a failure cuts dt back and retries; a contact change inside a too-long step
+    refines it) -> export (the caller, with the returned record) -> shift the state -> adapt dt.
 
-    ``exports`` are objects with ``write(record)``; each accepted step produces one record (dict
-    of time, dt, rigid-body motion, contact forces, optional energies)."""
+    The run loop of a case (app/loop/loop.py) calls :meth:`step` through the FE engine
+    (app/transient/engine.py); :meth:`run` steps in memory for the demos and tests."""
 
-    def __init__(self, system: CoupledSystem, controller: StepController, exports=(), track_energy=False,
-                 progress=None, watch=None):
-        """``watch`` (optional, :class:`app.transient.steady.SteadyStateWatch`) ends the run at a
-        rotor's steady state; its cycle means are part of the checkpoint snapshot."""
+    def __init__(self, system: CoupledSystem, controller: StepController, track_energy=False):
         self.system = system
         self.controller = controller
         self.monitor = ContactMonitor(system)
-        self.exports = list(exports)
         self.energy = EnergyAccount(system) if track_energy else None
-        self.progress = progress
         self.stats = RunStatistics()
-        self.watch = watch
         self.changed = False                # did the last accepted step change the contact set?
+        self.status = None                  # contact status of the current state
         # energy each interaction has dissipated since t = 0 [J]: its damping and friction power,
         # evaluated where the scheme evaluates forces (the step's generalised mid-point), integrated
         # by the trapezoidal rule between accepted steps (the first step: its own power)
         self.dissipated_J = {c.name: 0.0 for c in system.interactions}
         self.dissipation_W: dict[str, float] = {}
         self._factorisations_before = 0     # factorisations of the run before a resume
+        self._wall_start = None
 
     def record(self, state: TransientState, dt: float, forces: dict, status) -> dict:
         rec = {"time_s": state.t, "dt_s": dt, "position_m": state.z.copy(), "velocity_m_per_s": state.zd.copy(),
@@ -134,6 +133,7 @@ class TimeStepper:
     def snapshot(self) -> dict:
         """Everything besides the state that the next steps depend on (JSON-able): the controller's
         cap and counters, whether the last step changed the contact set, and the statistics."""
+        self._finish_statistics()
         ctl, stats = self.controller, self.stats
         return {"changed": bool(self.changed), "controller": ctl.snapshot(),
                 "newton_iterations": self.system.total_iterations,
@@ -141,8 +141,7 @@ class TimeStepper:
                 "factorisations": self._factorisations(),
                 "dissipated_J": dict(self.dissipated_J), "dissipation_W": dict(self.dissipation_W),
                 "statistics": {k: v for k, v in stats.as_dict().items() if k not in _DERIVED},
-                "failure_reasons": {str(k): v for k, v in stats.failure_reasons.items()},
-                "steady_state": self.watch.snapshot() if self.watch is not None else None}
+                "failure_reasons": {str(k): v for k, v in stats.failure_reasons.items()}}
 
     def restore(self, snap: dict) -> None:
         ctl, stats = self.controller, self.stats
@@ -156,8 +155,6 @@ class TimeStepper:
         for key, value in snap["statistics"].items():
             setattr(stats, key, value)
         stats.failure_reasons = {int(k): v for k, v in snap["failure_reasons"].items()}
-        if self.watch is not None and snap.get("steady_state") is not None:
-            self.watch.restore(snap["steady_state"])
 
     def _factorisations(self) -> int:
         cache = self.system.cache
@@ -169,70 +166,72 @@ class TimeStepper:
         remainder = t_end_s - t
         return dt if remainder >= dt * (1 - 1e-9) else remainder
 
-    def run(self, state: TransientState, t_end_s: float, on_step=None, checkpoint=None) -> TransientState:
-        """``checkpoint`` (optional) has ``due(steps)`` and ``write(state, snapshot)``; it is written
-        after a step is complete (exported, state shifted, dt adapted) and at the end."""
-        ctl, stats = self.controller, self.stats
-        start = time.perf_counter()
-        status = self.monitor.status(state)
+    def begin(self, state: TransientState) -> None:
+        """Before the first step from ``state`` (a start or a resume): its contact status, the energy
+        account's start."""
+        self.status = self.monitor.status(state)
         if self.energy is not None:
             self.energy.initial = self.energy.energy_J(state)
-        while state.t < t_end_s * (1 - 1e-12) and not (self.watch is not None and self.watch.steady):
-            dt = ctl.propose(status, self.changed)
-            while True:
-                dt_try = self._step_size(dt, state.t, t_end_s)
-                stats.attempts += 1
-                reason, new_state = self.system.solve_step(state, dt_try)   # loads updated inside
-                if new_state is None:                                       # convergence reason
-                    stats.failure_reasons[int(reason)] = stats.failure_reasons.get(int(reason), 0) + 1
-                    dt = ctl.cut_back(dt_try, f"SNES reason {int(reason)}")
-                    continue
-                new_status = self.monitor.status(new_state)
-                changed = new_status.closed != status.closed
-                smaller = ctl.refine_event(dt_try) if changed else None
-                if smaller is not None:
-                    dt = smaller
-                    continue
-                break
-            forces = self.system.last_forces_N
-            for name, power in self.system.last_dissipation_W.items():
-                self.dissipated_J[name] += 0.5 * dt_try * (self.dissipation_W.get(name, power) + power)
-            self.dissipation_W = dict(self.system.last_dissipation_W)
-            if self.energy is not None:
-                self.energy.add_work(state, new_state)
-            rec = self.record(new_state, dt_try, forces, new_status)
-            for export in self.exports:                                     # export
-                export.write(rec)
+        self._wall_start = time.perf_counter()
+
+    def step(self, state: TransientState, t_end_s: float) -> tuple[TransientState, dict]:
+        """One accepted step from ``state`` towards ``t_end_s``: (new state, its record)."""
+        ctl, stats = self.controller, self.stats
+        if self.status is None:
+            self.begin(state)
+        status = self.status
+        dt = ctl.propose(status, self.changed)
+        while True:
+            dt_try = self._step_size(dt, state.t, t_end_s)
+            stats.attempts += 1
+            reason, new_state = self.system.solve_step(state, dt_try)   # loads updated inside
+            if new_state is None:                                       # convergence reason
+                stats.failure_reasons[int(reason)] = stats.failure_reasons.get(int(reason), 0) + 1
+                dt = ctl.cut_back(dt_try, f"SNES reason {int(reason)}")
+                continue
+            new_status = self.monitor.status(new_state)
+            changed = new_status.closed != status.closed
+            smaller = ctl.refine_event(dt_try) if changed else None
+            if smaller is not None:
+                dt = smaller
+                continue
+            break
+        forces = self.system.last_forces_N
+        for name, power in self.system.last_dissipation_W.items():
+            self.dissipated_J[name] += 0.5 * dt_try * (self.dissipation_W.get(name, power) + power)
+        self.dissipation_W = dict(self.system.last_dissipation_W)
+        if self.energy is not None:
+            self.energy.add_work(state, new_state)
+        rec = self.record(new_state, dt_try, forces, new_status)
+        self.status, self.changed = new_status, changed                 # shift state
+        ctl.accepted(dt_try)                                            # adapt dt
+        stats.steps += 1
+        stats.dt_min_used_s = min(stats.dt_min_used_s, dt_try)
+        stats.dt_max_used_s = max(stats.dt_max_used_s, dt_try)
+        return new_state, rec
+
+    def run(self, state: TransientState, t_end_s: float, on_step=None) -> TransientState:
+        """Step from ``state`` to ``t_end_s`` in memory, calling ``on_step(record)`` after each step."""
+        self.begin(state)
+        while state.t < t_end_s * (1 - 1e-12):
+            state, rec = self.step(state, t_end_s)
             if on_step is not None:
                 on_step(rec)
-            if self.watch is not None:
-                self.watch.update(rec)
-            state, status, self.changed = new_state, new_status, changed    # shift state
-            ctl.accepted(dt_try)                                            # adapt dt
-            stats.steps += 1
-            stats.dt_min_used_s = min(stats.dt_min_used_s, dt_try)
-            stats.dt_max_used_s = max(stats.dt_max_used_s, dt_try)
-            if self.progress is not None:
-                self.progress.update(state.t)
-            if checkpoint is not None and checkpoint.due(stats.steps):
-                checkpoint.write(state, self._finish_statistics(start))
-                start = time.perf_counter()
-        snap = self._finish_statistics(start)
-        if checkpoint is not None:
-            checkpoint.write(state, snap)
+        self._finish_statistics()
         return state
 
-    def _finish_statistics(self, start: float) -> dict:
-        """Bring the counters in ``stats`` up to date (adds the wall time since ``start``) and
-        return the snapshot."""
+    def _finish_statistics(self) -> None:
+        """Bring the counters in ``stats`` up to date (adds the wall time since the last call)."""
         ctl, stats = self.controller, self.stats
         stats.cutbacks = ctl.cutbacks
         stats.event_refinements = ctl.event_refinements
         stats.newton_iterations = self.system.total_iterations
         stats.linear_steps = self.system.linear_steps
         stats.factorisations = self._factorisations()
-        stats.wall_time_s += time.perf_counter() - start
-        return self.snapshot()
+        now = time.perf_counter()
+        if self._wall_start is not None:
+            stats.wall_time_s += now - self._wall_start
+        self._wall_start = now
 
 
 _DERIVED = ("failure_reasons",)
