@@ -95,9 +95,10 @@ def _browse(args, rank: int) -> int:
         if rank == 0:
             print(format_cases())
         return 0
-    from app.plots import replot
+    from app.report import replot
 
-    written = replot(args.dir, write=rank == 0)
+    written = replot(args.dir, (lambda line: print(line, flush=True)) if rank == 0 else (lambda line: None),
+                     write=rank == 0)
     if rank == 0:
         print(f"{args.dir}: " + (", ".join(written) if written else "nothing to plot"))
     return 0

@@ -232,55 +232,11 @@ def plot_time_series(h5_path: Path, out_dir: Path, point: str | None, bodies: li
 
 
 def time_series_outputs(out_dir: Path, results: dict) -> list[str]:
-    """The time-series plots of a tier's results (``results["plot"]`` says what to draw, written by the
-    tier's driver: drive point, bodies, contacts, title) and its scene report's plots."""
+    """The time-series plots of a tier's results (``results["plot"]`` says what to draw: drive point,
+    bodies, contacts, title). The scene's own plots: app/report.py."""
     spec = results.get("plot")
     series = Path(out_dir) / results["time_series"] if results.get("time_series") else None
     if not spec or series is None or not series.is_file():
         return []
-    written = plot_time_series(series, out_dir, spec.get("point"), spec.get("bodies", []), spec.get("contacts", []),
-                               spec.get("title", ""))
-    if results.get("scene"):
-        from app.scenes import scene_report
-
-        written += scene_report(results["scene"]).plots(results.get("statistics") or {}, Path(out_dir),
-                                                        spec.get("title", ""))
-    return written
-
-
-def replot(result_dir: str | Path, write: bool = True) -> list[str]:
-    """``piezodyn plot DIR``: the tables and plots of an existing result directory, from its summary.json
-    (modal and harmonic) and its time series (every tier), without solving anything again."""
-    import json
-
-    from app.errors import CaseError
-
-    result_dir = Path(result_dir)
-    path = result_dir / "summary.json"
-    if not path.is_file():
-        raise CaseError(str(result_dir), None, "no summary.json here: not a piezodyn result directory")
-    try:
-        summary = json.loads(path.read_text())
-        results, case = summary["results"], summary.get("case", {})
-    except (json.JSONDecodeError, KeyError, TypeError) as exc:
-        raise CaseError(str(path), None, f"not a piezodyn summary ({exc})") from None
-    if not write:
-        return []
-    written = frequency_domain_outputs(result_dir, results, True, case.get("title", ""))
-    for tier_results in (results.get("transient"), results.get("lumped")):     # FE/modal, lumped
-        if tier_results:
-            if "plot" not in tier_results and case.get("transient"):
-                tier_results = {**tier_results, "plot": _plot_spec_of_case(case)}
-            written += time_series_outputs(result_dir, tier_results)
-    return written
-
-
-def _plot_spec_of_case(case: dict) -> dict:
-    """What to plot for a transient result written before results["plot"] existed: from its case."""
-    section = case["transient"]
-    bodies = [b["name"] for b in section.get("bodies", [])
-              if not b.get("fixed") and (b.get("free_axes") is None or any(b["free_axes"]))]
-    downforce = (section.get("loads") or {}).get("fe_force_N") or [0.0]
-    return {"point": (section.get("drive") or {}).get("point"), "bodies": bodies,
-            "contacts": [c["name"] for c in section.get("contacts", [])],
-            "title": f"{Path(case.get('source', 'case')).stem}, downforce {float(np.linalg.norm(downforce)):.3g} N"}
+    return plot_time_series(series, out_dir, spec.get("point"), spec.get("bodies", []), spec.get("contacts", []),
+                            spec.get("title", ""))

@@ -18,6 +18,8 @@ from app.errors import CaseError
 from app.files import write_json_atomic
 from app.mpi_log import PhaseTimer, make_log
 from app.progress import silenced
+from app.report import print_table, result_rows, time_series_plot_spec
+from app.scenes import scene_of
 
 
 def versions() -> dict:
@@ -71,11 +73,14 @@ def load_for_run(case_path: str | Path, overrides: list[str] | None, resume: boo
 
 
 def check_scene(case: Case) -> None:
-    """The case's ``scene`` names a registered scene (app/scenes/)."""
+    """The case's ``scene`` names a registered scene (app/scenes/), and the scene's own input rules hold."""
     from app.scenes import SCENES
 
-    if case.scene is not None and case.scene not in SCENES:
+    if case.scene is None:
+        return
+    if case.scene not in SCENES:
         raise CaseError(case.source, "scene", f"unknown scene {case.scene!r} (scenes: {', '.join(SCENES)})")
+    SCENES[case.scene].check(case)
 
 
 def check_case(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, log=None) -> None:
@@ -84,21 +89,23 @@ def check_case(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, log=None) -> None:
     loads). Collective."""
     if case.tier not in ("fe", "modal"):
         return
-    if case.tier == "modal" and "transient" in case.analyses:
-        from app.reduced import motor
-
-        if motor.is_motor_case(case):       # the motor's reduced stator: its band and electrodes
-            motor.check_model(case, comm)
-            return
-    if "transient" in case.analyses:        # the modal tier builds the same model before reducing it
-        from app.transient.driver import build
-
-        tm = build(case, comm, log or (lambda *a: None))
-        tm.system.destroy()
+    if "transient" in case.analyses:
+        engine_class(case.tier).check(case, comm, log or (lambda *a: None))
     else:
         from app.fe.model import build_model
 
         build_model(case, comm)
+
+
+ENGINES = {"fe": "app.transient.engine:FEEngine", "modal": "app.reduced.engine:ModalEngine"}
+
+
+def engine_class(tier: str):
+    """The transient engine of a tier (app/loop/loop.py's protocol)."""
+    from importlib import import_module
+
+    module, _, name = ENGINES[tier].partition(":")
+    return getattr(import_module(module), name)
 
 
 def run_case(case_path: str | Path, overrides: list[str] | None = None, out_dir: str | Path | None = None,
@@ -126,8 +133,11 @@ def run_lumped(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dic
     from app.lumped import driver
 
     with timer.phase("lumped"):
-        summary["results"]["lumped"] = driver.run(case.lumped, out, comm, log, Path(case.source).stem)
-    summary["outputs"] += summary["results"]["lumped"].pop("outputs", [])
+        results = summary["results"]["lumped"] = driver.run(case.lumped, out, comm, log, Path(case.source).stem)
+        results["scene"] = case.scene
+        add_scene_results(results, case, out, comm)
+    summary["outputs"] += results.pop("outputs", [])
+    print_table(result_rows(summary["results"], scene_of(case)), log)
 
 
 def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, resume: bool) -> None:
@@ -135,15 +145,6 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
     from app.fe.operators import add_damping, assemble_operators
 
     results = summary["results"]
-    if case.tier == "modal" and list(case.analyses) == ["transient"]:
-        from app.reduced import motor
-
-        if motor.is_motor_case(case):       # its reduced stator may come from the cache: no mesh needed
-            with timer.phase("transient"):
-                results["transient"] = motor.run(case, out, comm, log, resume=resume)
-            summary["outputs"] += results["transient"].pop("outputs", [])
-            print_table(results, log)
-            return
     with timer.phase("mesh"):
         model = build_model(case, comm)
     imap = model.W.dofmap.index_map
@@ -207,19 +208,55 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
             with timer.phase("export"):
                 summary["outputs"] += frequency_domain_outputs(out, results, case.output.plots, case.title)
     if "transient" in case.analyses:
-        if case.tier == "modal":
-            from app.reduced import driver as transient_driver
-            from app.reduced import motor
-
-            if motor.is_motor_case(case):
-                transient_driver = motor
-        else:
-            from app.transient import driver as transient_driver
-
         with timer.phase("transient"):
-            results["transient"] = transient_driver.run(case, out, comm, log, resume=resume)
+            results["transient"] = run_transient_analysis(case, out, comm, log, resume)
         summary["outputs"] += results["transient"].pop("outputs", [])
-    print_table(results, log)
+    print_table(result_rows(results, scene_of(case)), log)
+
+
+def run_transient_analysis(case: Case, out: Path, comm, log, resume: bool) -> dict:
+    """The transient analysis of ``case`` in its tier's engine, through the one run loop; then the scene's
+    statistics and outputs (from the written series)."""
+    from app.loop.loop import run_transient
+
+    scene = scene_of(case)
+    cls = engine_class(case.tier)
+    floors = scene.steady_floors(case) if scene is not None else (0.0, 0.0)
+    results = run_transient(lambda found: cls(case, comm, log, found), case, out, comm, log, resume, floors)
+    cfg = case.transient
+    moving = [b.name for b in cfg.bodies if not b.fixed and (b.free_axes is None or any(b.free_axes))]
+    point = cfg.drive.point if cfg.drive.point in case.points else None
+    results["scene"] = case.scene
+    results["plot"] = time_series_plot_spec(case, point, moving, [c.name for c in cfg.contacts])
+    add_scene_results(results, case, out, comm)
+    return results
+
+
+def add_scene_results(results: dict, case: Case, out: Path, comm) -> None:
+    """The scene's statistics (from the time series written) into ``results["statistics"]``, and the plots and
+    CSVs of the run (the tier's time-series plots, the scene's): rank 0 computes, every rank gets them."""
+    from app.series import read_time_series
+
+    scene = scene_of(case)
+    written = []
+    added = {}
+    if comm.rank == 0:
+        h5 = out / results["time_series"] if results.get("time_series") else None
+        if scene is not None and h5 is not None and h5.is_file():
+            added = scene.statistics(read_time_series(h5), case, results)
+    added = comm.bcast(added, root=0) if comm.size > 1 else added
+    results.setdefault("statistics", {}).update(added)
+    if comm.rank == 0:
+        from app.plots import time_series_outputs
+
+        if case.output.plots:
+            written += time_series_outputs(out, results)
+        if scene is not None:
+            title = (results.get("plot") or {}).get("title", case.title)
+            written += scene.outputs(results, out, title, case.output.plots)
+    written = comm.bcast(written, root=0) if comm.size > 1 else written
+    results["plots"] = written
+    results.setdefault("outputs", []).extend(written)
 
 
 TIER_RUNNERS = {"fe": run_fe, "modal": run_fe, "lumped": run_lumped}
@@ -260,70 +297,3 @@ def write_wave(model, solver, frequency_Hz: float, frames: int, out: Path, summa
         export.write(x_t, k * period / frames)
     x_t.destroy()
     summary["outputs"] += export.close()
-
-
-def transient_rows(transient: dict | None) -> list[tuple[str, str, str]]:
-    """End-of-run lines of a transient run (FE and modal tiers): drive, cost, and per contact its
-    impacts, largest force and rate; the foundation's mean force and power; the transducer's rise."""
-    if not transient:
-        return []
-    if transient.get("motor"):
-        from app.reduced.motor import table_rows
-
-        return table_rows(transient)
-    wall_per_ms = transient["wall_s_per_simulated_ms"]     # None: a finished run resumed (no step taken)
-    rows = [("simulated time", f"{transient['simulated_time_s'] * 1e3:.4g}", "ms"),
-            ("drive amplitude", f"{transient['drive_voltage_V']:.4g}", "V"),
-            ("steps / cut-backs", f"{transient['steps']} / {transient['cutbacks']}", "-"),
-            ("wall time per simulated ms", "-" if wall_per_ms is None else f"{wall_per_ms:.4g}", "s")]
-    stats = transient.get("statistics") or {}
-    rates = stats.get("impact_rate_per_s", {})
-    for name, contact in (transient.get("contacts") or {}).items():
-        rows.append((f"{name}: impacts (rate)", f"{contact['impacts']} ({rates.get(name, 0.0):.4g} /s)", "-"))
-        rows.append((f"{name}: largest force", f"{contact['max_force_N']:.4g}", "N"))
-    for key, value in stats.items():
-        if key.endswith("_foundation") and isinstance(value, dict):
-            name = key[: -len("_foundation")]
-            rows.append((f"{name}: mean force on the foundation", f"{value['mean_force_N']:.4g}", "N"))
-            rows.append((f"{name}: mean power into the foundation", f"{value['mean_power_W']:.4g}", "W"))
-    if transient.get("scene"):
-        from app.scenes import scene_report
-
-        rows += scene_report(transient["scene"]).table_rows(stats)
-    return rows
-
-
-def print_table(results: dict, log) -> None:
-    rows = []
-    if "mass_kg" in results:
-        rows.append(("mass", f"{results['mass_kg'] * 1e3:.2f}", "g"))
-    modal = results.get("modal")
-    if modal:
-        rows.append(("resonance f_r (modal, short circuit)", f"{modal['working_resonance_Hz']:.2f}", "Hz"))
-        if "working_antiresonance_Hz" in modal:
-            rows.append(("antiresonance f_a (modal, open circuit)", f"{modal['working_antiresonance_Hz']:.2f}", "Hz"))
-            rows.append(("effective coupling k_eff", f"{modal['working_k_eff']:.4f}", "-"))
-    harmonic = results.get("harmonic")
-    if harmonic:
-        rows.append(("|Y| peak (harmonic)", f"{harmonic['admittance_peak_Hz']:.2f}", "Hz"))
-        if harmonic.get("admittance_trough_Hz"):
-            rows.append(("|Y| trough (harmonic)", f"{harmonic['admittance_trough_Hz']:.2f}", "Hz"))
-        if "voltage_for_target_amplitude_V" in harmonic:
-            rows.append(("voltage for target amplitude", f"{harmonic['voltage_for_target_amplitude_V']:.2f}", "V"))
-    circuit = results.get("circuit")
-    if circuit:
-        for key, label, scale, unit in (("modal_mass_kg", "equivalent mass m_m", 1e3, "g"),
-                                        ("modal_stiffness_N_per_m", "equivalent stiffness k_m", 1e-6, "N/um"),
-                                        ("modal_damping_N_s_per_m", "equivalent damping c_m", 1.0, "N s/m"),
-                                        ("force_factor_N_per_V", "force factor alpha", 1.0, "N/V"),
-                                        ("clamped_capacitance_F", "clamped capacitance C_p", 1e9, "nF")):
-            if key in circuit:
-                rows.append((label, f"{circuit[key] * scale:.4g}", unit))
-    rows += transient_rows(results.get("transient"))
-    if not rows:
-        return
-    width = max(len(r[0]) for r in rows)
-    log("-" * (width + 24))
-    for label, value, unit in rows:
-        log(f"{label:<{width}}  {value:>14} {unit}")
-    log("-" * (width + 24))

@@ -217,6 +217,21 @@ class TimeSeriesWriter:
             self._file = None
 
 
+def check_time_series(path: Path) -> None:
+    """A time-series file that can be read: present, an HDF5 file, every dataset readable; else one CaseError
+    naming the file (``piezodyn plot`` on a damaged directory)."""
+    import h5py
+
+    if not path.is_file():
+        raise CaseError(str(path), None, "is missing (the summary names it)")
+    try:
+        with h5py.File(path, "r") as f:
+            for name in f:
+                f[name][...]
+    except (OSError, ValueError, KeyError, RuntimeError) as exc:
+        raise CaseError(str(path), None, f"cannot be read (truncated or damaged: {str(exc).splitlines()[0]})") from None
+
+
 def read_time_series(path: Path) -> dict[str, np.ndarray]:
     """Every dataset of a time-series file, by name."""
     import h5py

@@ -224,8 +224,6 @@ class Case:
     source: str = param("", doc="set by the loader: path of the case file")
 
     def check(self, file, prefix):
-        if self.tier == "lumped" and self.scene not in (None, "percussion-drill"):
-            raise CaseError(file, "scene", "the lumped tier is the percussion drill model: scene = 'percussion-drill'")
         if self.tier in ("fe", "modal"):
             if self.geometry is None:
                 raise CaseError(file, "geometry", f"required for tier = {self.tier!r}")

@@ -37,12 +37,11 @@ def compute(section: LumpedSection) -> tuple[dict, object]:
             "lumped model: the state became non-finite although the propagation is exact; "
             "check the parameters (tried: exact matrix-exponential steps, no step-size control to relax)"
         )
-    stats = run_statistics(result, section.output.min_flight_rise_m, section.output.histogram_bins)
+    stats = run_statistics(result)
     wall = time.perf_counter() - wall0
     simulated_ms = result.duration_s * 1e3
     results = {
         "tier": "lumped",
-        "scene": "percussion-drill",        # the lumped tier is the drill model
         "simulated_time_s": result.duration_s,
         "wall_s_per_simulated_ms": wall / simulated_ms,
         "cutbacks": 0,                      # exact propagation between events: no step to cut back

@@ -1,7 +1,7 @@
 """Statistics of a lumped run under the keys of every tier (app/transient/impacts.py): impacts per
 contact, what reaches the rock (``stem_rock_foundation``), the free bodies' rise and RMS velocity,
-and the drill's report (transducer rise and flights, app/scenes/percussion_drill.py). Exact: from
-the event table, not the samples, except where a key says so."""
+the scene's statistics (the drill's transducer flights) come from the written series and event table
+(app/scenes/). Exact: from the event table, not the samples, except where a key says so."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from app.lumped.model import ID3
 from app.lumped.outputs import BODIES, PLOTTED_BODIES
 from app.lumped.parameters import CONTACT_NAMES
 from app.lumped.simulate import SimulationResult
-from app.scenes import percussion_drill
 
 
 def open_intervals(events: np.ndarray, contact: int, initially_closed: bool, end_s: float):
@@ -31,7 +30,7 @@ def open_intervals(events: np.ndarray, contact: int, initially_closed: bool, end
     return intervals
 
 
-def run_statistics(result: SimulationResult, min_flight_rise_m: float = 50e-6, bins: int = 20) -> dict:
+def run_statistics(result: SimulationResult) -> dict:
     p = result.parameters
     ev = result.events
     duration = result.duration_s
@@ -68,5 +67,4 @@ def run_statistics(result: SimulationResult, min_flight_rise_m: float = 50e-6, b
                "rms_velocity_m_per_s": float(np.sqrt(np.mean(y[:, i_dot] ** 2)))}
         for body, (i, i_dot, _) in BODIES.items() if body in PLOTTED_BODIES
     }
-    stats.update(percussion_drill.lumped_statistics(result, min_flight_rise_m, bins))
     return stats

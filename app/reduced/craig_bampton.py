@@ -65,7 +65,7 @@ class ReducedBasis:
     M: np.ndarray
     C: np.ndarray | None
     interface_global_dofs: np.ndarray
-    electrodes: list[str]
+    electrodes: list[str]                   # input coordinates: driven electrodes, then base-motion patterns
     mode_frequencies_Hz: np.ndarray
     charge_rows: dict[str, np.ndarray]      # Q_e [C] = charge_rows[e] @ q
     columns: list[PETSc.Vec] = field(repr=False)   # T, full u-phi numbering
@@ -120,7 +120,8 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
                  interface_global_dofs: np.ndarray, electrode_local: dict[str, np.ndarray],
                  n_modes: int | None = None, cutoff_Hz: float | None = None,
                  damping_vectors: bool = True, n_enrich: int = 0,
-                 enrich_near_Hz: float | None = None) -> ReducedBasis:
+                 enrich_near_Hz: float | None = None,
+                 patterns: dict[str, tuple[np.ndarray, np.ndarray]] | None = None) -> ReducedBasis:
     """Craig-Bampton basis and projected operators.
 
     ``K, M, C``: assembled without boundary conditions (full u-phi numbering). ``fixed_local``: local
@@ -129,7 +130,9 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
     rank. ``electrode_local``: local potential DOFs of each driven or floating electrode.
     ``n_modes`` and/or ``cutoff_Hz`` choose the fixed-interface modes (both: the larger set).
     ``n_enrich`` > 0 adds the full model's ``n_enrich`` modes nearest ``enrich_near_Hz`` (interface free,
-    electrodes held) to the basis."""
+    electrodes held) to the basis. ``patterns``: prescribed displacement patterns (a base motion's spatial
+    parts), name -> (local DOFs, their values at unit amplitude): each an input coordinate after the
+    electrodes, its static mode the response to that pattern with every other boundary held."""
     if n_modes is None and cutoff_Hz is None:
         raise ValueError("give n_modes or cutoff_Hz")
     comm = K.getComm().tompi4py()
@@ -144,8 +147,15 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
 
     electrodes = list(electrode_local)
     electrode_owned = {name: owned_global(d) for name, d in electrode_local.items()}
+    patterns = patterns or {}
+    pattern_owned = {}
+    for name, (local, values) in patterns.items():
+        g = local_to_global[np.asarray(local, dtype=np.int32)]
+        keep = (g >= lo) & (g < hi)
+        pattern_owned[name] = (g[keep].astype(PETSc.IntType), np.asarray(values, dtype=float)[keep])
     held = np.unique(np.concatenate([owned_global(fixed_local), _owned_rows(K, interface)]
-                                    + list(electrode_owned.values()))).astype(PETSc.IntType)
+                                    + list(electrode_owned.values())
+                                    + [g for g, _ in pattern_owned.values()])).astype(PETSc.IntType)
 
     # One LU of K with every boundary DOF clamped: static constraint and electrode modes.
     clamped = K.copy()
@@ -162,10 +172,12 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
     rhs = K.createVecLeft()
     unit_sets = [np.array([g], dtype=PETSc.IntType) if lo <= g < hi else np.zeros(0, PETSc.IntType)
                  for g in interface]
-    unit_sets += [electrode_owned[name] for name in electrodes]
-    for owned in unit_sets:
+    unit_sets = [(owned, np.ones(owned.size)) for owned in unit_sets]
+    unit_sets += [(electrode_owned[name], np.ones(electrode_owned[name].size)) for name in electrodes]
+    unit_sets += [pattern_owned[name] for name in patterns]
+    for owned, values in unit_sets:
         boundary_values.set(0.0)
-        boundary_values.setValues(owned, np.ones(owned.size))
+        boundary_values.setValues(owned, values)
         boundary_values.assemble()
         K.mult(boundary_values, rhs)
         rhs.scale(-1.0)
@@ -183,12 +195,15 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
         if enrich_near_Hz is None:
             raise ValueError("n_enrich needs enrich_near_Hz")
         support_and_electrodes = np.unique(np.concatenate([owned_global(fixed_local)]
-                                                          + list(electrode_owned.values()))).astype(PETSc.IntType)
+                                                          + list(electrode_owned.values())
+                                                          + [g for g, _ in pattern_owned.values()])
+                                           ).astype(PETSc.IntType)
         enrichment_Hz, extra = _enrichment_vectors(K, M, W, support_and_electrodes - lo, n_enrich, enrich_near_Hz,
                                                    columns[:interface.size], interface, modes, comm)
         modes += extra
     if C is not None and damping_vectors:
-        modes += _damping_vectors(C, M, ksp, held, columns[interface.size:], modes, comm)
+        modes += _damping_vectors(C, M, ksp, held, columns[interface.size:interface.size + len(electrodes)], modes,
+                                  comm)
     ksp.destroy()
     clamped.destroy()
     boundary_values.destroy()
@@ -203,8 +218,8 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
         rows = electrode_owned[name] - lo
         charge_rows[name] = -comm.allreduce(KT[rows].sum(axis=0) if rows.size else np.zeros(len(columns)),
                                             op=MPI.SUM)
-    return ReducedBasis(K_r, M_r, C_r, interface.astype(np.int64), electrodes, frequencies, charge_rows,
-                        columns, comm, enrichment_Hz)
+    return ReducedBasis(K_r, M_r, C_r, interface.astype(np.int64), electrodes + list(patterns), frequencies,
+                        charge_rows, columns, comm, enrichment_Hz)
 
 
 def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint_modes, interface, modes, comm):

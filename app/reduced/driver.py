@@ -26,12 +26,12 @@ from mpi4py import MPI
 from app import series as S
 from app.errors import CaseError, NumericalFailure
 from app.killpoint import kill_point
+from app.loop.checkpoint import POINTER, CellLayout, CheckpointWriter, case_digest, mark_started, read_checkpoint
 from app.reduced import kernel as kr
 from app.reduced import restart
 from app.reduced.craig_bampton import ReducedBasis, harmonic_response, reduce_model
 from app.reduced.surface import SURFACE_KEYS, SurfaceContactSpec, kernel_surface_arrays, surface_nodes
 from app.series import TimeSeriesWriter
-from app.loop.checkpoint import POINTER, CellLayout, CheckpointWriter, case_digest, mark_started, read_checkpoint
 from app.transient.driver import plot_spec
 from app.transient.fields import FieldSeriesExport
 

@@ -32,7 +32,6 @@ import numpy as np
 
 from app.errors import CaseError
 from app.files import atomic_write
-from app.reduced.restart import MODEL_FILE, MODEL_KEY
 from app.loop.checkpoint import (  # noqa: F401 (mark_started: the motor's entry point)
     CHECKPOINT_DIR,
     CheckpointWriter,
@@ -41,6 +40,7 @@ from app.loop.checkpoint import (  # noqa: F401 (mark_started: the motor's entry
     read_checkpoint,
     read_on_root,
 )
+from app.reduced.restart import MODEL_FILE, MODEL_KEY
 
 #: the arrays of a state file (see the module docstring); the history_* arrays are stacked per period
 STATE_ARRAYS = ("q", "v", "a", "rot", "energies", "istate", "t_s", "periods", "steady", "steady_means", "last_row",

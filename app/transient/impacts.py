@@ -1,6 +1,6 @@
 """Generic statistics of a transient run (FE and modal tiers), read from its HDF5 time series, under
 the keys the lumped tier reports too (app/lumped/stats.py), so the tiers compare line by line.
-What belongs to one scene (the drill's transducer flights) is in its report (app/scenes/).
+What belongs to one scene (the drill's transducer flights) is in that scene (app/scenes/), added by the runner.
 
 - every contact: impacts (open -> closed transitions) and their rate per second;
 - a contact whose lower body is fixed (the rock foundation): impulse per impact, mean force, and
@@ -46,7 +46,7 @@ def statistics_from_file(h5_path: Path, case) -> tuple[dict, dict]:
     ``case`` (rank 0 only)."""
     data = read_time_series(h5_path)
     cfg = case.transient
-    return contact_summary(data, [c.name for c in cfg.contacts]), run_statistics(data, cfg, case.scene)
+    return contact_summary(data, [c.name for c in cfg.contacts]), run_statistics(data, cfg)
 
 
 def contact_summary(data: dict[str, np.ndarray], names: list[str]) -> dict:
@@ -65,10 +65,10 @@ def contact_summary(data: dict[str, np.ndarray], names: list[str]) -> dict:
     return out
 
 
-def run_statistics(data: dict[str, np.ndarray], cfg, scene: str | None = None) -> dict:
-    """Statistics of a transient run: ``data`` holds the time series by name (one row per step,
-    app/series.py names), ``cfg`` is the case's [transient] section, ``scene`` the case's scene
-    report (app/scenes/), whose statistics are added."""
+def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
+    """Generic statistics of a transient run: ``data`` holds the time series by name (one row per step,
+    app/series.py names), ``cfg`` is the case's [transient] section. A scene's own statistics are added by
+    the runner (app/scenes/)."""
     if S.TIME not in data or data[S.TIME].shape[0] < 2:
         return {}
     t = data[S.TIME]
@@ -113,8 +113,4 @@ def run_statistics(data: dict[str, np.ndarray], cfg, scene: str | None = None) -
         bodies[b.name] = {"max_rise_m": float(z.max() - z[0]),
                           "rms_velocity_m_per_s": float(np.sqrt(np.trapz(v**2, t) / duration))}
     stats["bodies"] = bodies
-    if scene is not None:
-        from app.scenes import scene_report
-
-        stats.update(scene_report(scene).statistics(data, cfg))
     return stats

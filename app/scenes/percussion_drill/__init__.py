@@ -1,4 +1,4 @@
-"""Report of the percussion drill (``scene = "percussion-drill"``; the lumped tier always): the
+"""Report of the percussion drill (``scene = "percussion-drill"``; the lumped tier is this model): the
 transducer's rigid rise and its flights, in the same keys for every tier (``statistics.transducer``).
 
 - ``max_rise_m``: largest rise of the transducer's rigid motion above its start;
@@ -22,10 +22,11 @@ from pathlib import Path
 import numpy as np
 
 from app import series as S
+from app.scenes import SceneReport, register
 from app.transient.impacts import closed_intervals, period_average
 
 
-def statistics(data: dict[str, np.ndarray], cfg) -> dict:
+def transient_statistics(data: dict[str, np.ndarray], cfg) -> dict:
     """``{"transducer": ...}`` of an FE/modal run from its time series (empty without the drive
     point's displacement): the rigid motion is the drive point's displacement averaged over a drive
     period; the transducer is in flight while every FE contact (node, surface) is open."""
@@ -62,24 +63,27 @@ def statistics(data: dict[str, np.ndarray], cfg) -> dict:
     }}
 
 
-def lumped_statistics(result, min_rise_m: float, bins: int) -> dict:
-    """``{"transducer": ...}`` of a lumped run (app.lumped.simulate.SimulationResult): flights are the
-    tip/free-mass open intervals in which z rises at least ``min_rise_m``. While that contact is open
-    the rigid coordinate moves on z'' = -(g + F_a / m_t), so the rise of a flight is
-    max(z', 0)^2 / (2 a) at take-off and its apex z + rise (exact, not sampled)."""
+def lumped_statistics(data: dict[str, np.ndarray], parameters: dict, duration_s: float, min_rise_m: float,
+                      bins: int) -> dict:
+    """``{"transducer": ...}`` of a lumped run from its time series and event table (app/lumped/outputs.py):
+    flights are the tip/free-mass open intervals in which z rises at least ``min_rise_m``. While that contact
+    is open the rigid coordinate moves on z'' = -(g + F_a / m_t), so the rise of a flight is
+    max(z', 0)^2 / (2 a) at take-off and its apex z + rise (exact, from the events, not sampled)."""
     from app.lumped import kernel as K
-    from app.lumped.model import IZ
     from app.lumped.stats import open_intervals
 
-    p = result.parameters
-    accel = p.gravity_m_per_s2 + p.downforce_N / p.transducer_mass_kg
-    z0 = float(result.initial_y[IZ])
-    intervals = open_intervals(result.events, 0, bool(result.samples_mode[0] & 1), result.duration_s)
+    accel = parameters["gravity_m_per_s2"] + parameters["downforce_N"] / parameters["transducer_mass_kg"]
+    events = np.asarray(data["events"])
+    t = data[S.TIME]
+    z = np.asarray(data[S.body_position("transducer")]).reshape(t.size, -1)[:, 0]
+    z0 = float(z[0])
+    initially_closed = bool(np.asarray(data[S.contact_closed("tip_ball")]).reshape(-1)[0] > 0)
+    intervals = open_intervals(events, 0, initially_closed, duration_s)
     durations, apexes, starts, censored = [], [], [], 0
     for start, end, row, ends_at_end in intervals:
         if row < 0 or accel <= 0:
             continue  # open from the start: no take-off
-        z_takeoff, zd_takeoff = result.events[row, K.EV_Z], result.events[row, K.EV_ZDOT]
+        z_takeoff, zd_takeoff = events[row, K.EV_Z], events[row, K.EV_ZDOT]
         rise = max(zd_takeoff, 0.0) ** 2 / (2.0 * accel)
         if rise < min_rise_m:
             continue
@@ -93,9 +97,7 @@ def lumped_statistics(result, min_rise_m: float, bins: int) -> dict:
     counts, edges = (
         np.histogram(durations, bins=bins) if len(durations) else (np.zeros(bins, int), np.zeros(bins + 1))
     )
-    duration = result.duration_s
-    half = 0.5 * duration
-    t, z = result.samples_t_s, result.samples_y[:, IZ]
+    half = 0.5 * duration_s
     apex_max = float(apexes.max()) if len(apexes) else 0.0
     return {"transducer": {
         "max_rise_m": float(max(np.max(z) - z0, apex_max)),
@@ -103,7 +105,7 @@ def lumped_statistics(result, min_rise_m: float, bins: int) -> dict:
         "max_rise_second_half_m": float(np.max(z[t >= half]) - z0),
         "mean_displacement_m": float(np.mean(z) - z0),
         "flight_count": int(len(durations)),
-        "flight_rate_per_s": len(durations) / duration,
+        "flight_rate_per_s": len(durations) / duration_s,
         "flight_duration_mean_s": float(durations.mean()) if len(durations) else 0.0,
         "flight_duration_std_s": float(durations.std()) if len(durations) else 0.0,
         "flight_duration_cv": float(durations.std() / durations.mean()) if len(durations) > 1 else 0.0,
@@ -117,16 +119,7 @@ def lumped_statistics(result, min_rise_m: float, bins: int) -> dict:
     }}
 
 
-def table_rows(stats: dict) -> list[tuple[str, str, str]]:
-    transducer = stats.get("transducer")
-    if not transducer:
-        return []
-    return [("transducer: largest rise", f"{transducer['max_rise_m'] * 1e3:.4g}", "mm"),
-            ("transducer: flights (rate)",
-             f"{transducer['flight_count']} ({transducer['flight_rate_per_s']:.4g} /s)", "-")]
-
-
-def plots(stats: dict, out_dir: Path, title: str) -> list[str]:
+def flight_histogram(stats: dict, out_dir: Path, title: str) -> list[str]:
     """``flight_durations.png`` when the statistics hold a flight-duration histogram (lumped tier)."""
     hist = (stats.get("transducer") or {}).get("flight_duration_histogram")
     if not hist or not sum(hist["counts"]):
@@ -146,3 +139,37 @@ def plots(stats: dict, out_dir: Path, title: str) -> list[str]:
     fig.savefig(Path(out_dir) / "flight_durations.png", dpi=120)
     plt.close(fig)
     return ["flight_durations.png"]
+
+
+class PercussionDrill(SceneReport):
+    """The drill: the transducer's rise and flights (``statistics.transducer``), its table rows and the
+    flight-duration histogram."""
+
+    name = "percussion-drill"
+    sweep_columns = ("statistics.transducer.max_rise_m", "statistics.transducer.flight_rate_per_s",
+                     "statistics.impact_rate_per_s.stem_rock", "statistics.impact_rate_per_s.tip_ball",
+                     "statistics.stem_rock_foundation.mean_force_N", "statistics.stem_rock_foundation.mean_power_W",
+                     "statistics.stem_rock_foundation.impulse_per_impact_mean_N_s")
+
+    def statistics(self, data: dict, case, results: dict) -> dict:
+        if case.tier == "lumped":
+            section = case.lumped
+            if "events" not in data or S.TIME not in data:
+                return {}
+            return lumped_statistics(data, results["parameters"], results["simulated_time_s"],
+                                     section.output.min_flight_rise_m, section.output.histogram_bins)
+        return transient_statistics(data, case.transient)
+
+    def table_rows(self, results: dict) -> list[tuple[str, str, str]]:
+        transducer = (results.get("statistics") or {}).get("transducer")
+        if not transducer:
+            return []
+        return [("transducer: largest rise", f"{transducer['max_rise_m'] * 1e3:.4g}", "mm"),
+                ("transducer: flights", f"{transducer['flight_count']}", "1"),
+                ("transducer: flight rate", f"{transducer['flight_rate_per_s']:.4g}", "1/s")]
+
+    def outputs(self, results: dict, out_dir: Path, title: str, plots: bool = True) -> list[str]:
+        return flight_histogram(results.get("statistics") or {}, out_dir, title) if plots else []
+
+
+SCENE = register(PercussionDrill())

@@ -1,0 +1,262 @@
+"""The one outer run loop of every transient engine (FE, modal, lumped).
+
+Resume-or-start, the time-series writer, field output, checkpoints, the steady-state stop, progress lines and
+the summary's common keys are done here once, for every tier. An engine implements the small protocol of
+:class:`Engine`; inside :meth:`Engine.advance` it takes accepted steps in FESTIM's ``iterate()`` order
+(update loads -> solve -> check convergence, cutting dt back on failure -> shift the state -> adapt dt), and
+returns their time-series rows; the loop then exports (series, fields), checkpoints and tests the stop.
+
+    lock the directory; resume: read the checkpoint (every check before anything is touched)
+    engine = make(found)                 build the model (a resumed modal run: its saved reduced model)
+    found ? engine.restore(found) : (mark started, engine.start())
+    while t < end and not steady:
+        rows = engine.advance(end, steps to the next checkpoint, next field output or period end)
+        series.write_block(rows); fields; steady.update_block(rows); progress
+        checkpoint when due
+    checkpoint at the end; results = the common keys + engine.results()
+
+A checkpoint is written after complete steps only (series flushed to the rows it names), so a run killed at
+any moment resumes to the same series, bit for bit (tests/test_*_checkpoint.py kill it at every named point).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import math
+import os
+import time
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from app import series as S
+from app.errors import CaseError
+from app.killpoint import kill_point
+from app.loop.checkpoint import POINTER, CheckpointWriter, Found, case_digest, mark_started, read_checkpoint
+from app.loop.steady import SteadyStateWatch
+from app.progress import SimulatedTimeProgress
+from app.series import TimeSeriesWriter
+
+#: a field output is due at the first step with t >= next output time - this fraction of the interval
+FIELD_TIME_TOLERANCE = 1e-9
+LOCK_FILE = ".piezodyn.lock"
+
+
+class Engine(Protocol):
+    """What the loop needs of a transient engine (a tier's time integrator of one case).
+
+    ``tier``: the case's tier; ``t``: the time of the current state [s]; ``steps``: accepted steps since
+    t = 0 (a resumed run counts on); ``end_time_s``: the run's end; ``capabilities``: what it can do beyond
+    the protocol (``"fields"``: :meth:`field_export`)."""
+
+    tier: str
+    t: float
+    steps: int
+    end_time_s: float
+
+    def start(self) -> None:
+        """The initial state of a fresh run (rest, or the harmonic steady state)."""
+
+    def restore(self, found: Found) -> None:
+        """The state of a checkpoint (``found.arrays``, ``found.engine``)."""
+
+    def columns(self) -> dict[str, str]:
+        """Time-series column names and their units."""
+
+    def advance(self, t_end: float, max_steps: int, stop_at_s: float) -> dict[str, np.ndarray]:
+        """Accepted steps until ``t_end``, ``max_steps`` or the first step at or after ``stop_at_s``
+        (whichever comes first); their rows (column -> array, one row per step)."""
+
+    def snapshot(self) -> tuple[dict | None, dict]:
+        """(state arrays: rank 0's are stored, JSON-able record) of the current state."""
+
+    def checkpoint_files(self, out_dir: Path) -> dict[str, str]:
+        """Files of its own the engine writes into the checkpoint directory once per run (key -> name)."""
+
+    def field_export(self, out_dir: Path, resume_from_s: float | None):
+        """An :class:`app.transient.fields.FieldSeriesExport`-like object (``write(t, z)``, ``next_s``,
+        ``interval_s``, ``close()``, ``files()``, ``path``, ``written``) or None (no FE fields)."""
+
+    def body_positions(self) -> np.ndarray:
+        """The rigid bodies' coordinates (packed), for the field export's body markers."""
+
+    def results(self) -> dict:
+        """The engine's own summary keys (counters, reduction, drive ...)."""
+
+    def statistics(self, h5_path: Path) -> tuple[dict, dict]:
+        """(per contact summary, generic statistics) of the finished run, from its time series (rank 0)."""
+
+    def close(self) -> None:
+        """Free solver objects."""
+
+
+class DirectoryLock:
+    """An exclusive lock on a result directory for the run's duration (rank 0 holds it): a second run or a
+    ``--resume`` of a directory a live run is writing is refused before anything in it changes."""
+
+    def __init__(self, out_dir: Path, comm, flag: str):
+        self.handle = None
+        why = None
+        if comm.rank == 0:
+            try:
+                self.handle = open(Path(out_dir) / LOCK_FILE, "a+")
+                fcntl.flock(self.handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+                self.handle.seek(0)
+                self.handle.truncate()
+                self.handle.write(f"{os.getpid()}\n")
+                self.handle.flush()
+            except BlockingIOError:
+                why = "another piezodyn run is writing this directory now (its lock is held): wait for it to end"
+            except OSError as exc:
+                why = f"cannot be locked ({exc.strerror or exc})"
+            if why and self.handle is not None:
+                self.handle.close()
+                self.handle = None
+        why = comm.bcast(why, root=0) if comm.size > 1 else why
+        if why:
+            raise CaseError(flag, str(out_dir), why)
+
+    def release(self) -> None:
+        if self.handle is not None:
+            fcntl.flock(self.handle.fileno(), fcntl.LOCK_UN)
+            self.handle.close()
+            self.handle = None
+
+
+def steady_state_watch(case, columns: dict[str, str], floors: tuple[float, float] = (0.0, 0.0)
+                       ) -> SteadyStateWatch | None:
+    """The watch of ``[transient.steady_state]`` (None without it): the body's first rotation, its speed if
+    free, else the summed torque of the contacts on it. ``floors``: (speed [rad/s], torque [N m]) scales
+    below which a change counts as noise (the case's keys, else the scene's defaults)."""
+    cfg = case.transient.steady_state if case.transient is not None else None
+    if cfg is None:
+        return None
+    body = next(b for b in case.transient.bodies if b.name == cfg.body)
+    free = body.rotations[0].motion == "free"
+    torques = [S.contact_torque(c.name) for c in case.transient.contacts
+               if c.kind == "surface" and c.body == cfg.body and S.contact_torque(c.name) in columns]
+    if not free and not torques:
+        raise CaseError(case.source, "transient.steady_state.body",
+                        f"the rotation of body {cfg.body!r} is prescribed and no surface contact acts on it: "
+                        "no torque to watch")
+    floor = cfg.speed_floor_rad_per_s if free else cfg.torque_floor_N_m
+    if floor is None:
+        floor = floors[0] if free else floors[1]
+    return SteadyStateWatch(cfg.body, S.body_angular_velocity(cfg.body), torques, free,
+                            case.transient.drive.frequency_Hz, cfg.window_cycles, cfg.relative_tolerance,
+                            cfg.min_cycles, floor)
+
+
+def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = False,
+                  steady_floors: tuple[float, float] = (0.0, 0.0)) -> dict:
+    """Run a transient case with the engine ``make_engine(found)`` builds (``found``: the checkpoint to resume
+    from, or None) into ``out_dir``; with ``resume`` continue from the checkpoint there (same case except the
+    end time, the checkpoint interval and the outputs) and append to its series. Returns the summary's
+    transient results (common keys, the engine's, per-contact summaries and statistics)."""
+    out_dir = Path(out_dir)
+    lock = DirectoryLock(out_dir, comm, "--resume" if resume else "--out")
+    try:
+        return _run(make_engine, case, out_dir, comm, log, resume, steady_floors)
+    finally:
+        lock.release()
+
+
+def _run(make_engine, case, out_dir, comm, log, resume, steady_floors) -> dict:
+    setup_start = time.perf_counter()
+    digest = case_digest(case)
+    found = read_checkpoint(out_dir, comm, case, digest, case.tier) if resume else None
+    engine = make_engine(found)
+    interval = case.transient.checkpoint_interval_steps if case.transient is not None else \
+        case.lumped.output.checkpoint_interval_steps
+    if found is not None:
+        engine.restore(found)
+        log(f"{engine.tier} tier: resuming at t = {engine.t * 1e3:.6g} ms from {out_dir / 'checkpoint'} "
+            f"({found.rows} time-series rows kept)")
+        files, seq = found.record.get("files") or {}, found.seq
+    else:
+        if resume:
+            log(f"{engine.tier} tier: {out_dir} holds a run killed before its first checkpoint: starting it again")
+        mark_started(out_dir, comm, digest)
+        engine.start()
+        files, seq = engine.checkpoint_files(out_dir), 0
+    t_start = engine.t
+    columns = engine.columns()
+    h5_path = out_dir / S.TIME_SERIES_FILE
+    series = TimeSeriesWriter(h5_path, columns, comm, resume_rows=found.rows if found is not None else None)
+    checkpoint = CheckpointWriter(out_dir, comm, interval, engine.tier, digest, seq=seq, files=files)
+    watch = steady_state_watch(case, columns, steady_floors)
+    if watch is not None and found is not None and found.loop.get("steady_state") is not None:
+        watch.restore(found.loop["steady_state"])
+    fields = engine.field_export(out_dir, t_start if found is not None else None)
+    if fields is not None and found is None:
+        fields.write(engine.t, engine.body_positions())
+    end = engine.end_time_s
+    period = 1.0 / case.transient.drive.frequency_Hz if watch is not None else None
+    progress = SimulatedTimeProgress(comm, t_start, end)
+    progress_step = max(end - t_start, 0.0) / 50
+    setup_wall = time.perf_counter() - setup_start
+    start = time.perf_counter()
+    field_wall = checkpoint_wall = 0.0
+    steady = watch is not None and watch.steady
+    checkpointed = -1
+    try:
+        while engine.t < end * (1 - 1e-12) and not steady:
+            stop_at = math.inf
+            if fields is not None:
+                stop_at = fields.next_s - FIELD_TIME_TOLERANCE * fields.interval_s
+            if period is not None:       # the steady test runs at period ends: stop there
+                stop_at = min(stop_at, (math.floor(engine.t / period + 1e-9) + 1) * period * (1 - 1e-12))
+            stop_at = min(stop_at, engine.t + progress_step)     # progress lines on time
+            rows = engine.advance(end, checkpoint.steps_to_next(engine.steps), stop_at)
+            if rows and len(rows[S.TIME]):
+                series.write_block(rows)
+                kill_point("series_block")
+                if watch is not None:
+                    steady = watch.update_block(rows)
+            if fields is not None:           # writes only when an output is due
+                mark = time.perf_counter()
+                fields.write(engine.t, engine.body_positions())
+                field_wall += time.perf_counter() - mark
+            progress.update(engine.t)
+            if checkpoint.due(engine.steps) or steady:
+                mark = time.perf_counter()
+                checkpointed = _checkpoint(engine, checkpoint, series, watch)
+                checkpoint_wall += time.perf_counter() - mark
+        if checkpointed != engine.steps:
+            mark = time.perf_counter()
+            _checkpoint(engine, checkpoint, series, watch)
+            checkpoint_wall += time.perf_counter() - mark
+    finally:
+        progress.close()
+        series.close()
+        if fields is not None:
+            fields.close()
+    wall = time.perf_counter() - start
+    simulated = engine.t - t_start
+    results = {"tier": engine.tier, "steps": engine.steps, "simulated_time_s": engine.t,
+               "resumed_from_s": t_start if found is not None else None,
+               "wall_time_s": wall, "setup_wall_s": setup_wall,
+               "wall_s_per_simulated_ms": wall / (simulated * 1e3) if simulated > 0 else None,
+               "time_series": h5_path.name, "checkpoint": f"{checkpoint.dir.name}/{POINTER}",
+               "checkpoints_written": checkpoint.written, "checkpoint_wall_s": checkpoint_wall,
+               "fields": fields.path.name if fields is not None else None,
+               "field_outputs": fields.written if fields is not None else 0, "field_output_wall_s": field_wall}
+    results.update(engine.results())
+    if watch is not None:
+        results["steady_state"] = watch.results()
+        log(f"{engine.tier} tier: {'steady' if watch.steady else 'not steady'} after {len(watch.means)} periods")
+    summaries = engine.statistics(h5_path) if comm.rank == 0 else None
+    results["contacts"], results["statistics"] = comm.bcast(summaries, root=0)
+    results["outputs"] = [h5_path.name, *checkpoint.files(), *(fields.files() if fields is not None else [])]
+    engine.close()
+    return results
+
+
+def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, watch) -> int:
+    """Write a checkpoint of the engine's state after complete steps; returns the step count it holds."""
+    series.flush()
+    arrays, record = engine.snapshot()
+    loop = {"steady_state": watch.snapshot() if watch is not None else None}
+    checkpoint.write(engine.t, arrays, record, loop, series.rows_written)
+    return engine.steps

@@ -1,0 +1,173 @@
+"""Where a contact acts on a reduced structure: its sites (points, areas, frames) and the structure's DOFs it
+keeps as Craig-Bampton interface coordinates.
+
+The FE tier integrates a surface contact's penalty over its facets at quadrature points. The modal tier
+evaluates the same law at *sites*, each carrying an area, whose displacement is a row block of the reduced
+basis, y = R q (app/reduced/loop_kernel.py):
+
+* ``sampling = "nodes"`` (the default): every node of the facet group is a site, with its lumped area (the
+  consistent nodal force of a uniform pressure, app/reduced/surface.py); the nodes' DOFs are interface
+  coordinates (``reduction.interface_nodes = 0``: all of them), so a site's row is a unit row.
+* ``sampling = "ring"``: a surface of revolution about the obstacle's axis (a cone, or a body spinning about
+  that axis) touched along a circle: ``sample_points`` sites evenly round the contact circle (a cone: where
+  the obstacle's face has its ``radius_m``, at the body's reference point), each carrying the facet group's
+  area over their number. ``reduction.interface_nodes`` of the group's nodes, nearest to as many targets
+  evenly round that circle, are interface coordinates. A site's row is, with ``reduction.site_displacement``,
+  ``"interface"``: interpolated from the interface nodes (periodic Lagrange, cubic, in angle, in cylindrical
+  components: loads act only on interface coordinates, whose static response the constraint modes hold
+  exactly), or ``"field"``: the reduced field itself at the point (every basis vector evaluated there).
+
+A node contact's site is its node (its DOFs interface coordinates, unit rows). Every site also has a frame
+for its diagnostics: n (the obstacle's normal), e1 (along the body's spin, else a tangent), e2 = n x e1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from app.errors import CaseError
+
+RING_INTERPOLATION_ORDER = 3
+
+
+@dataclass
+class SiteSet:
+    """The sites of one contact, before reduction: reference points, areas, and how their rows are formed."""
+
+    contact: int                          # index of the contact in the case's list
+    name: str
+    points_m: np.ndarray                  # (n, 3) reference positions
+    weight: np.ndarray                    # (n,) areas [m^2] (1 for a node contact)
+    interface_dofs: np.ndarray            # (k, gdim) global DOFs of the interface nodes (-1 where held)
+    node_dofs: np.ndarray | None = None   # sites at FE nodes: (n, gdim) their global DOFs (-1 held)
+    ring: dict | None = None              # ring sampling: axis, centre, node angles, site angles, rule
+    extra: dict = field(default_factory=dict)
+
+
+def contact_circle(section, case, body) -> tuple[np.ndarray, np.ndarray, float]:
+    """(axis a, centre c, radius R) of the contact circle of a ring-sampled surface contact: the obstacle's
+    cone axis through the body's reference point, radius its radius_m there; or, for a plane or sphere on a
+    body that spins about one axis, that axis and the mean radius of the surface's nodes (set by the caller)."""
+    position = np.zeros(3)
+    position[: len(body.position_m)] = body.position_m
+    if section.shape == "cone":
+        axis = np.asarray(section.axis, dtype=float)
+        return axis / np.linalg.norm(axis), position, float(section.radius_m)
+    axes = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+    if len(body.rotations) != 1 or body.rotations[0].axis not in axes:
+        raise CaseError(case.source, "transient.contacts.sampling",
+                        "ring sampling needs a cone obstacle or a body that spins about one axis x, y or z")
+    return np.asarray(axes[body.rotations[0].axis]), position, -1.0
+
+
+def cylindrical_frames(angles: np.ndarray, e1: np.ndarray, e2: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rows e_r, e_theta, a at the given angles (e_r = cos t e1 + sin t e2)."""
+    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    e_r = c * e1 + s * e2
+    e_t = -s * e1 + c * e2
+    return np.stack([e_r, e_t, np.tile(axis, (angles.size, 1))], axis=1)
+
+
+def in_plane_basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors normal to ``axis`` (right-handed with it); for the z axis: e_x, e_y."""
+    trial = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = trial - (trial @ axis) * axis
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(axis, e1)
+
+
+def interpolation_stencil(node_angles: np.ndarray, point_angles: np.ndarray, order: int = RING_INTERPOLATION_ORDER):
+    """Periodic Lagrange interpolation round a ring in angle: for each point, the ``order + 1`` nodes nearest
+    it (half before, half after) and their weights, from the nodes' own (unevenly spaced) angles [rad]."""
+    n_b = node_angles.size
+    order_of = np.argsort(node_angles)
+    theta = node_angles[order_of]
+    width = order + 1
+    idx = np.empty((point_angles.size, width), np.int64)
+    weights = np.empty((point_angles.size, width))
+    for c, phi in enumerate(point_angles % (2 * math.pi)):
+        right = int(np.searchsorted(theta, phi, side="right"))
+        ks = np.arange(right - (width + 1) // 2, right - (width + 1) // 2 + width)
+        turns = np.floor_divide(ks, n_b)
+        x = theta[ks % n_b] + 2 * math.pi * turns
+        for s in range(width):
+            others = np.delete(x, s)
+            weights[c, s] = np.prod((phi - others) / (x[s] - others))
+        idx[c] = order_of[ks % n_b]
+    return idx, weights
+
+
+def ring_sites(contact_index: int, section, case, body, nodes, area_m2: float, n_points: int, n_interface: int,
+               rule: str, prefix: str) -> SiteSet:
+    """Ring sampling of a surface contact (module docstring): ``nodes`` are the facet group's nodes
+    (app/reduced/surface.py SurfaceNodes), ``area_m2`` its area."""
+    file = case.source
+    axis, centre, radius = contact_circle(section, case, body)
+    e1, e2 = in_plane_basis(axis)
+    xyz = np.zeros((nodes.size, 3))
+    xyz[:, : nodes.coordinates_m.shape[1]] = nodes.coordinates_m
+    rel = xyz - centre
+    height = rel @ axis
+    radial = rel - np.outer(height, axis)
+    rho = np.linalg.norm(radial, axis=1)
+    if radius < 0:                              # plane or sphere: the surface's mean radius and height
+        radius = float(np.average(rho, weights=nodes.area_m2))
+    h_c = 0.0 if section.shape == "cone" else float(np.average(height, weights=nodes.area_m2))
+    angles_nodes = np.arctan2(radial @ e2, radial @ e1) % (2 * math.pi)
+    k = n_interface
+    if k > nodes.size:
+        raise CaseError(file, "reduction.interface_nodes", f"the facet group of {prefix} has only {nodes.size} nodes")
+    targets = (2 * math.pi * np.arange(k) / k)
+    target_xyz = centre + h_c * axis + radius * (np.outer(np.cos(targets), e1) + np.outer(np.sin(targets), e2))
+    chosen = [int(np.argmin(np.linalg.norm(xyz - t, axis=1))) for t in target_xyz]
+    if len(set(chosen)) != k:
+        raise CaseError(file, "reduction.interface_nodes", f"more interface nodes than {prefix}'s facet group has "
+                                                           "round its contact circle: use fewer")
+    if (nodes.global_dofs[chosen] < 0).any():
+        raise CaseError(file, f"{prefix}.facets", "the contact surface touches a support")
+    site_angles = 2 * math.pi * (np.arange(n_points) + 0.5) / n_points
+    points = centre + h_c * axis + radius * (np.outer(np.cos(site_angles), e1) + np.outer(np.sin(site_angles), e2))
+    ring = {"axis": axis, "centre": centre, "e1": e1, "e2": e2, "node_angles": angles_nodes[chosen],
+            "site_angles": site_angles, "rule": rule}
+    return SiteSet(contact_index, section.name, points, np.full(n_points, area_m2 / n_points),
+                   nodes.global_dofs[chosen], None, ring)
+
+
+def ring_interface_rows(ring: dict, n_interface_before: int, gdim: int, n_columns: int) -> np.ndarray:
+    """Rows (n_sites * 3, n_columns) of the ring's sites interpolated from its interface nodes (whose
+    coordinates start at ``n_interface_before``, gdim per node in component order): cubic Lagrange in angle of
+    the cylindrical components."""
+    node_angles, site_angles, axis = ring["node_angles"], ring["site_angles"], ring["axis"]
+    idx, weights = interpolation_stencil(node_angles, site_angles)
+    node_frames = cylindrical_frames(node_angles, ring["e1"], ring["e2"], axis)
+    site_frames = cylindrical_frames(site_angles, ring["e1"], ring["e2"], axis)
+    rows = np.zeros((site_angles.size * 3, n_columns))
+    for c in range(site_angles.size):
+        for s in range(idx.shape[1]):
+            j = idx[c, s]
+            # global at the site = F_c^T (local at the site) = F_c^T w F_j (global at node j)
+            block = weights[c, s] * site_frames[c].T @ node_frames[j]
+            for r in range(3):
+                for kk in range(gdim):
+                    rows[3 * c + r, n_interface_before + gdim * j + kk] += block[r, kk]
+    return rows
+
+
+def site_frames(points: np.ndarray, normals: np.ndarray, spin_axis: np.ndarray | None, lever_origin: np.ndarray
+                ) -> np.ndarray:
+    """(n, 3, 3) diagnostics frames: n, e1 = unit(a x r) along the spin (or a tangent), e2 = n x e1."""
+    frames = np.zeros((points.shape[0], 3, 3))
+    for i, (x, n) in enumerate(zip(points, normals)):
+        if spin_axis is not None:
+            t = np.cross(spin_axis, x - lever_origin)
+        else:
+            trial = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+            t = trial
+        t = t - (t @ n) * n
+        norm = np.linalg.norm(t)
+        t = t / norm if norm > 0 else np.array([0.0, 0.0, 1.0])
+        frames[i] = [n, t, np.cross(n, t)]
+    return frames
