@@ -45,6 +45,7 @@ from app.errors import CaseError
 
 TIME_SERIES_FILE = "transient.h5"
 UNITS = "units"
+TABLE = "table"           # attribute of a dataset whose rows are not the time rows
 DESCRIPTION = "description"
 TIME = "time_s"
 STEP = "dt_s"
@@ -124,7 +125,7 @@ class TimeSeriesWriter:
 
     def __init__(self, path: Path, units: dict[str, str], comm=None, block_rows: int = 2000,
                  resume_rows: int | None = None, descriptions: dict[str, str] | None = None,
-                 attrs: dict[str, str] | None = None):
+                 attrs: dict[str, str] | None = None, resume_tables: dict[str, int] | None = None):
         self.path = Path(path)
         self.units = dict(units)
         self.descriptions = dict(descriptions or {})
@@ -134,6 +135,8 @@ class TimeSeriesWriter:
         self._rows: list[dict] = []
         self._file = None
         self.rows_written = 0
+        #: rows of each table: a dataset with rows of its own (an event table, per-interval diagnostics)
+        self.table_rows: dict[str, int] = dict(resume_tables or {})
         if resume_rows is not None:
             why = self._reopen(resume_rows) if self.active else None
             if comm is not None:
@@ -152,9 +155,13 @@ class TimeSeriesWriter:
             self._file = h5py.File(self.path, "a")
             for name in self._file:
                 ds = self._file[name]
-                if ds.shape[0] < rows:
-                    return f"{name} has {ds.shape[0]} rows, the checkpoint needs {rows}"
-                ds.resize(rows, axis=0)
+                keep = self.table_rows.get(name, rows)
+                if name not in self.table_rows and ds.attrs.get(TABLE):
+                    keep = 0                          # a table the checkpoint does not know: after it
+                if ds.shape[0] < keep:
+                    return f"{name} has {ds.shape[0]} rows, the checkpoint needs {keep}"
+                if ds.maxshape[0] is None:
+                    ds.resize(keep, axis=0)
         except (OSError, ValueError) as exc:
             return f"cannot be continued ({exc})"
         self.rows_written = rows
@@ -191,7 +198,7 @@ class TimeSeriesWriter:
     def write_block(self, columns: dict[str, np.ndarray]) -> None:
         if not self.active:
             return
-        if self._file is None or not len(self._file):
+        if self._file is None or not any(name in self._file for name in columns):
             self._create({name: np.shape(values)[1:] for name, values in columns.items()})
         n = len(next(iter(columns.values())))
         for name, values in columns.items():
@@ -199,6 +206,31 @@ class TimeSeriesWriter:
             ds.resize(self.rows_written + n, axis=0)
             ds[self.rows_written:] = values
         self.rows_written += n
+        self._file.flush()
+
+    def append_table(self, name: str, block: np.ndarray, units: str, **attrs: str) -> None:
+        """Append rows to table ``name`` (a dataset whose rows are not the time rows; created on first use)."""
+        if not self.active:
+            return
+        block = np.asarray(block, dtype=float)
+        if self._file is None:
+            import h5py
+
+            self._file = h5py.File(self.path, "w")
+            for key, value in self.attrs.items():
+                self._file.attrs[key] = value
+        if name not in self._file:
+            ds = self._file.create_dataset(name, shape=(0, *block.shape[1:]), maxshape=(None, *block.shape[1:]),
+                                           dtype="f8", chunks=(64, *block.shape[1:]))
+            ds.attrs[UNITS] = units
+            ds.attrs[TABLE] = 1
+            for key, value in attrs.items():
+                ds.attrs[key] = value
+        ds = self._file[name]
+        start = self.table_rows.get(name, 0)
+        ds.resize(start + block.shape[0], axis=0)
+        ds[start:] = block
+        self.table_rows[name] = start + block.shape[0]
         self._file.flush()
 
     def add_table(self, name: str, data: np.ndarray, units: str, **attrs: str) -> None:

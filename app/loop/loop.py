@@ -47,13 +47,14 @@ class Engine(Protocol):
     """What the loop needs of a transient engine (a tier's time integrator of one case).
 
     ``tier``: the case's tier; ``t``: the time of the current state [s]; ``steps``: accepted steps since
-    t = 0 (a resumed run counts on); ``end_time_s``: the run's end; ``capabilities``: what it can do beyond
-    the protocol (``"fields"``: :meth:`field_export`)."""
+    t = 0 (a resumed run counts on); ``end_time_s``: the run's end; ``checkpoint_interval_steps``: a checkpoint
+    every so many accepted steps (0: at the end only)."""
 
     tier: str
     t: float
     steps: int
     end_time_s: float
+    checkpoint_interval_steps: int
 
     def start(self) -> None:
         """The initial state of a fresh run (rest, or the harmonic steady state)."""
@@ -67,6 +68,10 @@ class Engine(Protocol):
     def advance(self, t_end: float, max_steps: int, stop_at_s: float) -> dict[str, np.ndarray]:
         """Accepted steps until ``t_end``, ``max_steps`` or the first step at or after ``stop_at_s``
         (whichever comes first); their rows (column -> array, one row per step)."""
+
+    def take_tables(self) -> dict[str, tuple[str, np.ndarray]]:
+        """Rows of the engine's tables since the last call (name -> (units, rows)): datasets of the series file
+        whose rows are not the time rows (an event table, per-interval diagnostics)."""
 
     def snapshot(self) -> tuple[dict | None, dict]:
         """(state arrays: rank 0's are stored, JSON-able record) of the current state."""
@@ -167,8 +172,6 @@ def _run(make_engine, case, out_dir, comm, log, resume, steady_floors) -> dict:
     digest = case_digest(case)
     found = read_checkpoint(out_dir, comm, case, digest, case.tier) if resume else None
     engine = make_engine(found)
-    interval = case.transient.checkpoint_interval_steps if case.transient is not None else \
-        case.lumped.output.checkpoint_interval_steps
     if found is not None:
         engine.restore(found)
         log(f"{engine.tier} tier: resuming at t = {engine.t * 1e3:.6g} ms from {out_dir / 'checkpoint'} "
@@ -183,8 +186,10 @@ def _run(make_engine, case, out_dir, comm, log, resume, steady_floors) -> dict:
     t_start = engine.t
     columns = engine.columns()
     h5_path = out_dir / S.TIME_SERIES_FILE
-    series = TimeSeriesWriter(h5_path, columns, comm, resume_rows=found.rows if found is not None else None)
-    checkpoint = CheckpointWriter(out_dir, comm, interval, engine.tier, digest, seq=seq, files=files)
+    series = TimeSeriesWriter(h5_path, columns, comm, resume_rows=found.rows if found is not None else None,
+                              resume_tables=found.loop.get("tables") if found is not None else None)
+    checkpoint = CheckpointWriter(out_dir, comm, engine.checkpoint_interval_steps, engine.tier, digest, seq=seq,
+                                  files=files)
     watch = steady_state_watch(case, columns, steady_floors)
     if watch is not None and found is not None and found.loop.get("steady_state") is not None:
         watch.restore(found.loop["steady_state"])
@@ -211,6 +216,9 @@ def _run(make_engine, case, out_dir, comm, log, resume, steady_floors) -> dict:
             rows = engine.advance(end, checkpoint.steps_to_next(engine.steps), stop_at)
             if rows and len(rows[S.TIME]):
                 series.write_block(rows)
+            for name, (units, table) in engine.take_tables().items():
+                series.append_table(name, table, units)
+            if rows and len(rows[S.TIME]):
                 kill_point("series_block")
                 if watch is not None:
                     steady = watch.update_block(rows)
@@ -257,6 +265,6 @@ def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, 
     """Write a checkpoint of the engine's state after complete steps; returns the step count it holds."""
     series.flush()
     arrays, record = engine.snapshot()
-    loop = {"steady_state": watch.snapshot() if watch is not None else None}
+    loop = {"steady_state": watch.snapshot() if watch is not None else None, "tables": dict(series.table_rows)}
     checkpoint.write(engine.t, arrays, record, loop, series.rows_written)
     return engine.steps

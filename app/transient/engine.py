@@ -38,6 +38,7 @@ class FEEngine:
         self.stepper = TimeStepper(self.system, StepController(sizes))
         self.sampler = PointSampler(self.tm.model)
         self.end_time_s = cfg.end_time_s
+        self.checkpoint_interval_steps = cfg.checkpoint_interval_steps
         self.state: TransientState | None = None
         self.voltage_V = 0.0
 
@@ -125,6 +126,9 @@ class FEEngine:
             row.update(c.row(rec["contact_force_N"][c.name], bool(rec["contact_closed"][j])))
             row[S.contact_dissipated(c.name)] = rec["dissipated_J"][c.name]
         return row
+
+    def take_tables(self) -> dict:
+        return {}
 
     # ---------------------------------------------------------------- checkpoints, fields, results
     def snapshot(self) -> tuple[dict | None, dict]:
