@@ -145,6 +145,13 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
     from app.fe.operators import add_damping, assemble_operators
 
     results = summary["results"]
+    if case.tier == "modal" and list(case.analyses) == ["transient"]:
+        # the modal tier's transient alone: its engine reduces the model, or takes it from the cache (no mesh)
+        with timer.phase("transient"):
+            results["transient"] = run_transient_analysis(case, out, comm, log, resume)
+        summary["outputs"] += results["transient"].pop("outputs", [])
+        print_table(result_rows(results, scene_of(case)), log)
+        return
     with timer.phase("mesh"):
         model = build_model(case, comm)
     imap = model.W.dofmap.index_map

@@ -102,6 +102,27 @@ def contact_dissipated(contact: str) -> str:
     return f"{contact}_dissipated_J"
 
 
+def electrode_charge(electrode: str) -> str:
+    return f"{electrode}_charge_C"
+
+
+def contact_probe(contact: str) -> str:
+    return f"{contact}_probe_displacement_m"
+
+
+def sites_table(contact: str, quantity: str) -> str:
+    """A per-site diagnostics table of a sampled contact: ``time`` (interval start, end [s]), ``geometry``
+    (x, y, z [m], area [m^2] per site, written once), ``pressure`` [Pa] and the fractions ``closed``,
+    ``stick``, ``slip_positive``, ``slip_negative`` (rows: output intervals; columns: sites)."""
+    return f"{contact}_sites_{quantity}"
+
+
+#: energy columns of a run with ``output.energies`` (every tier): structure kinetic and strain energy, rigid
+#: bodies' kinetic energy, the contacts' penalty energy, the structure's damping loss since t = 0
+ENERGY_COLUMNS = {"kinetic_energy_J": "J", "strain_energy_J": "J", "rigid_kinetic_energy_J": "J",
+                  "contact_energy_J": "J", "damping_dissipated_J": "J (since t = 0)"}
+
+
 def contact_columns(contact: str) -> dict[str, str]:
     """Units of the columns every contact writes (what they mean: the table above)."""
     return {contact_force(contact): "N", contact_closed(contact): "1"}

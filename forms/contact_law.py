@@ -4,7 +4,8 @@
 facets by the FE tier. The modal tier's compiled loop (numba) and the rigid-rigid links evaluate the same laws
 at points; these functions are that law, written once more only in the scalar form a kernel can call, and
 ``tests/test_contact_law.py`` checks them against the UFL form at sample points (values and derivatives).
-They use ``math`` only, so ``numba.njit`` compiles them as they are (``app.reduced.kernel`` does).
+They use ``math`` only and are compiled with ``numba.njit`` here, so a kernel calls them directly and Python
+code (the FE tier's rigid links) calls the same compiled law.
 
 Sign conventions as :mod:`forms.contact`: gap g < 0 is penetration, the pressure p >= 0 pushes the surfaces
 apart; the friction force opposes the tangential slip velocity s of the surface over the obstacle.
@@ -14,6 +15,8 @@ from __future__ import annotations
 
 import math
 from typing import NamedTuple
+
+from numba import njit
 
 
 class FrictionLaw(NamedTuple):
@@ -29,6 +32,7 @@ class FrictionLaw(NamedTuple):
     regularisation_speed_m_per_s: float = 1e-4
 
 
+@njit(cache=True)
 def penalty_pressure(gap, gap_rate, stiffness, damping, rounding):
     """Kelvin-Voigt penalty pressure p [Pa] (or a force, per the unit of ``stiffness``) and its derivatives
     (p, dp/dg, dp/d(dg/dt)): p = < e(-g) - c dg/dt > while g < 0, 0 otherwise (no adhesion), with the
@@ -49,6 +53,7 @@ def penalty_pressure(gap, gap_rate, stiffness, damping, rounding):
     return p, -slope, -damping
 
 
+@njit(cache=True)
 def penalty_energy(gap, stiffness, rounding):
     """Elastic energy per area [J/m^2] stored by the penalty at gap g (the integral of e(d) over d)."""
     if gap >= 0.0:
@@ -61,6 +66,7 @@ def penalty_energy(gap, stiffness, rounding):
     return 0.5 * stiffness * d * d
 
 
+@njit(cache=True)
 def friction_coefficient(speed, mu_dynamic, static_ratio, decay_s_per_m):
     """mu(|s|) = mu_d (1 + (FACT - 1) exp(-DC |s|)) and d mu / d|s|."""
     decay = math.exp(-decay_s_per_m * speed)
@@ -68,6 +74,7 @@ def friction_coefficient(speed, mu_dynamic, static_ratio, decay_s_per_m):
             -mu_dynamic * (static_ratio - 1.0) * decay_s_per_m * decay)
 
 
+@njit(cache=True)
 def friction_shear(speed, pressure, mu_dynamic, static_ratio, decay_s_per_m, cap):
     """The magnitude of the friction stress tau = min(mu(|s|) p, cap) [Pa] and (d tau/d|s|, d tau/dp).
     The force on the surface is -tau s / sqrt(|s|^2 + eps^2) (:func:`regularised_speed`)."""
@@ -78,11 +85,13 @@ def friction_shear(speed, pressure, mu_dynamic, static_ratio, decay_s_per_m, cap
     return tau, dmu * pressure, mu
 
 
+@njit(cache=True)
 def regularised_speed(speed_squared, regularisation_speed):
     """sqrt(|s|^2 + eps^2): the friction force is -tau s over this (viscous below eps, Coulomb above)."""
     return math.sqrt(speed_squared + regularisation_speed * regularisation_speed)
 
 
+@njit(cache=True)
 def slip_speed(speed_squared):
     """|s| as the UFL form forms it (sqrt(|s|^2 + 1e-30): no division by zero at s = 0)."""
     return math.sqrt(speed_squared + 1e-30)

@@ -1,4 +1,4 @@
-"""The travelling-wave friction-drive reference (app.motor.friction_drive) checked independently:
+"""The travelling-wave friction-drive reference (app.references.friction_drive) checked independently:
 against space-time quadrature of Coulomb friction on a Winkler layer, against a slider integrated in
 time under a load, and against its small-angle asymptote. Dimensionless units (omega = U_t = k = W
 = k_w = mu = 1): the formula is homogeneous in each."""
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from app.motor.friction_drive import (
+from app.references.friction_drive import (
     contact_half_angle,
     contact_integral,
     force_ratio,

@@ -3,7 +3,7 @@
 cases/validation/strip-friction-drive.toml: a thin stiff strip (plane strain, one wavelength) whose
 bottom carries a prescribed travelling wave ([[transient.base_motions]]), under a rigid flat slider
 held at a fixed height and moving at a prescribed speed V against the wave, with Coulomb friction
-(mu = 0.57) and a penalty contact. Reference (app/motor/friction_drive.py): the slider on a Winkler
+(mu = 0.57) and a penalty contact. Reference (app/references/friction_drive.py): the slider on a Winkler
 layer under the wave w = W_s cos xi, u = U_s sin xi of the strip's top face, crests in contact over
 |xi| < theta_c with cos theta_c = (slider height above the top face) / W_s:
 
@@ -30,7 +30,7 @@ from mpi4py import MPI
 from scipy.optimize import brentq
 
 from app.case.schema import load_case
-from app.motor import friction_drive as fd
+from app.references import friction_drive as fd
 from app.transient.driver import run
 
 CASE = Path(__file__).resolve().parents[1] / "cases" / "validation" / "strip-friction-drive.toml"

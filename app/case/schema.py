@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any, Literal
 
 from app.case.loader import apply_overrides, read_toml
@@ -177,15 +176,16 @@ class ReductionSection:
     cutoff_Hz: float | None = param(None, gt=0, unit="Hz", doc="keep every fixed-interface mode below this frequency")
     cutoff_factor: float = param(
         20.0, gt=1, doc="default cutoff = factor x the transient drive frequency (when neither key is given)")
-    ring_points: int = param(
-        64, ge=8, le=1024, doc="a cone (rotor) contact: band nodes kept as interface, evenly round the contact "
-                               "circle: the reduced model's contact interface")
-    contact_points: int = param(
-        512, ge=0, le=16384, doc="a cone (rotor) contact: points evenly round the contact circle where the gap and "
-                                 "friction are evaluated, each carrying band area / contact_points, their displacement "
-                                 "interpolated (cubic, in angle) from the ring_points nodes; 0: at the nodes "
-                                 "themselves, each carrying band area / ring_points (node-sampled, not converged: "
-                                 "docs/motor-rotor.md)")
+    interface_nodes: int | None = param(
+        None, ge=1, le=4096, doc="nodes of each sampled surface kept as interface coordinates (all their displacement "
+                                 "DOFs): default all of them (sampling 'nodes'), 64 evenly round the contact circle "
+                                 "(sampling 'ring'); fewer: a smaller basis (docs/reduced.md: convergence)")
+    site_displacement: Literal["interface", "field"] = param(
+        "interface", doc="a ring-sampled site's displacement: interpolated from the interface nodes (cubic in angle; "
+                         "its force acts on interface coordinates only), or the reduced field at the point")
+    enrich_near_Hz: float | None = param(
+        None, gt=0, unit="Hz", doc="frequency the enrichment modes are nearest (default: the transient drive's; set it "
+                                   "to keep one reduced model over a frequency sweep)")
     enrich_modes: int = param(
         0, ge=0, le=16, doc="add the full FE model's modes nearest the drive frequency (electrodes held, interface "
                             "free) to the basis, so its resonance there is the FE model's exactly: 2 for the motor's "
@@ -196,6 +196,13 @@ class ReductionSection:
 class OutputSection:
     fields: bool = param(True, doc="write XDMF mode shapes / fields")
     plots: bool = param(True, doc="write PNG plots")
+    energies: bool = param(
+        False, doc="transient: energy columns (kinetic, strain, rigid kinetic, contact penalty, damping loss) and the "
+                   "electrodes' charges, for an energy balance")
+    contact_sites: bool = param(
+        False, doc="transient: per output interval and per sample point of every sampled surface contact, the mean "
+                   "pressure and the fractions of time closed, sticking and slipping either way (tables "
+                   "'<contact>_sites_*' in transient.h5)")
 
 
 @dataclass(frozen=True)
@@ -282,38 +289,6 @@ def _section_types():
     return {"lumped": LumpedSection, "transient": TransientSection}
 
 
-def _check_modal_tier(transient, file: str) -> None:
-    """What the modal tier's compiled loop does not model yet (app/reduced/kernel.py): refused
-    when the case is read, naming the key, instead of silently ignored. A motor (a cone contact on a
-    rotor) runs on its own reduced loop (app/reduced/motor.py), with its own checks."""
-    from app.motor.rotor_case import check_motor_case, is_motor_case
-
-    if is_motor_case(SimpleNamespace(transient=transient)):
-        check_motor_case(SimpleNamespace(transient=transient), file)
-        return
-    for i, contact in enumerate(transient.contacts):
-        if getattr(contact, "exclude_initial_gap", False):
-            raise CaseError(file, f"transient.contacts[{i}].exclude_initial_gap",
-                            "not available for tier 'modal' surface contacts yet (use tier 'fe')")
-        if getattr(contact, "friction", None) is not None:
-            raise CaseError(file, f"transient.contacts[{i}].friction",
-                            "friction is not available in tier 'modal' yet (frictionless contacts only; use tier 'fe')")
-    if transient.base_motions:
-        raise CaseError(file, "transient.base_motions[0]", "base motions are not available in tier 'modal' yet")
-    for i, body in enumerate(transient.bodies):
-        if body.seat_on is not None:
-            raise CaseError(file, f"transient.bodies[{i}].seat_on", "seating is not available in tier 'modal' yet "
-                                                                   "(the motor always seats its rotor; use tier 'fe')")
-        if body.rotations:
-            raise CaseError(file, f"transient.bodies[{i}].rotations",
-                            "rotating bodies are not available in tier 'modal' yet")
-        held = [not f for f in (body.free_axes or [True] * len(body.position_m))]
-        moving = body.velocity_m_per_s and any(v and (h or body.fixed) for v, h in zip(body.velocity_m_per_s, held))
-        if moving:
-            raise CaseError(file, f"transient.bodies[{i}].velocity_m_per_s",
-                            "held axes moving at a set velocity are not available in tier 'modal' yet")
-
-
 def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
     """Read, override and validate a case file into a :class:`Case`."""
     path = Path(path)
@@ -334,6 +309,4 @@ def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
     analyses = case.analyses if case.analyses is not None else default
     case = replace(case, materials=materials, analyses=analyses, source=str(path.resolve()), **extra)
     check_tier(case, file)
-    if case.tier == "modal" and case.transient is not None:
-        _check_modal_tier(case.transient, file)
     return case

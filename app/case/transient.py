@@ -167,6 +167,16 @@ class SurfaceContactSection:
     half_angle_deg: float | None = param(
         None, gt=0, lt=90, unit="deg", doc="cone: angle between the conical face and its axis")
     friction: SurfaceFrictionSection | None = param(None, doc="Coulomb friction (none: frictionless)")
+    rounding_m: float = param(
+        0.0, ge=0, unit="m", doc="the penalty's kink at first touch rounded over this penetration (C^1: k d^2 / (2 d0) "
+                                 "below d0, forms/contact.py); 0: none")
+    sampling: Literal["nodes", "ring"] = param(
+        "nodes", doc="where the modal tier evaluates the law (the FE tier integrates at quadrature points; both report "
+                     "diagnostics there): the facet group's nodes with lumped areas, or sample_points evenly round the "
+                     "contact circle of a surface of revolution (a cone obstacle, or a body spinning about its axis)")
+    sample_points: int = param(
+        512, ge=8, le=16384, doc="sampling 'ring': points round the contact circle, each carrying the facet group's "
+                                 "area over their number")
     exclude_initial_gap: bool = param(
         False, doc="measure each point's gap from its gap at the start, the undeformed surface against the body at "
                    "its position_m (ANSYS KEYOPT(9) = 1, every shape): g_eff = g(x + u, p) - g(x, p_ref). Both initial "

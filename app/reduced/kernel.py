@@ -1,490 +1,1146 @@
-"""Compiled time loop of the modal-reduced tier (numba): reduced structure + rigid bodies + contacts.
+"""The modal tier's compiled time loop (numba): one kernel for every scene.
 
-The FE tier's step (:mod:`app.transient.coupled`) and step control (:mod:`app.transient.control`)
-on a small dense system, so that a step costs microseconds instead of a sparse back-substitution
-and Python callbacks:
+A reduced structure (Craig-Bampton, app/reduced/craig_bampton.py: coordinates q, some of them prescribed
+inputs: driven electrodes, base-motion patterns) and rigid bodies (translations and rotations about fixed
+axes) interact through
 
-* generalized-alpha on the reduced coordinates q (free ones solved, driven electrode coordinates
-  prescribed through their Newmark kinematics, see :mod:`app.reduced.integrator`) and on the rigid
-  bodies' translations z; the equations are imposed at the generalized mid-points, contact forces
-  evaluated there, as in the FE tier;
-* interactions: node contacts (a power-law spring, Hertz with exponent 1.5, plus a clipped damper,
-  between an interface node and a body's sphere), rigid-rigid Kelvin-Voigt links, and frictionless
-  surface contacts: a facet group's nodes (interface coordinates) each carry a lumped area and
-  press with the penalty pressure < k (-g) + c (-dg/dt) > against the body's plane or sphere, the
-  gap and normal formed exactly at the node (a sphere's normal turns with the node: its tangent
-  includes the p / |d| (I - n n) term);
-* Newton with backtracking on the free coordinates and body DOFs, converged when the residual
-  norm is below ``rtol`` times the step's force scale (plus round-off), as the FE tier's SNES;
-* step sizes by contact state: ``open``, ``closed``, ``change`` with event refinement (a step that
-  changes the contact set while dt > change is retried with a quarter of it), approach to a
-  predicted closure, cut-back by halving on Newton failure, growth back after cut-backs; below
-  ``min`` the loop stops with a failure code (the driver turns it into NumericalFailure).
+* contact *sites* on the structure: points whose displacement is a row block of the basis, y = R q (a
+  surface contact's sample points, a node contact's node), each with the penalty law of its contact
+  (surface: pressure x the site's area; node: a power law, Hertz) against the obstacle shape of a rigid body
+  (plane, sphere, cone), regularised Coulomb friction with the body's spin in the slip;
+* rigid-rigid links (Kelvin-Voigt, optional friction).
 
-The loop runs until the end time, until the output buffer is full, or (when the driver asks for
-field output) right after the first accepted step at or after ``fstate[F_OUTPUT]``; the driver then
-writes the rows, expands the fields, checkpoints and calls again. Every quantity that the next
-call needs is in the state arrays (q, v, a, z, zd, zdd, istate, fstate); what else the loop keeps
-(the closed flags, the predicted closure, the K_eff^-1 of each step size) is a function of them,
-recomputed at the start of every call, so where a run is split into calls does not change it.
+The laws are those of forms/contact_law.py (the scalar twins of the FE tier's UFL), compiled here.
+
+One step (generalized-alpha; Newmark for alpha_m = alpha_f = 0; the equations imposed at the generalized
+mid-points, forces evaluated there, as the FE tier does) is condensed into the *contact space*: the
+structure's equations are linear, so for site forces f on the structure its increments are
+dq = w + A^-1 R^T f (A = K_eff of the free coordinates, w the contact-free increment), and the site
+increments are d = d_w + H f with H = R_F A^-1 R_F^T, formed once per step size (cached). Newton then runs
+on the increments of the sites that carry a force (the active set, updated every iteration: a separated
+site follows from the others without a solve) and on the corrections of the free body coordinates to their
+predictors (no m c_acc z-sized terms in a residual), damped by the natural monotonicity test (Deuflhard).
+A failed step is cut back and retried; steps by contact state (open / closed / change, event refinement,
+approach to a predicted closure) as the FE tier (app/transient/control.py).
+
+Every argument travels as a structured record (NamedTuple of arrays, :func:`make_records`); the state
+arrays (q, v, a, z, zd, zdd, istate, fstate) hold everything the next call needs, so where a run is split
+into calls (checkpoints, field outputs) does not change it.
 """
 
 from __future__ import annotations
 
+import math
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-# integer controller state slots
+from forms import contact_law as _law
+
+_penalty_pressure = _law.penalty_pressure
+_penalty_energy = _law.penalty_energy
+_friction_shear = _law.friction_shear
+_friction_coefficient = _law.friction_coefficient
+
+# integer state slots
 I_STEPS, I_ATTEMPTS, I_CUTBACKS, I_REFINEMENTS, I_NEWTON, I_CHANGED = range(6)
 N_ISTATE = 6
-# float controller state slots: time [s], step cap after cut-backs [s], next field output [s]
-F_TIME, F_CAP, F_OUTPUT = range(3)
-N_FSTATE = 3
+# float state slots: time [s], step cap after cut-backs [s], the call's stop time [s], time of the last
+# diagnostics row [s]
+F_TIME, F_CAP, F_STOP, F_SITES = range(4)
+N_FSTATE = 4
 # return codes
-DONE, BUFFER_FULL, STEP_FAILED, FIELD_OUTPUT = 0, 1, 2, 3
-CACHE_SLOTS = 24        # K_eff^-1 kept for this many step sizes
-MAX_NEWTON = 20
-NEWTON_RTOL = 1e-10
-NEWTON_STOL = 1e-14
+DONE, BUFFER_FULL, STEP_FAILED, STOPPED = 0, 1, 2, 3
+# contact kinds and shapes
+SURFACE, NODE = 0, 1
+PLANE, SPHERE, CONE = 0, 1, 2
+# input kinds: an electrode's A sin(wt + phase) (A cos after a harmonic start); a base motion's pattern
+# coefficients r(t) cos(wt + phase), r(t) sin(wt + phase) (r the smooth ramp)
+ELECTRODE, PATTERN_COS, PATTERN_SIN = 0, 1, 2
+# site states (diagnostics)
+SEPARATED, STICK, SLIP_POSITIVE, SLIP_NEGATIVE = 0, 1, 2, 3
+
+MAX_NEWTON = 60
+ROUND_OFF_FACTOR = 1e3
+#: unknown scales of the monotonicity test: site increments and body translations [m], rotation rates [rad/s]
+LENGTH_SCALE_M = 1e-12
+RATE_SCALE_RAD_PER_S = 1e-4
+#: absolute displacement tolerance of a site equation [m]; relative one on its increment
+SITE_TOL_M = 1e-14
+SITE_RTOL = 1e-9
+FORCE_RTOL = 1e-10
 EPS = 2.220446049250313e-16
 
 
-@njit(cache=True, error_model="numpy")
-def _drive(t, amp, phase, omega, cosine, out_q, out_v, out_a):
-    """Values of the prescribed coordinates: A sin(w t + phase) from rest, A cos(...) after a
-    harmonic start (derivatives used for the initial state only)."""
-    for p in range(amp.size):
-        arg = omega * t + phase[p]
-        if cosine:
-            out_q[p] = amp[p] * np.cos(arg)
-            out_v[p] = -amp[p] * omega * np.sin(arg)
-            out_a[p] = -amp[p] * omega * omega * np.cos(arg)
+class Structure(NamedTuple):
+    """The reduced structure: K, M, C (n x n), the constant generalized load [N], the free and the prescribed
+    (input) coordinates."""
+
+    K: np.ndarray
+    M: np.ndarray
+    C: np.ndarray
+    load: np.ndarray
+    free: np.ndarray
+    inputs: np.ndarray
+
+
+class Inputs(NamedTuple):
+    """Time functions of the prescribed coordinates (one entry per input coordinate)."""
+
+    kind: np.ndarray          # ELECTRODE, PATTERN_COS, PATTERN_SIN
+    amplitude: np.ndarray     # [V] or 1 (a pattern carries its amplitude)
+    phase: np.ndarray         # [rad]
+    ramp_s: np.ndarray        # smooth ramp time of a pattern [s] (0: none)
+    omega: float              # [rad/s]
+    cosine: bool              # a harmonic start: electrodes A cos(wt + phase)
+
+
+class Scheme(NamedTuple):
+    beta: float
+    gamma: float
+    alpha_m: float
+    alpha_f: float
+
+
+class Control(NamedTuple):
+    """Step sizes [s] (app/transient/control.py) and the growth after cut-backs."""
+
+    open_s: float
+    closed_s: float
+    change_s: float
+    min_s: float
+    growth: float
+
+
+class Bodies(NamedTuple):
+    """Rigid bodies, their coordinates packed body-major (translations, then angles)."""
+
+    gdim: int
+    start: np.ndarray         # (n_bodies,) first coordinate of each body
+    mass: np.ndarray          # (m,) mass [kg] on translations, inertia [kg m^2] on angles
+    free: np.ndarray          # (m,) bool
+    load: np.ndarray          # (m,) constant generalized load: gravity + applied force [N], torque [N m]
+    brake: np.ndarray         # (m,) viscous brake [N m s/rad] of a free angle
+    axis: np.ndarray          # (m, 3) rotation axis of an angle coordinate (zeros on translations)
+    rate: np.ndarray          # (m,) prescribed rate of a held coordinate [m/s or rad/s] (0: held still)
+    reference: np.ndarray     # (n_bodies, 3) reference point (the case's position_m)
+
+
+class Sites(NamedTuple):
+    """Contact sites on the structure: displacement rows, reference geometry, area, contact."""
+
+    rows: np.ndarray          # (n_sites * gdim, n) y_site = rows @ q
+    rel: np.ndarray           # (n_sites, 3) x - (body reference + obstacle offset), or - (... + R pole)
+    lever: np.ndarray         # (n_sites, 3) x - body reference
+    gap_ref: np.ndarray       # (n_sites,) reference gap excluded (exclude_initial_gap), else 0
+    weight: np.ndarray        # (n_sites,) area [m^2] of a surface site, 1 for a node site
+    contact: np.ndarray       # (n_sites,) contact index
+    frame: np.ndarray         # (n_sites, 3, 3) reporting frame: rows n, e1 (along the spin), e2
+
+
+class Contacts(NamedTuple):
+    """Laws of the contacts that act through sites (surface and node contacts)."""
+
+    kind: np.ndarray          # SURFACE or NODE
+    shape: np.ndarray         # PLANE, SPHERE, CONE (node: a sphere along a fixed normal)
+    body: np.ndarray
+    vector: np.ndarray        # (n, 3): plane normal / sphere pole (zeros: none) / cone axis / node normal
+    radius: np.ndarray        # sphere radius, cone radius at the body's reference point
+    half_angle: np.ndarray    # cone [rad]
+    stiffness: np.ndarray     # [Pa/m] surface, [N/m^exponent] node
+    damping: np.ndarray       # [Pa s/m] surface, [N s/m] node
+    rounding: np.ndarray      # [m] (surface)
+    exponent: np.ndarray      # force law exponent (node; surface 1)
+    mu: np.ndarray            # mu_d (0: frictionless)
+    fact: np.ndarray
+    decay: np.ndarray
+    cap: np.ndarray           # shear cap [Pa] surface, force cap [N] node
+    eps: np.ndarray           # regularisation speed [m/s]
+
+
+class Links(NamedTuple):
+    """Rigid-rigid Kelvin-Voigt links: the force acts along ``direction`` from lower to upper."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    direction: np.ndarray     # (n, 3)
+    touch: np.ndarray         # reference-point distance at first touch [m]
+    stiffness: np.ndarray
+    damping: np.ndarray
+    offset: np.ndarray        # upper body's reference point to the contact point, against direction [m]
+    mu: np.ndarray
+    fact: np.ndarray
+    decay: np.ndarray
+    cap: np.ndarray
+    eps: np.ndarray
+
+
+class Outputs(NamedTuple):
+    """Row buffers (one row per accepted step) and the per-site diagnostics accumulators."""
+
+    time: np.ndarray          # (cap,)
+    dt: np.ndarray
+    samples: np.ndarray       # (cap, n_samples) sample_rows @ q
+    inputs: np.ndarray        # (cap, n_inputs) prescribed coordinate values
+    z: np.ndarray             # (cap, m)
+    zd: np.ndarray
+    force: np.ndarray         # (cap, n_contacts + n_links, 3) force on the rigid body (upper body of a link)
+    torque: np.ndarray        # (cap, n_contacts, 3) torque of the contact on its body about its reference point
+    normal: np.ndarray        # (cap, n_contacts) total normal force [N]
+    area: np.ndarray          # (cap, n_contacts) area (surface) or count (node) of sites in contact
+    closed: np.ndarray        # (cap, n_contacts + n_links)
+    dissipated: np.ndarray    # (cap, n_contacts + n_links) friction and damping energy since t = 0 [J]
+    energy: np.ndarray        # (cap, 5): kinetic, strain, rigid kinetic, contact penalty [J], damping loss [J]
+    probe: np.ndarray         # (cap, n_contacts, 3) displacement of each contact's first site in its frame
+    site_sums: np.ndarray     # (n_sites, 5): time integrals of pressure [Pa s], closed, stick, slip +, slip - [s]
+
+
+class Sums(NamedTuple):
+    """Running sums the loop carries between calls (part of the state)."""
+
+    dissipated: np.ndarray    # (n_contacts + n_links,) [J]
+    power: np.ndarray         # (n_contacts + n_links,) dissipation power of the last step [W]
+    damping: np.ndarray       # (2,) structural damping loss [J], its power at the last step [W]
+
+
+# ------------------------------------------------------------------ small vector helpers
+@njit(cache=True)
+def _cross(a, b, out):
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@njit(cache=True)
+def _dot3(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def _ramp(t, ramp_s):
+    if ramp_s <= 0.0 or t >= ramp_s:
+        return 1.0
+    if t <= 0.0:
+        return 0.0
+    return 0.5 * (1.0 - math.cos(math.pi * t / ramp_s))
+
+
+@njit(cache=True)
+def input_values(t, inputs, out):
+    """Values of the prescribed coordinates at time t."""
+    for p in range(inputs.kind.size):
+        arg = inputs.omega * t + inputs.phase[p]
+        kind = inputs.kind[p]
+        if kind == ELECTRODE:
+            out[p] = inputs.amplitude[p] * (math.cos(arg) if inputs.cosine else math.sin(arg))
+        elif kind == PATTERN_COS:
+            out[p] = inputs.amplitude[p] * _ramp(t, inputs.ramp_s[p]) * math.cos(arg)
         else:
-            out_q[p] = amp[p] * np.sin(arg)
-            out_v[p] = amp[p] * omega * np.cos(arg)
-            out_a[p] = -amp[p] * omega * omega * np.sin(arg)
+            out[p] = inputs.amplitude[p] * _ramp(t, inputs.ramp_s[p]) * math.sin(arg)
 
 
-@njit(cache=True, error_model="numpy")
-def _node_force(i, q_mid, v_mid, z_mid, zd_mid, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c,
-                nc_exp, gdim):
-    """(F >= 0, dF/d delta, dF/d rate, delta) of node contact i at the mid-point state."""
-    gap = nc_offset[i]
-    rate = 0.0
-    b = nc_body[i]
+# ------------------------------------------------------------------ obstacle shapes
+@njit(cache=True)
+def shape_gap(shape, vector, radius, half_angle, d, n, Dn):
+    """Gap [m] of a point at ``d`` (3-vector relative to the obstacle's reference point; for a sphere with a
+    pole, relative to centre + R pole) and the obstacle's outward unit normal ``n`` there; ``Dn`` = dn/dd.
+    Plane: g = n.d. Sphere: |d| - R (with a pole, without its cancellation, as forms/contact.py).
+    Cone about the unit axis a, radius R at the reference, half angle alpha: g = (rho - R - h tan a) cos a."""
+    for i in range(3):
+        for j in range(3):
+            Dn[i, j] = 0.0
+    if shape == PLANE:
+        for i in range(3):
+            n[i] = vector[i]
+        return _dot3(vector, d)
+    if shape == SPHERE:
+        pole = vector[0] != 0.0 or vector[1] != 0.0 or vector[2] != 0.0
+        if pole:
+            ee = _dot3(d, d)
+            pe = _dot3(vector, d)
+            c0 = radius * vector[0] + d[0]
+            c1 = radius * vector[1] + d[1]
+            c2 = radius * vector[2] + d[2]
+            dist = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+            gap = (ee + 2.0 * radius * pe) / (dist + radius)
+            n[0], n[1], n[2] = c0 / dist, c1 / dist, c2 / dist
+        else:
+            dist = math.sqrt(_dot3(d, d))
+            gap = dist - radius
+            for i in range(3):
+                n[i] = d[i] / dist
+        for i in range(3):
+            for j in range(3):
+                Dn[i, j] = ((1.0 if i == j else 0.0) - n[i] * n[j]) / dist
+        return gap
+    # cone
+    h = _dot3(d, vector)
+    r0 = d[0] - h * vector[0]
+    r1 = d[1] - h * vector[1]
+    r2 = d[2] - h * vector[2]
+    rho = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    ca, sa = math.cos(half_angle), math.sin(half_angle)
+    e0, e1, e2 = r0 / rho, r1 / rho, r2 / rho
+    n[0] = ca * e0 - sa * vector[0]
+    n[1] = ca * e1 - sa * vector[1]
+    n[2] = ca * e2 - sa * vector[2]
+    e = (e0, e1, e2)
+    for i in range(3):
+        for j in range(3):
+            Dn[i, j] = ca * ((1.0 if i == j else 0.0) - vector[i] * vector[j] - e[i] * e[j]) / rho
+    return (rho - radius - h * math.tan(half_angle)) * ca
+
+
+# ------------------------------------------------------------------ one site's force
+@njit(cache=True)
+def site_force(i, y, v_site, z_mid, zd_mid, sites, contacts, bodies, c_vel, w_f, want, out):
+    """Force of site i on the structure (``out.f``, 3) at the mid-point state: the site's displacement ``y`` and
+    velocity ``v_site`` (3-vectors), the bodies' mid-point coordinates and rates. With ``want``, the
+    derivatives with respect to the site's own increment (``out.Fd``, 3 x 3) and to the increments of its
+    body's coordinates (``out.Fz``, 3 x n_body_coordinates), both per unit end-of-step increment (the
+    generalized-alpha factors w_f and c_vel included). Returns (normal force [N], gap [m], slip e1, slip e2,
+    slip speed). ``out.lever`` gets the lever arm from the body's reference point."""
+    c = sites.contact[i]
+    b = contacts.body[c]
+    gdim = bodies.gdim
+    s0 = bodies.start[b]
+    n_rot = (bodies.start[b + 1] if b + 1 < bodies.start.size else bodies.mass.size) - s0 - gdim
+    d = out.d
+    lever = out.lever
+    for k in range(3):
+        d[k] = sites.rel[i, k]
+        lever[k] = sites.lever[i, k]
     for k in range(gdim):
-        n = nc_normal[i, k]
-        if n == 0.0:
-            continue
-        j = nc_coord[i, k]
-        u = q_mid[j] if j >= 0 else 0.0
-        w = v_mid[j] if j >= 0 else 0.0
-        gap += n * (u - (z_mid[b * gdim + k] - nc_ref[i, k]))
-        rate += n * (w - zd_mid[b * gdim + k])
-    delta = -gap
-    delta_rate = -rate
+        du = y[k] - (z_mid[s0 + k] - bodies.reference[b, k])
+        d[k] += du
+        lever[k] += du
+    omega = out.omega
+    omega[0] = omega[1] = omega[2] = 0.0
+    for r in range(n_rot):
+        j = s0 + gdim + r
+        for k in range(3):
+            omega[k] += zd_mid[j] * bodies.axis[j, k]
+    spin = out.spin
+    _cross(omega, lever, spin)
+    vrel = out.vrel
+    for k in range(3):
+        vrel[k] = (v_site[k] - zd_mid[s0 + k] if k < gdim else v_site[k]) - spin[k]
+    n = out.n
+    Dn = out.Dn
+    kind = contacts.kind[c]
+    if kind == NODE:
+        for k in range(3):
+            n[k] = contacts.vector[c, k]
+            for j in range(3):
+                Dn[k, j] = 0.0
+        gap = _dot3(n, d) - contacts.radius[c] - sites.gap_ref[i]
+    else:
+        gap = shape_gap(contacts.shape[c], contacts.vector[c], contacts.radius[c], contacts.half_angle[c], d, n,
+                        Dn) - sites.gap_ref[i]
+    f = out.f
+    f[0] = f[1] = f[2] = 0.0
+    if want:
+        for r in range(3):
+            for k in range(3):
+                out.Fd[r, k] = 0.0
+            for k in range(out.Fz.shape[1]):
+                out.Fz[r, k] = 0.0
+    rate = _dot3(n, vrel)
+    if gap >= 0.0:
+        return 0.0, gap, 0.0, 0.0, 0.0
+    weight = sites.weight[i]
+    if kind == NODE:
+        delta = -gap
+        power = delta ** contacts.exponent[c]
+        fn = contacts.stiffness[c] * power - contacts.damping[c] * rate
+        if fn <= 0.0:
+            return 0.0, gap, 0.0, 0.0, 0.0
+        dfn_dg = -contacts.exponent[c] * contacts.stiffness[c] * power / delta
+        dfn_drate = -contacts.damping[c]
+    else:
+        p, dp_dg, dp_drate = _penalty_pressure(gap, rate, contacts.stiffness[c], contacts.damping[c],
+                                               contacts.rounding[c])
+        if p <= 0.0:
+            return 0.0, gap, 0.0, 0.0, 0.0
+        fn = weight * p
+        dfn_dg = weight * dp_dg
+        dfn_drate = weight * dp_drate
+    # slip: the tangential relative velocity
+    s = out.s
+    for k in range(3):
+        s[k] = vrel[k] - rate * n[k]
+    speed2 = _dot3(s, s)
+    speed = math.sqrt(speed2 + 1e-30)
+    T = 0.0
+    dT_dspeed = 0.0
+    dT_dfn = 0.0
+    mu = contacts.mu[c]
+    reg = 1.0
+    if mu > 0.0:
+        eps = contacts.eps[c]
+        reg = math.sqrt(speed2 + eps * eps)
+        T, dT_dspeed, dT_dfn = _friction_shear(speed, fn, mu, contacts.fact[c], contacts.decay[c],
+                                               contacts.cap[c] * weight)
+    for k in range(3):
+        f[k] = fn * n[k] - T * s[k] / reg
+    e1 = sites.frame[i, 1]
+    e2 = sites.frame[i, 2]
+    s1 = _dot3(s, e1)
+    s2 = _dot3(s, e2)
+    if not want:
+        return fn, gap, s1, s2, speed
+    # derivatives with respect to the relative position d and the relative velocity v
+    # g: dg/dd = n; rate = n.v: d rate/dd = v^T Dn, d rate/dv = n
+    vDn = out.vDn
+    for k in range(3):
+        vDn[k] = vrel[0] * Dn[0, k] + vrel[1] * Dn[1, k] + vrel[2] * Dn[2, k]
+    dfn_dd = out.dfn_dd
+    dfn_dv = out.dfn_dv
+    for k in range(3):
+        dfn_dd[k] = dfn_dg * n[k] + dfn_drate * vDn[k]
+        dfn_dv[k] = dfn_drate * n[k]
+    # s = v - (n.v) n: ds/dv = P, ds/dd = -(n vDn^T + rate Dn)
+    A = out.A             # d f_t / d s
+    for r in range(3):
+        for k in range(3):
+            A[r, k] = 0.0
+    bvec = out.b          # d f_t / d fn
+    bvec[0] = bvec[1] = bvec[2] = 0.0
+    if mu > 0.0:
+        r3 = reg * reg * reg
+        for r in range(3):
+            bvec[r] = -dT_dfn * s[r] / reg
+            for k in range(3):
+                A[r, k] = -T * ((1.0 if r == k else 0.0) / reg - s[r] * s[k] / r3) - s[r] / reg * dT_dspeed * s[k] / speed
+    Jd = out.Jd           # d f / d d
+    Jv = out.Jv           # d f / d v
+    for r in range(3):
+        for k in range(3):
+            jd = (n[r] + bvec[r]) * dfn_dd[k] + fn * Dn[r, k]
+            jv = (n[r] + bvec[r]) * dfn_dv[k]
+            for m in range(3):
+                ds_dd_m = -(n[m] * vDn[k] + rate * Dn[m, k])
+                ds_dv_m = (1.0 if m == k else 0.0) - n[m] * n[k]
+                jd += A[r, m] * ds_dd_m
+                jv += A[r, m] * ds_dv_m
+            Jd[r, k] = jd
+            Jv[r, k] = jv
+    # chain to the unknowns: d(d)/d(site increment) = w_f I, d(v)/d(...) = w_f (c_vel I - [omega]x)
+    # body translation: d(d)/dz = -w_f I, dv/dz = -w_f (c_vel I - [omega]x); angle k: dv/dtheta_k = -w_f c_vel a_k x lever
+    for r in range(3):
+        for k in range(3):
+            om = 0.0        # ([omega]x)[m, k] applied: Jv @ [omega]x
+            for m in range(3):
+                # [omega]x e_k = omega x e_k: component m
+                if m == 0:
+                    wx = omega[1] * (1.0 if k == 2 else 0.0) - omega[2] * (1.0 if k == 1 else 0.0)
+                elif m == 1:
+                    wx = omega[2] * (1.0 if k == 0 else 0.0) - omega[0] * (1.0 if k == 2 else 0.0)
+                else:
+                    wx = omega[0] * (1.0 if k == 1 else 0.0) - omega[1] * (1.0 if k == 0 else 0.0)
+                om += Jv[r, m] * wx
+            out.Fd[r, k] = w_f * (Jd[r, k] + c_vel * Jv[r, k] - om)
+    for k in range(gdim):
+        for r in range(3):
+            out.Fz[r, k] = -out.Fd[r, k]
+    axl = out.axl
+    for q in range(n_rot):
+        j = s0 + gdim + q
+        _cross(bodies.axis[j], lever, axl)
+        for r in range(3):
+            out.Fz[r, gdim + q] = -w_f * c_vel * (Jv[r, 0] * axl[0] + Jv[r, 1] * axl[1] + Jv[r, 2] * axl[2])
+    return fn, gap, s1, s2, speed
+
+
+class SiteWork(NamedTuple):
+    d: np.ndarray
+    lever: np.ndarray
+    omega: np.ndarray
+    spin: np.ndarray
+    vrel: np.ndarray
+    n: np.ndarray
+    Dn: np.ndarray
+    f: np.ndarray
+    s: np.ndarray
+    vDn: np.ndarray
+    dfn_dd: np.ndarray
+    dfn_dv: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    Jd: np.ndarray
+    Jv: np.ndarray
+    Fd: np.ndarray
+    Fz: np.ndarray
+    axl: np.ndarray
+
+
+@njit(cache=True)
+def site_work(max_body_coordinates):
+    return SiteWork(np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros((3, 3)),
+                    np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros((3, 3)), np.zeros(3),
+                    np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, max(max_body_coordinates, 1))),
+                    np.zeros(3))
+
+
+# ------------------------------------------------------------------ rigid-rigid links
+@njit(cache=True)
+def _body_rotations(bodies, b):
+    s0 = bodies.start[b]
+    end = bodies.start[b + 1] if b + 1 < bodies.start.size else bodies.mass.size
+    return s0, end - s0 - bodies.gdim
+
+
+@njit(cache=True)
+def link_force(l, z_mid, zd_mid, bodies, links, F, P, want):
+    """Force of link l on its upper body (``F``, 3) at the mid-point state; ``P`` (3 x m) gets the map from
+    all body coordinate rates to the slip velocity of the contact point (upper's over lower's). Returns
+    (normal force, penetration, rate, dF/d delta [N/m], dF/d rate [N s/m], regularised friction terms as
+    (T, dT/dspeed, dT/dfn, reg, speed) or zeros)."""
+    gdim = bodies.gdim
+    lo, up = links.lower[l], links.upper[l]
+    slo, nlo = _body_rotations(bodies, lo)
+    sup, nup = _body_rotations(bodies, up)
+    n = links.direction[l]
+    delta = links.touch[l]
+    rate = 0.0
+    for k in range(gdim):
+        delta -= n[k] * (z_mid[sup + k] - z_mid[slo + k])
+        rate -= n[k] * (zd_mid[sup + k] - zd_mid[slo + k])
+    F[0] = F[1] = F[2] = 0.0
+    for r in range(3):
+        for k in range(P.shape[1]):
+            P[r, k] = 0.0
     if delta <= 0.0:
-        return 0.0, 0.0, 0.0, delta
-    power = delta ** nc_exp[i]
-    f = nc_k[i] * power + nc_c[i] * delta_rate
+        return 0.0, delta, rate, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0
+    f = links.stiffness[l] * delta + links.damping[l] * rate
     if f <= 0.0:
-        return 0.0, 0.0, 0.0, delta
-    return f, nc_exp[i] * nc_k[i] * power / delta, nc_c[i], delta
-
-
-@njit(cache=True, error_model="numpy")
-def _surface_node(i, q_mid, v_mid, z_mid, zd_mid, sn_contact, sn_coord, sn_rel, sc_body, sc_kind, sc_normal,
-                  sc_radius, sc_ref, gdim, d, w, n):
-    """Gap [m], gap rate [m/s] and distance |d| [m] (sphere; 1 for a plane) of surface node i at a
-    state; fills d (node relative to the obstacle), w (relative velocity) and the unit normal n.
-
-    The node's position relative to the obstacle is formed as (reference difference, stored once)
-    + (u - body displacement), never from absolute positions, as the FE tier does (the gap of a
-    stiff penalty must not carry round-off of |x|). A sphere with a pole p stores e0 = x - (centre +
-    R p) and forms g = (|e|^2 + 2 R p.e) / (|R p + e| + R), the cancellation-free |d| - R."""
-    c = sn_contact[i]
-    b = sc_body[c]
+        return 0.0, delta, rate, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0
+    for k in range(3):
+        F[k] = f * n[k]
+    if links.mu[l] <= 0.0 and nlo + nup == 0:
+        return f, delta, rate, links.stiffness[l], links.damping[l], 0.0, 0.0, 0.0, 1.0, 0.0
+    # slip map: translations, then omega x r of each body's lever arm (upper: -offset n; lower: to that point)
+    r_up = np.zeros(3)
+    r_lo = np.zeros(3)
+    for k in range(3):
+        r_up[k] = -links.offset[l] * n[k]
     for k in range(gdim):
-        j = sn_coord[i, k]
-        u = q_mid[j] if j >= 0 else 0.0
-        uv = v_mid[j] if j >= 0 else 0.0
-        d[k] = sn_rel[i, k] + (u - (z_mid[b * gdim + k] - sc_ref[c, k]))
-        w[k] = uv - zd_mid[b * gdim + k]
-    if sc_kind[c] == 0:                                 # plane: fixed normal
-        gap = 0.0
-        rate = 0.0
-        for k in range(gdim):
-            n[k] = sc_normal[c, k]
-            gap += n[k] * d[k]
-            rate += n[k] * w[k]
-        return gap, rate, 1.0
-    radius = sc_radius[c]
-    has_pole = False
+        r_lo[k] = (z_mid[sup + k] - z_mid[slo + k]) + r_up[k]
+    axr = np.zeros(3)
     for k in range(gdim):
-        has_pole = has_pole or sc_normal[c, k] != 0.0
-    ee = 0.0
-    pe = 0.0
-    if has_pole:                                        # d holds e = y - (centre + R p)
-        for k in range(gdim):
-            ee += d[k] * d[k]
-            pe += sc_normal[c, k] * d[k]
-            d[k] = radius * sc_normal[c, k] + d[k]
-    dist = 0.0
-    for k in range(gdim):
-        dist += d[k] * d[k]
-    dist = np.sqrt(dist)
-    gap = (ee + 2.0 * radius * pe) / (dist + radius) if has_pole else dist - radius
-    rate = 0.0
-    for k in range(gdim):
-        n[k] = d[k] / dist
-        rate += n[k] * w[k]
-    return gap, rate, dist
+        P[k, sup + k] += 1.0
+        P[k, slo + k] -= 1.0
+    for q in range(nup):
+        j = sup + gdim + q
+        _cross(bodies.axis[j], r_up, axr)
+        for k in range(3):
+            P[k, j] += axr[k]
+    for q in range(nlo):
+        j = slo + gdim + q
+        _cross(bodies.axis[j], r_lo, axr)
+        for k in range(3):
+            P[k, j] -= axr[k]
+    if links.mu[l] <= 0.0:
+        return f, delta, rate, links.stiffness[l], links.damping[l], 0.0, 0.0, 0.0, 1.0, 0.0
+    vrel = np.zeros(3)
+    for k in range(3):
+        for j in range(P.shape[1]):
+            vrel[k] += P[k, j] * zd_mid[j]
+    vn = _dot3(vrel, n)
+    s = np.zeros(3)
+    for k in range(3):
+        s[k] = vrel[k] - vn * n[k]
+    speed2 = _dot3(s, s)
+    speed = math.sqrt(speed2 + 1e-30)
+    reg = math.sqrt(speed2 + links.eps[l] * links.eps[l])
+    T, dT_ds, dT_dfn = _friction_shear(speed, f, links.mu[l], links.fact[l], links.decay[l], links.cap[l])
+    for k in range(3):
+        F[k] -= T * s[k] / reg
+    return f, delta, rate, links.stiffness[l], links.damping[l], T, dT_ds, dT_dfn, reg, speed
 
 
-@njit(cache=True, error_model="numpy")
-def _point_force(i, z_mid, zd_mid, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, gdim):
-    lo, up = pc_lower[i], pc_upper[i]
-    delta = pc_touch[i]
-    rate = 0.0
-    for k in range(gdim):
-        delta -= pc_dir[i, k] * (z_mid[up * gdim + k] - z_mid[lo * gdim + k])
-        rate -= pc_dir[i, k] * (zd_mid[up * gdim + k] - zd_mid[lo * gdim + k])
-    if delta <= 0.0:
-        return 0.0, 0.0, 0.0, delta
-    f = pc_k[i] * delta + pc_c[i] * rate
-    if f <= 0.0:
-        return 0.0, 0.0, 0.0, delta
-    return f, pc_k[i], pc_c[i], delta
+# ------------------------------------------------------------------ one step: the condensed system
+class StepWork(NamedTuple):
+    """Per-step arrays (allocated once per call)."""
+
+    y0: np.ndarray            # (ns, 3) site displacement at the step's start
+    v0: np.ndarray            # (ns, 3) its velocity
+    a0: np.ndarray            # (ns, 3) its acceleration
+    dw: np.ndarray            # (ns * gdim,) contact-free site increments
+    dd: np.ndarray            # (ns * gdim,) site increments (the iterate)
+    dd_try: np.ndarray
+    f: np.ndarray             # (ns, 3) site forces on the structure
+    fn: np.ndarray            # (ns,) normal forces
+    gap: np.ndarray           # (ns,)
+    slip: np.ndarray          # (ns, 3): e1, e2 components and speed
+    Fd: np.ndarray            # (ns, 3, 3)
+    Fz: np.ndarray            # (ns, 3, kmax) derivatives w.r.t. the site body's coordinates
+    lever: np.ndarray         # (ns, 3)
+    Hf: np.ndarray            # (ns * gdim,)
+    R: np.ndarray             # (ns * gdim,) site residuals
+    rz: np.ndarray            # (m,) body residuals
+    rz_try: np.ndarray
+    xi: np.ndarray            # (m,) body corrections to the predictor
+    xi_try: np.ndarray
+    Q: np.ndarray             # (m,) generalized loads of the contacts on the bodies
+    dQ: np.ndarray            # (m, m) their derivative w.r.t. the body corrections
+    y_mid: np.ndarray         # (3,)
+    v_mid: np.ndarray
+    work: SiteWork
+    lf: np.ndarray            # (3,) a link's force
+    lP: np.ndarray            # (3, m)
+    link_fn: np.ndarray       # (n_links,)
+    active: np.ndarray        # (ns,) int64 positions of the active sites
 
 
-@njit(cache=True, error_model="numpy")
-def _surface_terms(q_mid, v_mid, z_mid, zd_mid, s, w_f, c_vel, G_SS, gdim, sn_contact, sn_coord, sn_rel, sn_area,
-                   sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref, F, J, Kss, want_jacobian, sforce):
-    """Residual (and tangent) terms of the surface contacts' nodes, the node-contact pattern with a
-    full gdim x gdim block: node i pushes with F_i = A_i p n on the structure and -F_i on the body,
-    p = < k (-g) + c (-dg/dt) > while g < 0. D = dF_i / d(relative-position increment over the
-    step) = A_i w_f [n (x) (-k n - c P w / r) + p P / r - c_vel c n (x) n] with P = I - n n, w the
-    relative velocity and r = |d| (a plane: the curvature terms vanish)."""
-    for c in range(sc_k.size):
-        for k in range(gdim):
-            sforce[c, k] = 0.0
-    if sn_contact.size == 0:
-        return
-    d = np.empty(gdim)
-    w = np.empty(gdim)
-    n = np.empty(gdim)
-    D = np.empty((gdim, gdim))
-    for i in range(sn_contact.size):
-        c = sn_contact[i]
-        b = sc_body[c]
-        gap, rate, dist = _surface_node(i, q_mid, v_mid, z_mid, zd_mid, sn_contact, sn_coord, sn_rel, sc_body,
-                                        sc_kind, sc_normal, sc_radius, sc_ref, gdim, d, w, n)
-        if gap >= 0.0:
-            continue
-        pressure = -sc_k[c] * gap - sc_c[c] * rate
-        if pressure <= 0.0:
-            continue
-        area = sn_area[i]
-        for k in range(gdim):
-            f = area * pressure * n[k]
-            j = sn_coord[i, k]
-            if j >= 0:
-                F[j] -= f
-            F[s + b * gdim + k] += f
-            sforce[c, k] -= f
-        if not want_jacobian:
-            continue
-        curved = sc_kind[c] != 0
-        for k in range(gdim):
-            for kk in range(gdim):
-                nn = n[k] * n[kk]
-                value = -(sc_k[c] + sc_c[c] * c_vel) * nn
-                if curved:
-                    projector = (1.0 if k == kk else 0.0) - nn
-                    value += (-sc_c[c] * n[k] * (w[kk] - rate * n[kk]) + pressure * projector) / dist
-                D[k, kk] = area * w_f * value
-        # rc_S = -F_i, r_z = +F_i; the relative position grows with u and falls with z
-        for k in range(gdim):
-            row_q = sn_coord[i, k]
-            row_z = s + b * gdim + k
-            for kk in range(gdim):
-                col_q = sn_coord[i, kk]
-                col_z = s + b * gdim + kk
-                coeff = D[k, kk]
-                if row_q >= 0:
-                    if col_q >= 0:
-                        Kss[row_q, col_q] -= coeff
-                    J[row_q, col_z] += coeff
-                if col_q >= 0:
-                    for kk2 in range(s):
-                        J[row_z, kk2] -= coeff * G_SS[col_q, kk2]      # D (-G)
-                J[row_z, col_z] -= coeff
+@njit(cache=True)
+def step_work(ns, gdim, m, kmax, n_links):
+    return StepWork(np.zeros((ns, 3)), np.zeros((ns, 3)), np.zeros((ns, 3)), np.zeros(ns * gdim),
+                    np.zeros(ns * gdim), np.zeros(ns * gdim), np.zeros((ns, 3)), np.zeros(ns), np.zeros(ns),
+                    np.zeros((ns, 3)), np.zeros((ns, 3, 3)), np.zeros((ns, 3, max(kmax, 1))), np.zeros((ns, 3)),
+                    np.zeros(ns * gdim), np.zeros(ns * gdim), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
+                    np.zeros(m), np.zeros((m, m)), np.zeros(3), np.zeros(3), site_work(kmax), np.zeros(3),
+                    np.zeros((3, max(m, 1))), np.zeros(max(n_links, 1)), np.zeros(max(ns, 1), np.int64))
 
 
-@njit(cache=True, error_model="numpy")
-def _contact_system(g, dz, uS0, G_SS, qS0, vS0, aS0, z0, zd0, zdd0, dt, beta, gamma, alpha_m, alpha_f,
-                    body_mass, body_force, zfree, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c,
-                    nc_exp, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel, sn_area,
-                    sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref, F, J, want_jacobian, forces, sforce):
-    """Condensed residual on (g, dz) and, optionally, its Jacobian; contact forces into ``forces``.
+@njit(cache=True)
+def _body_kinematics(xi, z0, zd0, zdd0, dt, scheme, bodies, t1, z_mid, zd_mid, z1, zd1, zdd1):
+    """End-of-step and mid-point body coordinates for corrections ``xi`` of the free coordinates to their
+    predictors (held coordinates move at their rate)."""
+    beta, gamma, am, af = scheme
+    c_acc = 1.0 / (beta * dt * dt)
+    for j in range(z0.size):
+        if bodies.free[j]:
+            zdd1[j] = zdd0[j] + c_acc * xi[j]
+            dz = dt * zd0[j] + 0.5 * dt * dt * zdd0[j] + xi[j]
+            zd1[j] = zd0[j] + dt * ((1.0 - gamma) * zdd0[j] + gamma * zdd1[j])
+        else:
+            zdd1[j] = 0.0
+            zd1[j] = bodies.rate[j]
+            dz = bodies.rate[j] * dt
+        z1[j] = z0[j] + dz
+        z_mid[j] = z0[j] + (1.0 - af) * dz
+        zd_mid[j] = (1.0 - af) * zd1[j] + af * zd0[j]
 
-    The structure's equations are linear, so for contact residuals g on the interface coordinates
-    its increments are dq = (predictor + w) - G g (``uS0`` = the interface part of predictor + w,
-    ``G_SS`` = the interface block of K_eff^-1, both formed once per step / per dt). Newton then
-    runs on g and the body increments dz only: F_g = rc_S(dq_S(g), dz) - g, F_z = r_z(dq_S, dz),
-    the FE tier's condensed system (app.transient.coupled) on a dense model. ``sforce`` gets the
-    force of each surface contact on its body [N]."""
-    s = g.size
-    m = dz.size
+
+@njit(cache=True)
+def _evaluate(dd, xi, wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt, scheme, bodies, sites, contacts,
+              links, want):
+    """Site forces at the iterate (site increments ``dd``, body corrections ``xi``), the site residuals
+    R = dd - dw - H f, the body residuals rz, and (``want``) the derivatives of the active sites and the
+    bodies' load derivative dQ. Returns the number of active sites (listed in wk.active)."""
+    gdim = bodies.gdim
+    beta, gamma, am, af = scheme
+    w_f = 1.0 - af
     c_acc = 1.0 / (beta * dt * dt)
     c_vel = gamma / (beta * dt)
-    w_f = 1.0 - alpha_f
-    dqS = uS0 - G_SS @ g
-    aS1 = (dqS - dt * vS0) * c_acc - (1.0 / (2.0 * beta) - 1.0) * aS0
-    vS1 = vS0 + dt * ((1.0 - gamma) * aS0 + gamma * aS1)
-    q_mid = qS0 + w_f * dqS
-    v_mid = w_f * vS1 + alpha_f * vS0
-    zdd1 = (dz - dt * zd0) * c_acc - (1.0 / (2.0 * beta) - 1.0) * zdd0
-    zd1 = zd0 + dt * ((1.0 - gamma) * zdd0 + gamma * zdd1)
-    z_mid = z0 + w_f * dz
-    zd_mid = w_f * zd1 + alpha_f * zd0
-    for k in range(s):
-        F[k] = -g[k]
+    _body_kinematics(xi, z0, zd0, zdd0, dt, scheme, bodies, 0.0, z_mid, zd_mid, z1, zd1, zdd1)
+    ns = sites.contact.size
+    m = z0.size
     for j in range(m):
-        F[s + j] = body_mass[j // gdim] * ((1.0 - alpha_m) * zdd1[j] + alpha_m * zdd0[j]) - body_force[j]
-    if want_jacobian:
-        for a in range(s + m):
-            for b in range(s + m):
-                J[a, b] = 0.0
-        for k in range(s):
-            J[k, k] = -1.0
+        wk.Q[j] = 0.0
+        if want:
+            for k in range(m):
+                wk.dQ[j, k] = 0.0
+    n_active = 0
+    sw = wk.work
+    for i in range(ns):
+        for k in range(3):
+            wk.y_mid[k] = 0.0
+            wk.v_mid[k] = 0.0
+        for k in range(gdim):
+            inc = dd[i * gdim + k]
+            a1 = (inc - dt * wk.v0[i, k]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * wk.a0[i, k]
+            v1 = wk.v0[i, k] + dt * ((1.0 - gamma) * wk.a0[i, k] + gamma * a1)
+            wk.y_mid[k] = wk.y0[i, k] + w_f * inc
+            wk.v_mid[k] = w_f * v1 + af * wk.v0[i, k]
+        fn, gap, s1, s2, speed = site_force(i, wk.y_mid, wk.v_mid, z_mid, zd_mid, sites, contacts, bodies, c_vel,
+                                            w_f, want, sw)
+        wk.fn[i] = fn
+        wk.gap[i] = gap
+        wk.slip[i, 0] = s1
+        wk.slip[i, 1] = s2
+        wk.slip[i, 2] = speed
+        for k in range(3):
+            wk.f[i, k] = sw.f[k]
+            wk.lever[i, k] = sw.lever[k]
+        if fn <= 0.0:
+            continue
+        wk.active[n_active] = i
+        n_active += 1
+        c = sites.contact[i]
+        b = contacts.body[c]
+        s0, n_rot = _body_rotations(bodies, b)
+        nb = gdim + n_rot
+        if want:
+            for r in range(3):
+                for k in range(3):
+                    wk.Fd[i, r, k] = sw.Fd[r, k]
+                for k in range(nb):
+                    wk.Fz[i, r, k] = sw.Fz[r, k]
+        # the body takes -f at the site: translation -f, angle q: -a_q . (lever x f)
+        axl = sw.axl
+        for k in range(gdim):
+            wk.Q[s0 + k] -= sw.f[k]
+        for q in range(n_rot):
+            j = s0 + gdim + q
+            _cross(bodies.axis[j], sw.lever, axl)          # a x lever: a.(lever x f) = f.(a x lever)
+            wk.Q[j] -= _dot3(axl, sw.f)
+        if want:
+            for k in range(gdim):
+                for kk in range(nb):
+                    wk.dQ[s0 + k, s0 + kk] -= sw.Fz[k, kk]
+            for q in range(n_rot):
+                j = s0 + gdim + q
+                _cross(bodies.axis[j], sw.lever, axl)
+                fxa = np.zeros(3)
+                _cross(sw.f, bodies.axis[j], fxa)
+                for kk in range(nb):
+                    value = axl[0] * sw.Fz[0, kk] + axl[1] * sw.Fz[1, kk] + axl[2] * sw.Fz[2, kk]
+                    if kk < gdim:
+                        value -= w_f * fxa[kk]       # the lever arm shortens as the body moves
+                    wk.dQ[j, s0 + kk] -= value
+    # links between bodies
+    for l in range(links.lower.size):
+        lo, up = links.lower[l], links.upper[l]
+        slo, nlo = _body_rotations(bodies, lo)
+        sup, nup = _body_rotations(bodies, up)
+        f, delta, rate, kf, cf, T, dT_ds, dT_dfn, reg, speed = link_force(l, z_mid, zd_mid, bodies, links, wk.lf,
+                                                                          wk.lP, want)
+        wk.link_fn[l] = f
+        if f <= 0.0:
+            continue
+        n = links.direction[l]
+        # generalized forces: upper gets F at its contact point, lower -F
+        for k in range(gdim):
+            wk.Q[sup + k] += wk.lf[k]
+            wk.Q[slo + k] -= wk.lf[k]
+        if links.mu[l] > 0.0 or nlo + nup > 0:
+            for j in range(m):
+                value = 0.0
+                for k in range(3):
+                    value += wk.lP[k, j] * wk.lf[k]
+                # P^T F holds the translations again: keep the rotational part only
+                if not (sup <= j < sup + gdim or slo <= j < slo + gdim):
+                    wk.Q[j] += value
+        if want:
+            # dF/dq = (n + dF/dN) (k + c c_vel) w_f D + c_vel w_f dF/ds P, D = d delta / d coordinates
+            D = np.zeros(m)
+            for k in range(gdim):
+                D[slo + k] += n[k]
+                D[sup + k] -= n[k]
+            dFdN = np.zeros(3)
+            dFds = np.zeros((3, 3))
+            if links.mu[l] > 0.0:
+                s = np.zeros(3)
+                vrel = np.zeros(3)
+                for k in range(3):
+                    for j in range(m):
+                        vrel[k] += wk.lP[k, j] * zd_mid[j]
+                vn = _dot3(vrel, n)
+                for k in range(3):
+                    s[k] = vrel[k] - vn * n[k]
+                r3 = reg * reg * reg
+                for r in range(3):
+                    dFdN[r] = -dT_dfn * s[r] / reg
+                    for k in range(3):
+                        dFds[r, k] = -T * ((1.0 if r == k else 0.0) / reg - s[r] * s[k] / r3) \
+                            - s[r] / reg * dT_ds * s[k] / speed
+                # the slip is the tangential part: d s / d v = I - n n
+                tang = np.zeros((3, 3))
+                for r in range(3):
+                    for k in range(3):
+                        tang[r, k] = (1.0 if r == k else 0.0) - n[r] * n[k]
+                dFds = dFds @ tang
+            dF = np.zeros((3, m))
+            for r in range(3):
+                for j in range(m):
+                    dF[r, j] = (n[r] + dFdN[r]) * (kf + cf * c_vel) * w_f * D[j]
+                    for k in range(3):
+                        dF[r, j] += c_vel * w_f * dFds[r, k] * wk.lP[k, j]
+            # Q_upper translation += F, lower -= F, angles: P^T F (rotational rows)
+            for j in range(m):
+                for k in range(gdim):
+                    wk.dQ[sup + k, j] += dF[k, j]
+                    wk.dQ[slo + k, j] -= dF[k, j]
+                for jj in range(m):
+                    if not (sup <= jj < sup + gdim or slo <= jj < slo + gdim):
+                        value = 0.0
+                        for k in range(3):
+                            value += wk.lP[k, jj] * dF[k, j]
+                        wk.dQ[jj, j] += value
+    # site residuals R = dd - dw - H f
+    nr = ns * gdim
+    for r in range(nr):
+        wk.Hf[r] = 0.0
+    for a in range(n_active):
+        i = wk.active[a]
+        for k in range(gdim):
+            fk = wk.f[i, k]
+            if fk != 0.0:
+                col = i * gdim + k
+                for r in range(nr):
+                    wk.Hf[r] += H[r, col] * fk
+    for r in range(nr):
+        wk.R[r] = dd[r] - wk.dw[r] - wk.Hf[r]
+    # body residuals: m (zdd0 + (1 - am) c_acc xi) - load + brake zd_mid - Q
+    for j in range(m):
+        if bodies.free[j]:
+            wk.rz[j] = bodies.mass[j] * (zdd0[j] + (1.0 - am) * c_acc * xi[j]) - bodies.load[j] \
+                + bodies.brake[j] * zd_mid[j] - wk.Q[j]
+        else:
+            wk.rz[j] = 0.0
+    return n_active
+
+
+@njit(cache=True)
+def _scales(dd, xi, wk, bodies, dt, scheme):
+    """Per-unknown scales of the monotonicity test."""
+    c_vel = scheme[1] / (scheme[0] * dt)
+    out = np.empty(xi.size)
+    gdim = bodies.gdim
+    for j in range(xi.size):
+        translation = True
+        for b in range(bodies.start.size):
+            if j >= bodies.start[b] + gdim and (b + 1 == bodies.start.size or j < bodies.start[b + 1]):
+                translation = False
+        out[j] = LENGTH_SCALE_M if translation else RATE_SCALE_RAD_PER_S / c_vel
+    return out
+
+
+@njit(cache=True)
+def _newton_matrix(n_active, wk, H, bodies, contacts, sites, free_body, dt, scheme):
+    """J and -R of the Newton system on the active sites' increments and the free body corrections."""
+    gdim = bodies.gdim
+    beta, gamma, am, af = scheme
+    c_acc = 1.0 / (beta * dt * dt)
+    c_vel = gamma / (beta * dt)
+    w_f = 1.0 - af
+    nfb = free_body.size
+    N = n_active * gdim + nfb
+    J = np.zeros((N, N))
+    rhs = np.zeros(N)
+    body_pos = np.full(wk.xi.size, -1, np.int64)
+    for q in range(nfb):
+        body_pos[free_body[q]] = n_active * gdim + q
+    axl = np.zeros(3)
+    fxa = np.zeros(3)
+    for a in range(n_active):
+        i = wk.active[a]
+        for r in range(gdim):
+            rhs[a * gdim + r] = -wk.R[i * gdim + r]
+    for q in range(nfb):
+        rhs[n_active * gdim + q] = -wk.rz[free_body[q]]
+    for a in range(n_active):
+        k = wk.active[a]
+        c = sites.contact[k]
+        b = contacts.body[c]
+        s0, n_rot = _body_rotations(bodies, b)
+        nb = gdim + n_rot
+        # site rows: J[i, k] = delta_ik I - H_ik Fd_k ; J[i, body] = - H_ik Fz_k
+        for a2 in range(n_active):
+            i = wk.active[a2]
+            for r in range(gdim):
+                row = a2 * gdim + r
+                for cc in range(gdim):
+                    value = 0.0
+                    for m in range(gdim):
+                        value += H[i * gdim + r, k * gdim + m] * wk.Fd[k, m, cc]
+                    J[row, a * gdim + cc] -= value
+                for kk in range(nb):
+                    col = body_pos[s0 + kk]
+                    if col < 0:
+                        continue
+                    value = 0.0
+                    for m in range(gdim):
+                        value += H[i * gdim + r, k * gdim + m] * wk.Fz[k, m, kk]
+                    J[row, col] -= value
+        # body rows: the body takes -f_k: d(-Q)/d dd_k
+        for r in range(gdim):
+            row = body_pos[s0 + r]
+            if row < 0:
+                continue
+            for cc in range(gdim):
+                J[row, a * gdim + cc] += wk.Fd[k, r, cc]
+        for q in range(n_rot):
+            j = s0 + gdim + q
+            row = body_pos[j]
+            if row < 0:
+                continue
+            lever = wk.lever[k]
+            _cross(bodies.axis[j], lever, axl)
+            fk = wk.f[k]
+            _cross(fk, bodies.axis[j], fxa)
+            for cc in range(gdim):
+                J[row, a * gdim + cc] += axl[0] * wk.Fd[k, 0, cc] + axl[1] * wk.Fd[k, 1, cc] \
+                    + axl[2] * wk.Fd[k, 2, cc] + w_f * fxa[cc]
+    for a in range(n_active):
+        for r in range(gdim):
+            J[a * gdim + r, a * gdim + r] += 1.0
+    for q in range(nfb):
+        j = free_body[q]
+        row = n_active * gdim + q
+        J[row, row] += bodies.mass[j] * (1.0 - am) * c_acc + bodies.brake[j] * w_f * c_vel
+        for q2 in range(nfb):
+            J[row, n_active * gdim + q2] -= wk.dQ[j, free_body[q2]]
+    return J, rhs
+
+
+@njit(cache=True)
+def _newton(wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt, scheme, bodies, sites, contacts, links,
+            free_body):
+    """Newton on the condensed step; True when converged (wk.dd, wk.xi hold the solution). Returns
+    (converged, iterations)."""
+    gdim = bodies.gdim
+    nr = wk.dd.size
+    m = wk.xi.size
+    tol_site = SITE_TOL_M
+    for r in range(nr):
+        tol_site = max(tol_site, SITE_RTOL * abs(wk.dw[r]))
+    n_active = _evaluate(wk.dd, wk.xi, wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt, scheme, bodies,
+                         sites, contacts, links, True)
+    scale_b = _scales(wk.dd, wk.xi, wk, bodies, dt, scheme)
+    its = 0
+    for its in range(1, MAX_NEWTON + 1):
+        res = 0.0
+        for r in range(nr):
+            res = max(res, abs(wk.R[r]) / tol_site)
+        for q in range(free_body.size):
+            j = free_body[q]
+            scale = abs(bodies.load[j]) + abs(bodies.mass[j] * zdd0[j]) + abs(wk.Q[j]) + abs(bodies.brake[j] * zd_mid[j])
+            tol = FORCE_RTOL * scale + 1e-300
+            res = max(res, abs(wk.rz[j]) / tol)
+        if res <= 1.0:
+            return True, its
+        J, rhs = _newton_matrix(n_active, wk, H, bodies, contacts, sites, free_body, dt, scheme)
+        N = rhs.size
+        dy = np.linalg.solve(J, rhs)
+        # the correction of every site: active ones from dy; a separated one follows from the others
+        # (its force is zero): du_I = -R_I + H_IA (Fd_A du_A + Fz_A dxi)
+        du = -wk.R.copy()
+        df = np.zeros(nr)
+        for a in range(n_active):
+            k = wk.active[a]
+            c = sites.contact[k]
+            b = contacts.body[c]
+            s0, n_rot = _body_rotations(bodies, b)
+            for r in range(gdim):
+                value = 0.0
+                for cc in range(gdim):
+                    value += wk.Fd[k, r, cc] * dy[a * gdim + cc]
+                for kk in range(gdim + n_rot):
+                    for q in range(free_body.size):
+                        if free_body[q] == s0 + kk:
+                            value += wk.Fz[k, r, kk] * dy[n_active * gdim + q]
+                df[k * gdim + r] = value
+        for r in range(nr):
+            value = 0.0
+            for a in range(n_active):
+                k = wk.active[a]
+                for cc in range(gdim):
+                    value += H[r, k * gdim + cc] * df[k * gdim + cc]
+            du[r] += value
+        for a in range(n_active):
+            k = wk.active[a]
+            for r in range(gdim):
+                du[k * gdim + r] = dy[a * gdim + r]
+        dxi = np.zeros(m)
+        for q in range(free_body.size):
+            dxi[free_body[q]] = dy[n_active * gdim + q]
+        # damped Newton, natural monotonicity test (Deuflhard): the simplified correction at the trial point,
+        # J^-1 R(trial) with this iteration's J, must be shorter than the Newton correction (scaled unknowns)
+        scale = np.empty(N)
+        for r in range(n_active * gdim):
+            scale[r] = LENGTH_SCALE_M
+        for q in range(free_body.size):
+            scale[n_active * gdim + q] = scale_b[free_body[q]]
+        size0 = np.sqrt(np.sum((dy / scale) ** 2))
+        lam = 1.0
+        n_trial = n_active
+        active_rows = wk.active[:n_active].copy()
+        for _ in range(14):
+            for r in range(nr):
+                wk.dd_try[r] = wk.dd[r] + lam * du[r]
+            for j in range(m):
+                wk.xi_try[j] = wk.xi[j] + lam * dxi[j]
+            n_trial = _evaluate(wk.dd_try, wk.xi_try, wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt,
+                                scheme, bodies, sites, contacts, links, True)
+            r_trial = np.zeros(N)
+            for a in range(n_active):
+                i = active_rows[a]
+                for r in range(gdim):
+                    r_trial[a * gdim + r] = -wk.R[i * gdim + r]
+            for q in range(free_body.size):
+                r_trial[n_active * gdim + q] = -wk.rz[free_body[q]]
+            simplified = np.linalg.solve(J, r_trial)
+            if np.sqrt(np.sum((simplified / scale) ** 2)) <= (1.0 - 0.5 * lam) * size0 + 1e-300:
+                break
+            lam *= 0.5
+        for r in range(nr):
+            wk.dd[r] = wk.dd_try[r]
         for j in range(m):
-            J[s + j, s + j] = (1.0 - alpha_m) * c_acc * body_mass[j // gdim]
-    Kss = np.zeros((s, s))
-    for i in range(nc_k.size):
-        f, df, dfr, _ = _node_force(i, q_mid, v_mid, z_mid, zd_mid, nc_coord, nc_normal, nc_offset, nc_ref,
-                                    nc_body, nc_k, nc_c, nc_exp, gdim)
-        forces[i] = f
-        b = nc_body[i]
-        for k in range(gdim):
-            n = nc_normal[i, k]
-            j = nc_coord[i, k]
-            if j >= 0:
-                F[j] -= f * n
-            F[s + b * gdim + k] += f * n
-        if want_jacobian and f > 0.0:
-            slope = w_f * (df + dfr * c_vel)          # d F / d (delta increment over the step)
-            for k in range(gdim):
-                row_q = nc_coord[i, k]
-                row_z = s + b * gdim + k
-                for kk in range(gdim):
-                    col_q = nc_coord[i, kk]
-                    col_z = s + b * gdim + kk
-                    coeff = slope * nc_normal[i, k] * nc_normal[i, kk]
-                    # rc_S = -F n, r_z = +F n; d delta / d u = -n, d delta / d z = +n
-                    if row_q >= 0:
-                        if col_q >= 0:
-                            Kss[row_q, col_q] += coeff
-                        J[row_q, col_z] -= coeff
-                    if col_q >= 0:
-                        for kk2 in range(s):
-                            J[row_z, kk2] += coeff * G_SS[col_q, kk2]      # (-coeff) * (-G)
-                    J[row_z, col_z] += coeff
-    _surface_terms(q_mid, v_mid, z_mid, zd_mid, s, w_f, c_vel, G_SS, gdim, sn_contact, sn_coord, sn_rel, sn_area,
-                   sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref, F, J, Kss, want_jacobian, sforce)
-    for c in range(sc_k.size):
-        forces[nc_k.size + pc_k.size + c] = np.sqrt(np.sum(sforce[c] * sforce[c]))
-    if want_jacobian:
-        KG = Kss @ G_SS
-        for a in range(s):
-            for b in range(s):
-                J[a, b] -= KG[a, b]
-    base = nc_k.size
-    for i in range(pc_k.size):
-        f, df, dfr, _ = _point_force(i, z_mid, zd_mid, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, gdim)
-        forces[base + i] = f
-        lo, up = pc_lower[i], pc_upper[i]
-        for k in range(gdim):
-            F[s + up * gdim + k] -= f * pc_dir[i, k]
-            F[s + lo * gdim + k] += f * pc_dir[i, k]
-        if want_jacobian and f > 0.0:
-            slope = w_f * (df + dfr * c_vel)
-            for k in range(gdim):
-                for kk in range(gdim):
-                    coeff = slope * pc_dir[i, k] * pc_dir[i, kk]
-                    J[s + up * gdim + k, s + up * gdim + kk] += coeff
-                    J[s + lo * gdim + k, s + lo * gdim + kk] += coeff
-                    J[s + up * gdim + k, s + lo * gdim + kk] -= coeff
-                    J[s + lo * gdim + k, s + up * gdim + kk] -= coeff
-    for j in range(m):
-        if not zfree[j]:
-            F[s + j] = 0.0
-            if want_jacobian:
-                for k in range(s + m):
-                    J[s + j, k] = 0.0
-                    J[k, s + j] = 0.0
-                J[s + j, s + j] = 1.0
-    return zdd1, zd1
+            wk.xi[j] = wk.xi_try[j]
+        n_active = n_trial
+        if lam < 1e-3 and res < ROUND_OFF_FACTOR:
+            return True, its          # no descent left within a few of the tolerances: round-off floor
+    return False, its
 
 
-@njit(cache=True, error_model="numpy")
-def _status(q, v, z, zd, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower,
-            pc_upper, pc_dir, pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel, sc_body, sc_kind, sc_normal,
-            sc_radius, sc_k, sc_ref, closed):
-    """Closed flags of every contact at an end-of-step state and the earliest predicted closure [s]."""
-    closure = np.inf
-    for i in range(nc_k.size):
-        gap = nc_offset[i]
-        rate = 0.0
-        b = nc_body[i]
-        for k in range(gdim):
-            n = nc_normal[i, k]
-            j = nc_coord[i, k]
-            u = q[j] if j >= 0 else 0.0
-            w = v[j] if j >= 0 else 0.0
-            gap += n * (u - (z[b * gdim + k] - nc_ref[i, k]))
-            rate += n * (w - zd[b * gdim + k])
-        closed[i] = gap < 0.0
-        if gap >= 0.0 and rate < 0.0:
-            closure = min(closure, gap / -rate)
-    base = nc_k.size
-    for i in range(pc_k.size):
-        lo, up = pc_lower[i], pc_upper[i]
-        delta = pc_touch[i]
-        rate = 0.0
-        for k in range(gdim):
-            delta -= pc_dir[i, k] * (z[up * gdim + k] - z[lo * gdim + k])
-            rate -= pc_dir[i, k] * (zd[up * gdim + k] - zd[lo * gdim + k])
-        closed[base + i] = delta > 0.0
-        if delta <= 0.0 and rate > 0.0:
-            closure = min(closure, -delta / rate)
-    # a surface contact is closed while any of its nodes penetrates (where its force acts)
-    base = nc_k.size + pc_k.size
-    for c in range(sc_k.size):
-        closed[base + c] = False
-    d = np.empty(gdim)
-    w = np.empty(gdim)
-    n = np.empty(gdim)
-    for i in range(sn_contact.size):
-        gap, rate, _ = _surface_node(i, q, v, z, zd, sn_contact, sn_coord, sn_rel, sc_body, sc_kind, sc_normal,
-                                     sc_radius, sc_ref, gdim, d, w, n)
-        if gap < 0.0:
-            closed[base + sn_contact[i]] = True
-        elif rate < 0.0:
-            closure = min(closure, gap / -rate)
-    return closure
+# ------------------------------------------------------------------ the loop
+class Cache(NamedTuple):
+    """Per step size: K_eff^-1 of the free coordinates, G = K_eff^-1 R_F^T and H = R_F G (kept between calls;
+    a function of dt alone, so they change the cost of a call, never its result)."""
+
+    dt: np.ndarray            # (slots,), -1 = empty
+    inv: np.ndarray           # (slots, nf, nf)
+    G: np.ndarray             # (slots, nf, nr)
+    H: np.ndarray             # (slots, nr, nr)
+    next: np.ndarray          # (1,) the slot to fill next
 
 
-@njit(cache=True, error_model="numpy")
+def make_cache(nf: int, nr: int, budget_bytes: float = 3e8) -> Cache:
+    per_slot = 8.0 * (nf * nf + nf * nr + nr * nr) + 8
+    slots = int(max(2, min(24, budget_bytes // per_slot)))
+    return Cache(np.full(slots, -1.0), np.zeros((slots, nf, nf)), np.zeros((slots, nf, nr)),
+                 np.zeros((slots, nr, nr)), np.zeros(1, np.int64))
+
+
+@njit(cache=True)
+def _effective(structure, rows, dt, scheme, cache):
+    """The cache slot of step size dt (formed on first use)."""
+    for c in range(cache.dt.size):
+        if cache.dt[c] > 0 and abs(cache.dt[c] - dt) <= 1e-12 * dt:
+            return c
+    beta, gamma, am, af = scheme
+    c_acc = 1.0 / (beta * dt * dt)
+    c_vel = gamma / (beta * dt)
+    free = structure.free
+    nf = free.size
+    A = np.empty((nf, nf))
+    for i in range(nf):
+        for k in range(nf):
+            a, b = free[i], free[k]
+            A[i, k] = (1.0 - am) * c_acc * structure.M[a, b] + (1.0 - af) * c_vel * structure.C[a, b] \
+                + (1.0 - af) * structure.K[a, b]
+    slot = cache.next[0]
+    cache.next[0] = (slot + 1) % cache.dt.size
+    cache.dt[slot] = dt
+    cache.inv[slot] = np.linalg.inv(A)
+    RF = np.empty((rows.shape[0], nf))
+    for r in range(rows.shape[0]):
+        for i in range(nf):
+            RF[r, i] = rows[r, free[i]]
+    G = cache.inv[slot] @ RF.T
+    cache.G[slot] = G
+    cache.H[slot] = RF @ G
+    return slot
+
+
+@njit(cache=True)
 def _snap(level, dt):
-    """Largest level / 2^k not above dt (dt > 0)."""
     if dt >= level:
         return level
     k = np.ceil(np.log2(level / dt) - 1e-12)
     return level / 2.0 ** k
 
 
-@njit(cache=True, error_model="numpy")
-def _effective_inverse(K, M, C, free_q, dt, beta, gamma, alpha_m, alpha_f):
-    c_acc = 1.0 / (beta * dt * dt)
-    c_vel = gamma / (beta * dt)
-    nf = free_q.size
-    A = np.empty((nf, nf))
-    for i in range(nf):
-        for k in range(nf):
-            a, b = free_q[i], free_q[k]
-            A[i, k] = (1.0 - alpha_m) * c_acc * M[a, b] + (1.0 - alpha_f) * c_vel * C[a, b] + (1.0 - alpha_f) * K[a, b]
-    return np.linalg.inv(A)
+@njit(cache=True)
+def _status(y, v, z, zd, wk, sites, contacts, bodies, links, closed_sites, closed):
+    """Contact status at an end-of-step state (site displacements ``y`` (ns, 3), velocities ``v``): closed per
+    contact and link (into ``closed``) and per site, and the earliest predicted closure [s] (inf if none)."""
+    closure = np.inf
+    n_c = contacts.kind.size
+    for c in range(closed.size):
+        closed[c] = False
+    sw = wk.work
+    for i in range(sites.contact.size):
+        _, gap, _, _, _ = site_force(i, y[i], v[i], z, zd, sites, contacts, bodies, 1.0, 1.0, False, sw)
+        rate = _dot3(sw.n, sw.vrel)
+        closed_sites[i] = gap < 0.0
+        if gap < 0.0:
+            closed[sites.contact[i]] = True
+        elif rate < 0.0:
+            closure = min(closure, gap / -rate)
+    for l in range(links.lower.size):
+        _, delta, rate, _, _, _, _, _, _, _ = link_force(l, z, zd, bodies, links, wk.lf, wk.lP, False)
+        closed[n_c + l] = delta > 0.0
+        if delta <= 0.0 and rate > 0.0:
+            closure = min(closure, -delta / rate)
+    return closure
 
 
-@njit(cache=True, error_model="numpy")
-def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
-        K, M, C, fq, free_q, pres_q, drive_amp, drive_phase, omega, cosine, body_mass, body_force, zfree, gdim,
-        nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp,
-        pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c,
-        sn_contact, sn_coord, sn_rel, sn_area, sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref,
-        beta, gamma, alpha_m, alpha_f, open_s, closed_s, change_s, min_s, growth,
-        sample_rows, out_time, out_dt, out_samples, out_drive, out_z, out_zd, out_force, out_closed, out_surface,
-        cache_dt=None, cache_inv=None):
-    """Advance the state arrays (in place) to ``t_end``, until the output buffers are full or, if
-    ``fstate`` has the slot F_OUTPUT, until the first accepted step at t >= fstate[F_OUTPUT] (code
-    FIELD_OUTPUT; a 2-slot fstate never stops for output). Returns (code, rows written). One output
-    row per accepted step: time, dt, ``sample_rows @ q``, the prescribed coordinates, body positions
-    and velocities, contact forces [N] (magnitudes: node contacts, links, then surface contacts) and
-    closed flags, and the force vector of each surface contact on its body (``out_surface``, gdim
-    columns per surface contact).
-
-    Surface contacts: ``sn_*`` per node (its contact, interface coordinate per axis or -1 if held,
-    reference relative position [m], lumped area [m^2]), ``sc_*`` per contact (body, shape 0 plane /
-    1 sphere, plane normal or sphere pole (zeros: none), radius [m], penalty [Pa/m], damping
-    [Pa s/m], the body's reference position [m]).
-
-    The interface coordinates (those the node and surface contacts act on) must be the first free
-    coordinates, ``free_q[:s] == arange(s)`` (the Craig-Bampton order).
-
-    ``cache_dt`` (CACHE_SLOTS, -1 = empty) and ``cache_inv`` (CACHE_SLOTS x n_free x n_free), if
-    given, keep K_eff^-1 of the step sizes used from one call to the next (a run split into many
-    calls for checkpoints and field outputs then forms each once); they are a function of dt
-    alone, so they change the cost of a call, never its result."""
-    nf = free_q.size
+@njit(cache=True)
+def run(t_end, q, v, a, z, zd, zdd, istate, fstate, sums, structure, inputs, scheme, control, bodies, sites,
+        contacts, links, sample_rows, cache, out, track_energy):
+    """Advance the state arrays (in place) until ``t_end``, until the output buffers are full, or until the first
+    accepted step at or after ``fstate[F_STOP]``. Returns (code, rows written): one output row per accepted
+    step (``out``), the per-site diagnostics integrated into ``out.site_sums``."""
+    gdim = bodies.gdim
+    n = q.size
+    free = structure.free
+    nf = free.size
+    P = structure.inputs
     m = z.size
-    s = 0
-    for i in range(nc_coord.shape[0]):
-        for k in range(gdim):
-            s = max(s, nc_coord[i, k] + 1)
-    for i in range(sn_coord.shape[0]):
-        for k in range(gdim):
-            s = max(s, sn_coord[i, k] + 1)
-    n_contacts = nc_k.size + pc_k.size + sc_k.size
-    sforce = np.zeros((sc_k.size, gdim))
-    F = np.zeros(s + m)
-    F_try = np.zeros(s + m)
-    J = np.zeros((s + m, s + m))
-    forces = np.zeros(max(n_contacts, 1))
-    new_closed = np.zeros(max(n_contacts, 1), dtype=np.bool_)
-    pq = np.zeros(pres_q.size)
-    pv = np.zeros(pres_q.size)
-    pa = np.zeros(pres_q.size)
-    # K_eff^-1 of the free coordinates for the few step sizes a run uses
-    slots = CACHE_SLOTS
-    if cache_dt is None:
-        cache_dt = np.full(slots, -1.0)
-    if cache_inv is None:
-        cache_inv = np.zeros((slots, nf, nf))
-    cache_cols = np.zeros((slots, nf, s))           # K_eff^-1 E: the columns of the interface coordinates
-    cache_block = np.zeros((slots, s, s))           # their interface rows, G_SS
-    cache_next = 0
-    for c in range(slots):                          # entries kept from an earlier call
-        if cache_dt[c] > 0:
-            cache_cols[c] = np.ascontiguousarray(cache_inv[c][:, :s])
-            cache_block[c] = np.ascontiguousarray(cache_inv[c][:s, :s])
-            cache_next = (c + 1) % slots
-    rows = 0
-    capacity = out_time.size
-    t = fstate[F_TIME]
-    closure = _status(q, v, z, zd, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp,
-                      pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel, sc_body,
-                      sc_kind, sc_normal, sc_radius, sc_k, sc_ref, closed)
-    load_scale = np.sqrt(np.sum(fq * fq) + np.sum(body_force * body_force))
-    body_mass_dofs = np.zeros(m)
+    ns = sites.contact.size
+    nr = ns * gdim
+    n_c = contacts.kind.size
+    n_l = links.lower.size
+    rows_R = sites.rows
+    kmax = 0
+    for b in range(bodies.start.size):
+        s0, n_rot = _body_rotations(bodies, b)
+        kmax = max(kmax, gdim + n_rot)
+    wk = step_work(ns, gdim, m, kmax, n_l)
+    free_count = 0
     for j in range(m):
-        body_mass_dofs[j] = body_mass[j // gdim] if zfree[j] else 0.0
-    next_output = fstate[F_OUTPUT] if fstate.size > F_OUTPUT else np.inf
+        if bodies.free[j]:
+            free_count += 1
+    free_body = np.empty(free_count, np.int64)
+    free_count = 0
+    for j in range(m):
+        if bodies.free[j]:
+            free_body[free_count] = j
+            free_count += 1
+    pq = np.zeros(P.size)
+    y_end = np.zeros((ns, 3))
+    v_end = np.zeros((ns, 3))
+    closed_sites = np.zeros(ns, np.bool_)
+    closed_new_sites = np.zeros(ns, np.bool_)
+    closed = np.zeros(n_c + n_l, np.bool_)
+    closed_new = np.zeros(n_c + n_l, np.bool_)
+    z_mid = np.zeros(m)
+    zd_mid = np.zeros(m)
+    z1 = np.zeros(m)
+    zd1 = np.zeros(m)
+    zdd1 = np.zeros(m)
+    # the status of the current state
+    for i in range(ns):
+        for k in range(gdim):
+            y_end[i, k] = rows_R[i * gdim + k] @ q
+            v_end[i, k] = rows_R[i * gdim + k] @ v
+    closure = _status(y_end, v_end, z, zd, wk, sites, contacts, bodies, links, closed_sites, closed)
+    beta, gamma, am, af = scheme
+    load_scale = np.sqrt(np.sum(structure.load ** 2))
+    rows = 0
+    capacity = out.time.size
+    t = fstate[F_TIME]
+    stop_at = fstate[F_STOP]
     while t < t_end * (1.0 - 1e-12):
         if rows >= capacity:
             fstate[F_TIME] = t
             return BUFFER_FULL, rows
         any_closed = False
-        for i in range(n_contacts):
-            any_closed = any_closed or closed[i]
+        for c in range(n_c + n_l):
+            any_closed = any_closed or closed[c]
         if istate[I_CHANGED]:
-            dt = change_s
+            dt = control.change_s
         elif any_closed:
-            dt = closed_s
+            dt = control.closed_s
         else:
-            dt = open_s
+            dt = control.open_s
             if closure < dt:
-                dt = max(change_s, _snap(open_s, max(0.5 * closure, 1e-300)))
+                dt = max(control.change_s, _snap(control.open_s, max(0.5 * closure, 1e-300)))
         if dt > fstate[F_CAP]:
             dt = _snap(dt, fstate[F_CAP])
         while True:
@@ -492,139 +1148,77 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
             dt_try = dt if remainder >= dt * (1.0 - 1e-9) else remainder
             istate[I_ATTEMPTS] += 1
             t1 = t + dt_try
-            slot = -1
-            for c in range(slots):
-                if cache_dt[c] > 0 and abs(cache_dt[c] - dt_try) <= 1e-12 * dt_try:
-                    slot = c
-            if slot < 0:
-                slot = cache_next
-                cache_next = (cache_next + 1) % slots
-                cache_dt[slot] = dt_try
-                cache_inv[slot] = _effective_inverse(K, M, C, free_q, dt_try, beta, gamma, alpha_m, alpha_f)
-                cache_cols[slot] = np.ascontiguousarray(cache_inv[slot][:, :s])
-                cache_block[slot] = np.ascontiguousarray(cache_inv[slot][:s, :s])
-            A_inv = cache_inv[slot]
-            G_cols = cache_cols[slot]
-            G_SS = cache_block[slot]
+            slot = _effective(structure, rows_R, dt_try, scheme, cache)
+            A_inv = cache.inv[slot]
+            G = cache.G[slot]
+            H = cache.H[slot]
             c_acc = 1.0 / (beta * dt_try * dt_try)
-            _drive(t1, drive_amp, drive_phase, omega, cosine, pq, pv, pa)
-            # predictor increments; the structure's residual there without contact, and w = -K_eff^-1 r0
+            input_values(t1, inputs, pq)
+            # contact-free increments: predictor, the prescribed inputs at t1, w = -K_eff^-1 r0
             dq = dt_try * v + 0.5 * dt_try * dt_try * a
-            for p in range(pres_q.size):
-                dq[pres_q[p]] = pq[p] - q[pres_q[p]]
+            for p in range(P.size):
+                dq[P[p]] = pq[p] - q[P[p]]
             a1 = (dq - dt_try * v) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a
             v1 = v + dt_try * ((1.0 - gamma) * a + gamma * a1)
-            inertia_term = M @ ((1.0 - alpha_m) * a1 + alpha_m * a)
-            damping_term = C @ ((1.0 - alpha_f) * v1 + alpha_f * v)
-            stiffness_term = K @ (q + (1.0 - alpha_f) * dq)
-            r0 = inertia_term + damping_term + stiffness_term - fq
+            r0 = structure.M @ ((1.0 - am) * a1 + am * a) + structure.C @ ((1.0 - af) * v1 + af * v) \
+                + structure.K @ (q + (1.0 - af) * dq) - structure.load
             r0F = np.empty(nf)
             for i in range(nf):
-                r0F[i] = r0[free_q[i]]
+                r0F[i] = r0[free[i]]
             w = -(A_inv @ r0F)
-            uS0 = dq[:s] + w[:s]
-            dz = dt_try * zd + 0.5 * dt_try * dt_try * zdd
+            for i in range(nf):
+                dq[free[i]] += w[i]
+            # the sites' start values and contact-free increments
+            for i in range(ns):
+                for k in range(gdim):
+                    row = rows_R[i * gdim + k]
+                    wk.y0[i, k] = row @ q
+                    wk.v0[i, k] = row @ v
+                    wk.a0[i, k] = row @ a
+                    wk.dw[i * gdim + k] = row @ dq
+            for r in range(nr):
+                wk.dd[r] = wk.dw[r]
             for j in range(m):
-                if not zfree[j]:
-                    dz[j] = 0.0
-            g = np.zeros(s)
-            # tolerance: rtol times the forces the step balances (the FE tier's scale), never below
-            # their round-off (the rigid inertia is formed from increments / (beta dt^2))
-            scale = load_scale + np.sqrt(np.sum(inertia_term**2) + np.sum(damping_term**2)
-                                         + np.sum(stiffness_term**2))
-            # the body accelerations come from (dz - dt zd) c_acc: its round-off is eps |zd| c_acc dt
-            rigid_inertia = np.sqrt(np.sum((body_mass_dofs * dt_try * zd * c_acc) ** 2)
-                                    + np.sum((body_mass_dofs * zdd) ** 2))
-            atol = NEWTON_RTOL * scale + 10.0 * EPS * (scale + rigid_inertia) + 1e-300
-            converged = False
-            iterations = 0
-            zdd1, zd1 = _contact_system(g, dz, uS0, G_SS, q[:s], v[:s], a[:s], z, zd, zdd, dt_try, beta, gamma,
-                                        alpha_m, alpha_f, body_mass, body_force, zfree, gdim, nc_coord, nc_normal,
-                                        nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower, pc_upper, pc_dir,
-                                        pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel, sn_area, sc_body,
-                                        sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref, F, J, True, forces, sforce)
-            norm = np.sqrt(np.sum(F * F))
-            # ... nor below the round-off of the contact forces themselves: a body in free rigid
-            # translation balances nothing else (a rod striking a wall: scale ~1e-6 N against
-            # 6e5 N of contact force, whose balance rounds at ~1e-10 N)
-            atol += 10.0 * EPS * norm
-            while iterations < MAX_NEWTON and np.isfinite(norm):
-                if norm <= atol:
-                    converged = True
-                    break
-                step = np.linalg.solve(J, -F)
-                lam = 1.0
-                accepted = False
-                for _ in range(12):                     # backtracking: accept a decrease
-                    g_try = g + lam * step[:s]
-                    dz_try = dz + lam * step[s:]
-                    _contact_system(g_try, dz_try, uS0, G_SS, q[:s], v[:s], a[:s], z, zd, zdd, dt_try, beta, gamma,
-                                    alpha_m, alpha_f, body_mass, body_force, zfree, gdim, nc_coord, nc_normal,
-                                    nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower, pc_upper, pc_dir,
-                                    pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel, sn_area, sc_body, sc_kind,
-                                    sc_normal, sc_radius, sc_k, sc_c, sc_ref, F_try, J, False, forces, sforce)
-                    norm_try = np.sqrt(np.sum(F_try * F_try))
-                    if norm_try <= (1.0 - 1e-4 * lam) * norm or norm_try <= atol:
-                        accepted = True
-                        break
-                    lam *= 0.5
-                iterations += 1
-                if not accepted:
-                    break
-                small = lam * np.sqrt(np.sum(step * step)) <= NEWTON_STOL * (
-                    np.sqrt(np.sum(g * g)) + np.sqrt(np.sum(dz * dz)) + 1e-300)
-                g, dz = g_try, dz_try
-                zdd1, zd1 = _contact_system(g, dz, uS0, G_SS, q[:s], v[:s], a[:s], z, zd, zdd, dt_try, beta, gamma,
-                                            alpha_m, alpha_f, body_mass, body_force, zfree, gdim, nc_coord,
-                                            nc_normal, nc_offset, nc_ref, nc_body, nc_k, nc_c, nc_exp, pc_lower,
-                                            pc_upper, pc_dir, pc_touch, pc_k, pc_c, sn_contact, sn_coord, sn_rel,
-                                            sn_area, sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_c, sc_ref, F, J,
-                                            True, forces, sforce)
-                norm = np.sqrt(np.sum(F * F))
-                if small and norm <= 1e3 * atol:
-                    converged = True
-                    break
-            istate[I_NEWTON] += max(iterations, 1)
+                wk.xi[j] = 0.0
+            converged, its = _newton(wk, H, z, zd, zdd, z_mid, zd_mid, z1, zd1, zdd1, dt_try, scheme, bodies,
+                                     sites, contacts, links, free_body)
+            istate[I_NEWTON] += max(its, 1)
             if not converged:
                 istate[I_CUTBACKS] += 1
                 dt = 0.5 * dt_try
-                if dt < min_s:
+                if dt < control.min_s:
                     fstate[F_TIME] = t
                     return STEP_FAILED, rows
                 fstate[F_CAP] = dt
                 continue
-            # the structure's increments for the converged contact residuals
-            corr = w - G_cols @ g
+            # the structure's increments for the converged site forces: dq_F += G f
+            fflat = np.zeros(nr)
+            for i in range(ns):
+                for k in range(gdim):
+                    fflat[i * gdim + k] = wk.f[i, k]
+            corr = G @ fflat
             for i in range(nf):
-                dq[free_q[i]] += corr[i]
+                dq[free[i]] += corr[i]
             a1 = (dq - dt_try * v) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a
             v1 = v + dt_try * ((1.0 - gamma) * a + gamma * a1)
             q1 = q + dq
-            z1 = z + dz
-            new_closure = _status(q1, v1, z1, zd1, gdim, nc_coord, nc_normal, nc_offset, nc_ref, nc_body, nc_k,
-                                  nc_c, nc_exp, pc_lower, pc_upper, pc_dir, pc_touch, pc_k, pc_c, sn_contact,
-                                  sn_coord, sn_rel, sc_body, sc_kind, sc_normal, sc_radius, sc_k, sc_ref, new_closed)
+            for i in range(ns):
+                for k in range(gdim):
+                    y_end[i, k] = wk.y0[i, k] + wk.dd[i * gdim + k]
+                    v_end[i, k] = rows_R[i * gdim + k] @ v1
+            new_closure = _status(y_end, v_end, z1, zd1, wk, sites, contacts, bodies, links, closed_new_sites,
+                                  closed_new)
             changed = False
-            for i in range(n_contacts):
-                changed = changed or (new_closed[i] != closed[i])
-            if changed and dt_try > change_s * (1.0 + 1e-9):
+            for c in range(n_c + n_l):
+                changed = changed or (closed_new[c] != closed[c])
+            if changed and dt_try > control.change_s * (1.0 + 1e-9):
                 istate[I_REFINEMENTS] += 1
-                dt = max(0.25 * dt_try, change_s)
+                dt = max(0.25 * dt_try, control.change_s)
                 continue
             break
-        # accepted: export, shift, adapt dt
-        out_time[rows] = t1
-        out_dt[rows] = dt_try
-        out_samples[rows, :] = sample_rows @ q1
-        out_drive[rows, :] = pq
-        out_z[rows, :] = z1
-        out_zd[rows, :] = zd1
-        for i in range(n_contacts):
-            out_force[rows, i] = forces[i]
-            out_closed[rows, i] = new_closed[i]
-        for c in range(sc_k.size):
-            for k in range(gdim):
-                out_surface[rows, c * gdim + k] = sforce[c, k]
+        # accepted: the step's forces (at its mid-point) were evaluated last by the Newton iteration
+        _record(rows, t1, dt_try, q1, v, v1, z1, zd1, pq, wk, sums, structure, sites, contacts, bodies, links,
+                sample_rows, out, closed_new, y_end, track_energy)
         rows += 1
         q[:] = q1
         v[:] = v1
@@ -632,18 +1226,137 @@ def run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate,
         z[:] = z1
         zd[:] = zd1
         zdd[:] = zdd1
-        for i in range(n_contacts):
-            closed[i] = new_closed[i]
+        for c in range(n_c + n_l):
+            closed[c] = closed_new[c]
         closure = new_closure
         istate[I_CHANGED] = 1 if changed else 0
         istate[I_STEPS] += 1
         t = t1
         if fstate[F_CAP] < np.inf:
-            fstate[F_CAP] = dt_try * growth
-            if fstate[F_CAP] >= max(open_s, closed_s):
+            fstate[F_CAP] = dt_try * control.growth
+            if fstate[F_CAP] >= max(control.open_s, control.closed_s):
                 fstate[F_CAP] = np.inf
-        if t >= next_output:                    # the driver expands the fields of this state
+        if t >= stop_at:
             fstate[F_TIME] = t
-            return FIELD_OUTPUT, rows
+            return STOPPED, rows
     fstate[F_TIME] = t
     return DONE, rows
+
+
+@njit(cache=True)
+def _record(row, t1, dt, q1, v0, v1, z1, zd1, pq, wk, sums, structure, sites, contacts, bodies, links, sample_rows,
+            out, closed, y_end, track_energy):
+    """One output row, the dissipated energies and the per-site diagnostics of an accepted step."""
+    gdim = bodies.gdim
+    n_c = contacts.kind.size
+    n_l = links.lower.size
+    out.time[row] = t1
+    out.dt[row] = dt
+    out.samples[row, :] = sample_rows @ q1
+    out.inputs[row, :] = pq
+    out.z[row, :] = z1
+    out.zd[row, :] = zd1
+    for c in range(n_c + n_l):
+        for k in range(3):
+            out.force[row, c, k] = 0.0
+        out.closed[row, c] = closed[c]
+    for c in range(n_c):
+        for k in range(3):
+            out.torque[row, c, k] = 0.0
+        out.normal[row, c] = 0.0
+        out.area[row, c] = 0.0
+    power = np.zeros(n_c + n_l)
+    tq = np.zeros(3)
+    fneg = np.zeros(3)
+    for i in range(sites.contact.size):
+        c = sites.contact[i]
+        if wk.gap[i] < 0.0:
+            out.area[row, c] += sites.weight[i]
+        fn = wk.fn[i]
+        # diagnostics: time integrals of the pressure and of the site's state over accepted steps
+        if fn > 0.0:
+            sums_row = out.site_sums[i]
+            sums_row[0] += dt * fn / sites.weight[i]
+            sums_row[1] += dt
+            if wk.slip[i, 2] <= contacts.eps[c] or contacts.mu[c] <= 0.0:
+                sums_row[2] += dt
+            elif wk.slip[i, 0] > 0.0:
+                sums_row[3] += dt
+            else:
+                sums_row[4] += dt
+        if fn <= 0.0:
+            continue
+        for k in range(3):
+            fneg[k] = -wk.f[i, k]
+            out.force[row, c, k] += fneg[k]
+        _cross(wk.lever[i], fneg, tq)
+        for k in range(3):
+            out.torque[row, c, k] += tq[k]
+        out.normal[row, c] += fn
+        # dissipated power: damping (pressure beyond its elastic part times the closing rate) and friction
+        if contacts.kind[c] == NODE:
+            elastic = contacts.stiffness[c] * (-wk.gap[i]) ** contacts.exponent[c]
+        else:
+            elastic = sites.weight[i] * _penalty_pressure(wk.gap[i], 0.0, contacts.stiffness[c], 0.0,
+                                                          contacts.rounding[c])[0]
+        tangential = 0.0            # -f_t . s = T |s|^2 / reg
+        if contacts.mu[c] > 0.0:
+            mu_, _ = _friction_coefficient(wk.slip[i, 2], contacts.mu[c], contacts.fact[c], contacts.decay[c])
+            T = min(mu_ * fn, contacts.cap[c] * sites.weight[i])
+            speed = wk.slip[i, 2]
+            eps = contacts.eps[c]
+            tangential = T * speed * speed / math.sqrt(speed * speed + eps * eps)
+        power[c] += (fn - elastic) * _closing_rate(fn, elastic, contacts.damping[c], contacts.kind[c],
+                                                    sites.weight[i]) + tangential
+    for l in range(n_l):
+        f = wk.link_fn[l]
+        if f > 0.0:
+            n = links.direction[l]
+            for k in range(3):
+                out.force[row, n_c + l, k] = f * n[k]
+    for c in range(n_c + n_l):
+        previous = power[c] if math.isnan(sums.power[c]) else sums.power[c]     # a first step: its own power
+        sums.dissipated[c] += 0.5 * dt * (previous + power[c])
+        sums.power[c] = power[c]
+        out.dissipated[row, c] = sums.dissipated[c]
+    if track_energy:
+        vm = 0.5 * (v0 + v1)
+        p_damp = vm @ (structure.C @ vm)
+        sums.damping[0] += dt * p_damp
+        sums.damping[1] = p_damp
+        out.energy[row, 0] = 0.5 * (v1 @ (structure.M @ v1))
+        out.energy[row, 1] = 0.5 * (q1 @ (structure.K @ q1))
+        kin = 0.0
+        for j in range(z1.size):
+            kin += 0.5 * bodies.mass[j] * zd1[j] * zd1[j]
+        out.energy[row, 2] = kin
+        pen = 0.0
+        for i in range(sites.contact.size):
+            c = sites.contact[i]
+            if wk.gap[i] < 0.0:
+                if contacts.kind[c] == NODE:
+                    e = contacts.exponent[c]
+                    pen += contacts.stiffness[c] * (-wk.gap[i]) ** (e + 1.0) / (e + 1.0)
+                else:
+                    pen += sites.weight[i] * _penalty_energy(wk.gap[i], contacts.stiffness[c], contacts.rounding[c])
+        out.energy[row, 3] = pen
+        out.energy[row, 4] = sums.damping[0]
+    # each contact's first site: its displacement in its frame (the contact point's path)
+    for c in range(n_c):
+        for k in range(3):
+            out.probe[row, c, k] = 0.0
+    seen = np.zeros(n_c, np.bool_)
+    for i in range(sites.contact.size):
+        c = sites.contact[i]
+        if seen[c]:
+            continue
+        seen[c] = True
+        for r in range(3):
+            out.probe[row, c, r] = _dot3(sites.frame[i, r], y_end[i])
+
+
+@njit(cache=True)
+def _closing_rate(fn, elastic, damping, kind, weight):
+    """The closing rate -dg/dt behind the damping part (fn - elastic) of a site's normal force."""
+    c = damping if kind == NODE else damping * weight
+    return (fn - elastic) / c if c > 0.0 else 0.0

@@ -66,7 +66,7 @@ class SceneReport:
 
 
 SCENES: dict[str, Scene] = {}
-_SHIPPED = ("app.scenes.percussion_drill",)
+_SHIPPED = ("app.scenes.percussion_drill", "app.scenes.wwusm_motor")
 
 
 def register(scene: Scene) -> Scene:

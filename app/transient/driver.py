@@ -22,6 +22,7 @@ from dolfinx import fem
 
 from app import series as S
 from app.compat import petsc_vector
+from app.drive import drive_weights
 from app.errors import CaseError
 from app.killpoint import kill_point
 from app.transient.contact import MidpointFields
@@ -62,19 +63,6 @@ class VoltageDrive:
     def __call__(self, t: float) -> None:
         for _name, dofs, weight, phase in self.electrodes:
             self.values.x.array[dofs] = self.amplitude_V * weight * math.sin(self.omega * t + phase + self.start_phase)
-
-
-def drive_weights(case) -> tuple[float, dict[str, float]]:
-    """(largest electrode amplitude [V], weight of each driven electrode): the nominal amplitude of
-    an electrode is its amplitude_V, else transient.drive.voltage_V; all nominal amplitudes 0 (a
-    target-amplitude case) weigh 1."""
-    voltage = case.transient.drive.voltage_V
-    nominal = {n: (e.amplitude_V if e.amplitude_V is not None else voltage)
-               for n, e in case.electrodes.items() if e.kind == "voltage"}
-    largest = max(nominal.values(), default=0.0)
-    if largest <= 0.0:
-        return 0.0, {n: 1.0 for n in nominal}
-    return largest, {n: a / largest for n, a in nominal.items()}
 
 
 class TransientModel:

@@ -143,11 +143,13 @@ class FEEngine:
     def field_export(self, out_dir: Path, resume_from_s: float | None):
         if not self.case.output.fields:
             return None
+        from app.exports import VertexFields
         from app.transient.fields import FieldSeriesExport
 
         tm, system = self.tm, self.system
         bodies = [(b.name, tm.rigid.dofs(b.name), b.position_m) for b in tm.rigid.bodies]
-        export = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", tm.model, lambda: system.solution_vector,
+        export = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", VertexFields(tm.model),
+                                   lambda: system.solution_vector,
                                    self.cfg.output_interval_s, bodies=bodies, resume_from_s=resume_from_s)
         if resume_from_s is None:
             system.show_state(self.state)

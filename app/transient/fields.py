@@ -25,7 +25,6 @@ import numpy as np
 
 from app.exports import (
     FE_GRID,
-    VertexFields,
     mesh_grid,
     point_grid,
     step_bytes,
@@ -38,19 +37,20 @@ from app.killpoint import kill_point
 
 class FieldSeriesExport:
     """``write(t, body_positions)`` appends the current displacement [m] and electric potential [V]
-    of ``model`` (from ``solution()``, a full u-phi PETSc vector) and the rigid bodies' positions
+    (``vertex.sample(solution())``: :class:`app.exports.VertexFields` of the FE model and a full u-phi PETSc
+    vector, or the modal tier's vertex basis and its coordinates) and the rigid bodies' positions
     (``body_positions``: the rigid state vector z [m]) when t has reached the next multiple of
     ``interval_s``. ``bodies``: (name, slice of z, start position [m]) per rigid body.
     ``resume_from_s``: continue the existing series after that time (later steps are dropped)."""
 
-    def __init__(self, path: Path, model, solution, interval_s: float, bodies=(), resume_from_s: float | None = None):
+    def __init__(self, path: Path, vertex, solution, interval_s: float, bodies=(), resume_from_s: float | None = None):
         self.path = Path(path)
         self.dir = self.path.with_suffix("")
         self.solution = solution
         self.interval_s = float(interval_s)
         self.bodies = [(name, sl, np.asarray(start, dtype=float)) for name, sl, start in bodies]
-        self.vertex = VertexFields(model)
-        self.comm = model.mesh.comm
+        self.vertex = vertex
+        self.comm = vertex.comm
         self.rank0 = self.comm.rank == 0
         self.steps: list[bytes] = []         # each output's XML, serialised once
         self.next_s = 0.0

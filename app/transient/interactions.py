@@ -109,7 +109,7 @@ def build_surface(section, prefix: str, ctx: BuildContext):
         return SurfaceContact(section.name, ctx.fe, ctx.model.mesh_data.facet_tags, tag, section.body, shape,
                               section.stiffness, section.damping, friction=friction, weight=ctx.weight,
                               fields=ctx.fields, rotation_axes=axes,
-                              exclude_initial_gap=section.exclude_initial_gap)
+                              exclude_initial_gap=section.exclude_initial_gap, rounding_m=section.rounding_m)
     except ValueError as exc:
         raise CaseError(ctx.file, f"{prefix}.shape", str(exc)) from None
 

@@ -40,7 +40,7 @@ class TravellingWaveMotion:
     The wave travels along the unit vector e at omega / k; W is the normal amplitude along the unit
     vector n, U_t the tangential one along e. With U_t > 0 a crest (xi = 0) moves along -e at
     omega U_t: the surface of a bending plate carrying a flexural wave has U_t = k (h/2) W on its
-    top face, and a slider on it is driven against the wave (app.motor.friction_drive). r(t) is the
+    top face, and a slider on it is driven against the wave (app.references.friction_drive). r(t) is the
     smooth ramp over ``ramp_periods`` drive periods."""
 
     name: str

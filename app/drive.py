@@ -1,0 +1,44 @@
+"""The drive-amplitude rule, once for every tier: which voltage each driven electrode gets.
+
+The nominal amplitude of a driven electrode (kind 'voltage') is its ``amplitude_V``, else
+``transient.drive.voltage_V``; its phase its ``phase_deg``. The run's drive amplitude is the largest nominal
+one and each electrode carries its share of it (weight in (0, 1]); all nominal amplitudes 0 (a case driven to a
+target tip amplitude) weigh 1. A target ``transient.drive.tip_amplitude_m`` scales every electrode together:
+drive amplitude = target / |steady amplitude at the drive point per volt of drive amplitude| (a harmonic
+solve of the tier's own model). The time function: U_e(t) = A_e sin(wt + phase_e) from rest, A_e cos(wt +
+phase_e) after a harmonic start.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def drive_weights(case) -> tuple[float, dict[str, float]]:
+    """(largest nominal electrode amplitude [V], weight of each driven electrode)."""
+    voltage = case.transient.drive.voltage_V
+    nominal = {n: (e.amplitude_V if e.amplitude_V is not None else voltage)
+               for n, e in case.electrodes.items() if e.kind == "voltage"}
+    largest = max(nominal.values(), default=0.0)
+    if largest <= 0.0:
+        return 0.0, {n: 1.0 for n in nominal}
+    return largest, {n: a / largest for n, a in nominal.items()}
+
+
+def electrode_amplitudes(case, names: list[str]) -> tuple[float, np.ndarray, np.ndarray]:
+    """(drive amplitude [V] before a target scales it, weights and phases [rad] of the electrodes ``names``)."""
+    largest, weights = drive_weights(case)
+    return (largest, np.array([weights[n] for n in names], dtype=float),
+            np.array([math.radians(case.electrodes[n].phase_deg) for n in names], dtype=float))
+
+
+def target_voltage(target_m: float, amplitude_per_volt_m: float) -> float:
+    """The drive amplitude [V] that gives the target steady amplitude at the drive point."""
+    if not amplitude_per_volt_m > 0:
+        from app.errors import NumericalFailure
+
+        raise NumericalFailure("the drive does not move the drive point (harmonic solve): no voltage reaches the "
+                               "target amplitude")
+    return target_m / amplitude_per_volt_m

@@ -1,1 +1,0 @@
-"""Ultrasonic motor scene: stator-rotor friction drive (see docs/motor-stator.md)."""

@@ -1,0 +1,672 @@
+"""The modal tier's engine for the run loop (app/loop/loop.py): the case's reduced model (app/reduced/model.py,
+cached), its rigid bodies and interactions as the compiled loop's records (app/reduced/loop_kernel.py), the
+rows under the output convention of every tier (app/series.py), so the FE tier and this one report alike.
+
+The drive (electrode amplitudes, a target tip amplitude, the harmonic start) follows the one rule of
+app/drive.py; the rigid bodies, contacts, base motions, seating and the steady-state stop are the case's keys
+as the FE tier reads them.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from app import series as S
+from app.drive import electrode_amplitudes
+from app.errors import CaseError, NumericalFailure
+from app.killpoint import kill_point
+from app.loop.checkpoint import Found, load_arrays, read_on_root, write_engine_file
+from app.reduced import kernel as lk
+from app.reduced.model import ReducedModel, load_or_build
+
+MODEL_FILE = "reduced-model.npz"
+ROWS_PER_CALL = 4096
+AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0), "plane": (0.0, 0.0, 1.0)}
+SHAPES = {"plane": lk.PLANE, "sphere": lk.SPHERE, "cone": lk.CONE}
+
+
+class ModalEngine:
+    """The modal tier as an :class:`app.loop.loop.Engine`."""
+
+    tier = "modal"
+
+    def __init__(self, case, comm, log, found: Found | None = None):
+        from app.blas import limit_blas_threads
+
+        limit_blas_threads()     # the kernel's small products: threads cost more than they give (BENCHMARKS.md)
+        self.case, self.comm, self.log = case, comm, log
+        self.cfg = cfg = case.transient
+        self.end_time_s = cfg.end_time_s
+        self.checkpoint_interval_steps = cfg.checkpoint_interval_steps
+        start = time.perf_counter()
+        if found is not None:
+            path = found.pointer.parent / str((found.record.get("files") or {}).get("reduced_model", MODEL_FILE))
+            self.model: ReducedModel = read_on_root(path, comm, ReducedModel.load, "a reduced model")
+            self.from_cache = None
+            log(f"modal tier: reduced model from the checkpoint {path}")
+        else:
+            self.model, self.from_cache = load_or_build(case, comm, log)
+        self.setup_wall_s = time.perf_counter() - start
+        self._records()
+        self._tables: dict = {}
+
+    @classmethod
+    def check(cls, case, comm, log) -> None:
+        """``validate``: the checks that need the mesh (facet groups, node points, the interface), without
+        reducing anything."""
+        from app.fe.model import build_model
+        from app.reduced.model import contact_site_sets
+
+        model = build_model(case, comm)
+        if model.electrodes_of("floating"):
+            raise CaseError(case.source, "electrodes",
+                            "floating electrodes are not supported by the transient analysis")
+        contact_site_sets(case, model)
+
+    # ---------------------------------------------------------------- the kernel's records
+    def _records(self) -> None:
+        case, cfg, model = self.case, self.cfg, self.model
+        file = case.source
+        gdim = model.gdim
+        n = model.size
+        inputs = np.arange(model.n_interface, model.n_interface + len(model.inputs), dtype=np.int64)
+        free = np.setdiff1d(np.arange(n), inputs).astype(np.int64)
+        gravity = np.asarray(cfg.loads.gravity_m_per_s2 or [0.0] * gdim, dtype=float)
+        force = np.asarray(cfg.loads.fe_force_N or [0.0] * gdim, dtype=float)
+        for key, value in (("gravity_m_per_s2", gravity), ("fe_force_N", force)):
+            if value.size != gdim:
+                raise CaseError(file, f"transient.loads.{key}", f"needs {gdim} components")
+        acceleration = gravity + force / model.mass_kg
+        load = acceleration @ model.translation_loads
+        self.structure = lk.Structure(model.K, model.M, model.C, load, free, inputs)
+        s = cfg.scheme.scheme()
+        self.scheme = lk.Scheme(s.beta, s.gamma, s.alpha_m, s.alpha_f)
+        st = cfg.steps
+        self.control = lk.Control(st.open_s, st.closed_s, st.change_s, st.min_s, 2.0)
+        self.bodies_record, self.body_slices = self._bodies(gravity)
+        self.contacts_record, self.links_record = self._contacts()
+        self.sites_record = self._sites()
+        self.electrodes = list(model.inputs[:model.n_electrodes])
+        self.scale_V, amplitudes, phases = electrode_amplitudes(case, self.electrodes)
+        self.inputs_record = self._inputs(amplitudes, phases, 1.0)
+        self.sample_rows = np.vstack([model.sample_rows, model.charge_rows]) if model.n_electrodes else \
+            model.sample_rows
+        self.cache = lk.make_cache(free.size, model.site_rows.shape[0])
+
+    def _bodies(self, gravity):
+        case, cfg = self.case, self.cfg
+        gdim = self.model.gdim
+        start, mass, free, load, brake, axis, rate = [], [], [], [], [], [], []
+        reference = np.zeros((max(len(cfg.bodies), 1), 3))
+        slices = {}
+        m = 0
+        for i, b in enumerate(cfg.bodies):
+            if len(b.position_m) != gdim:
+                raise CaseError(case.source, f"transient.bodies[{i}].position_m", f"needs {gdim} coordinates")
+            start.append(m)
+            reference[i, :gdim] = b.position_m
+            velocity = list(b.velocity_m_per_s or [0.0] * gdim)
+            free_axes = [False] * gdim if b.fixed else list(b.free_axes or [True] * gdim)
+            force = np.asarray(b.applied_force_N or [0.0] * gdim, dtype=float)
+            g = np.zeros(gdim) if b.fixed else gravity
+            for k in range(gdim):
+                mass.append(b.mass_kg)
+                free.append(free_axes[k])
+                load.append(b.mass_kg * g[k] + force[k])
+                brake.append(0.0)
+                axis.append((0.0, 0.0, 0.0))
+                rate.append(0.0 if b.fixed or free_axes[k] else velocity[k])
+            for r in b.rotations:
+                mass.append(r.inertia_kg_m2)
+                free.append(r.motion == "free")
+                load.append(r.torque_N_m if r.motion == "free" else 0.0)
+                brake.append(r.brake_N_m_s_per_rad if r.motion == "free" else 0.0)
+                axis.append(AXES[r.axis])
+                rate.append(r.rate_rad_per_s if r.motion == "constant_rate" else 0.0)
+            slices[b.name] = slice(m, m + gdim + len(b.rotations))
+            m += gdim + len(b.rotations)
+        record = lk.Bodies(gdim, np.array(start, np.int64), np.array(mass, float), np.array(free, np.bool_),
+                           np.array(load, float), np.array(brake, float), np.array(axis, float).reshape(m, 3),
+                           np.array(rate, float), reference)
+        return record, slices
+
+    def _contacts(self):
+        cfg = self.cfg
+        index = {b.name: i for i, b in enumerate(cfg.bodies)}
+        rows = []
+        for c in cfg.contacts:
+            if c.kind == "point":
+                continue
+            f = c.friction
+            friction = (f.mu_dynamic, f.static_ratio, f.decay_s_per_m,
+                        f.shear_cap_Pa if c.kind == "surface" else f.force_cap_N,
+                        f.regularisation_speed_m_per_s) if f is not None else (0.0, 1.0, 0.0, 1e20, 1e-4)
+            vector = np.zeros(3)
+            if c.kind == "node":
+                vector[:len(c.normal)] = c.normal
+                rows.append((lk.NODE, lk.SPHERE, index[c.body], vector, c.radius_m, 0.0, c.stiffness, c.damping, 0.0,
+                             1.5, *friction))
+                continue
+            if c.shape == "cone":
+                vector[:] = c.axis
+            elif c.normal is not None:
+                vector[:len(c.normal)] = c.normal
+            rows.append((lk.SURFACE, SHAPES[c.shape], index[c.body], vector, c.radius_m or 0.0,
+                         math.radians(c.half_angle_deg or 0.0), c.stiffness, c.damping, c.rounding_m, 1.0, *friction))
+        cols = list(zip(*rows)) if rows else [[]] * 15
+        contacts = lk.Contacts(np.array(cols[0], np.int64), np.array(cols[1], np.int64), np.array(cols[2], np.int64),
+                               np.array(cols[3], float).reshape(-1, 3), *(np.array(cols[k], float) for k in range(4, 15)))
+        links = []
+        for c in cfg.contacts:
+            if c.kind != "point":
+                continue
+            f = c.friction
+            friction = (f.mu_dynamic, f.static_ratio, f.decay_s_per_m, f.force_cap_N, f.regularisation_speed_m_per_s) \
+                if f is not None else (0.0, 1.0, 0.0, 1e20, 1e-4)
+            direction = np.zeros(3)
+            direction[:len(c.direction)] = np.asarray(c.direction, float) / np.linalg.norm(c.direction)
+            links.append((index[c.lower], index[c.upper], direction, c.touch_distance_m, c.stiffness, c.damping,
+                          c.contact_offset_m, *friction))
+        cols = list(zip(*links)) if links else [[]] * 12
+        links = lk.Links(np.array(cols[0], np.int64), np.array(cols[1], np.int64), np.array(cols[2], float).reshape(-1, 3),
+                         *(np.array(cols[k], float) for k in range(3, 12)))
+        return contacts, links
+
+    def _sites(self):
+        """Sites in the kernel's terms: reference geometry relative to their body and obstacle, excluded initial
+        gaps, diagnostics frames."""
+        from app.reduced.sites import site_frames
+
+        model, cfg = self.model, self.cfg
+        contacts = self.contacts_record
+        kernel_index = {}            # case contact index -> kernel contact index (node and surface contacts)
+        k = 0
+        for i, c in enumerate(cfg.contacts):
+            if c.kind != "point":
+                kernel_index[i] = k
+                k += 1
+        site_contact = np.array([kernel_index[int(c)] for c in model.site_contact], np.int64)
+        ns = site_contact.size
+        rel = np.zeros((ns, 3))
+        lever = np.zeros((ns, 3))
+        gap_ref = np.zeros(ns)
+        normals = np.zeros((ns, 3))
+        n = np.zeros(3)
+        Dn = np.zeros((3, 3))
+        for i in range(ns):
+            c = site_contact[i]
+            b = contacts.body[c]
+            ref = self.bodies_record.reference[b]
+            x = model.site_points[i]
+            lever[i] = x - ref
+            rel[i] = x - ref
+            if contacts.kind[c] == lk.SURFACE and contacts.shape[c] == lk.SPHERE and np.any(contacts.vector[c]):
+                rel[i] = x - (ref + contacts.radius[c] * contacts.vector[c])
+            if contacts.kind[c] == lk.NODE:
+                normals[i] = contacts.vector[c]
+                continue
+            gap = lk.shape_gap(contacts.shape[c], contacts.vector[c], contacts.radius[c], contacts.half_angle[c],
+                               rel[i].copy(), n, Dn)
+            normals[i] = n
+            case_index = next(j for j, kk in kernel_index.items() if kk == c)
+            if cfg.contacts[case_index].exclude_initial_gap:
+                gap_ref[i] = gap
+        frames = np.zeros((ns, 3, 3))
+        for i in range(ns):
+            c = site_contact[i]
+            b = contacts.body[c]
+            sl = self.bodies_record.start[b]
+            gdim = model.gdim
+            body = cfg.bodies[b]
+            spin = np.array(AXES[body.rotations[0].axis]) if body.rotations else None
+            frames[i] = site_frames(model.site_points[i:i + 1], normals[i:i + 1], spin, self.bodies_record.reference[b])[0]
+            _ = sl, gdim
+        return lk.Sites(model.site_rows, rel, lever, gap_ref, model.site_weight, site_contact, frames)
+
+    def _inputs(self, amplitudes, phases, scale):
+        """The prescribed coordinates' time functions: electrodes (amplitude [V], phase), then each base motion's
+        four patterns (its amplitudes W, U and the ramp)."""
+        cfg, model = self.cfg, self.model
+        kinds, amps, ph, ramps = [], [], [], []
+        omega = 2 * math.pi * cfg.drive.frequency_Hz
+        for e in range(model.n_electrodes):
+            kinds.append(lk.ELECTRODE)
+            amps.append(amplitudes[e] * scale)
+            ph.append(phases[e])
+            ramps.append(0.0)
+        motions = {m.name: m for m in cfg.base_motions}
+        for name in model.inputs[model.n_electrodes:]:
+            motion_name, pattern = name.split(":")
+            m = motions[motion_name]
+            frequency = m.frequency_Hz or cfg.drive.frequency_Hz
+            if abs(2 * math.pi * frequency - omega) > 1e-9 * omega:
+                raise CaseError(self.case.source, "transient.base_motions.frequency_Hz",
+                                "the modal tier drives base motions at the drive frequency")
+            W, U = m.normal_amplitude_m, m.tangential_amplitude_m
+            # u = cos wt (W cos kx n + U sin kx e) + sin wt (W sin kx n - U cos kx e), ramped
+            kind, amplitude = {"n_cos": (lk.PATTERN_COS, W), "n_sin": (lk.PATTERN_SIN, W),
+                               "e_sin": (lk.PATTERN_COS, U), "e_cos": (lk.PATTERN_SIN, -U)}[pattern]
+            kinds.append(kind)
+            amps.append(amplitude)
+            ph.append(0.0)
+            ramps.append(m.ramp_periods / frequency)
+        return lk.Inputs(np.array(kinds, np.int64), np.array(amps, float), np.array(ph, float),
+                         np.array(ramps, float), omega, self.cfg.initial_state == "harmonic")
+
+    # ---------------------------------------------------------------- start / restore
+    def _allocate(self) -> None:
+        model = self.model
+        n, m = model.size, self.bodies_record.mass.size
+        n_c, n_l = self.contacts_record.kind.size, self.links_record.lower.size
+        cap = ROWS_PER_CALL
+        self._out = (np.zeros(cap), np.zeros(cap), np.zeros((cap, self.sample_rows.shape[0])),
+                     np.zeros((cap, self.structure.inputs.size)), np.zeros((cap, m)), np.zeros((cap, m)),
+                     np.zeros((cap, n_c + n_l, 3)), np.zeros((cap, n_c, 3)), np.zeros((cap, n_c)),
+                     np.zeros((cap, n_c)), np.zeros((cap, n_c + n_l), np.bool_), np.zeros((cap, n_c + n_l)),
+                     np.zeros((cap, 5)), np.zeros((cap, n_c, 3)))
+        self.site_sums = np.zeros((self.sites_record.contact.size, 5))
+        self.q, self.v, self.a = np.zeros(n), np.zeros(n), np.zeros(n)
+        self.z, self.zd, self.zdd = np.zeros(m), np.zeros(m), np.zeros(m)
+        self.istate = np.zeros(lk.N_ISTATE, np.int64)
+        self.fstate = np.zeros(lk.N_FSTATE)
+        self.fstate[lk.F_CAP] = np.inf
+        self.sums = lk.Sums(np.zeros(n_c + n_l), np.full(n_c + n_l, np.nan), np.zeros(2))   # power: none yet
+        self.sites_interval_s = self.cfg.output_interval_s
+        self.next_sites_s = self.sites_interval_s
+        self.sites_started_s = 0.0
+
+    def _harmonic(self, scale: float) -> np.ndarray:
+        """Complex steady-state coordinates for the electrodes' phasors (amplitude ``scale`` x weight,
+        their phases), the other inputs held (a base motion starts from rest)."""
+        model = self.model
+        omega = self.inputs_record.omega
+        D = model.K - omega**2 * model.M + 1j * omega * model.C
+        P, F = self.structure.inputs, self.structure.free
+        x = np.zeros(model.size, dtype=complex)
+        for e in range(model.n_electrodes):
+            x[P[e]] = scale * self._weights[e] * np.exp(1j * self._phases[e])
+        x[F] = np.linalg.solve(D[np.ix_(F, F)], -D[np.ix_(F, P)] @ x[P])
+        return x
+
+    def start(self) -> None:
+        cfg, model = self.cfg, self.model
+        self._allocate()
+        self.scale_V, self._weights, self._phases = electrode_amplitudes(self.case, self.electrodes)
+        if cfg.drive.tip_amplitude_m is not None or cfg.initial_state == "harmonic":
+            if not model.n_electrodes:
+                key = "drive.tip_amplitude_m" if cfg.drive.tip_amplitude_m is not None else "initial_state"
+                raise CaseError(self.case.source, f"transient.{key}",
+                                "needs an electrode of kind 'voltage' (a harmonic solve)")
+        if cfg.drive.tip_amplitude_m is not None:
+            from app.drive import target_voltage
+
+            point = model.sample_names.index(cfg.drive.point)
+            per_volt = abs(model.sample_rows[point] @ self._harmonic(1.0))
+            self.scale_V = target_voltage(cfg.drive.tip_amplitude_m, per_volt)
+        self.inputs_record = self._inputs(self._weights, self._phases, self.scale_V)
+        P, F = self.structure.inputs, self.structure.free
+        q, v, a = self.q, self.v, self.a
+        omega = self.inputs_record.omega
+        if cfg.initial_state == "harmonic":
+            x = self._harmonic(self.scale_V)
+            q[:], v[:], a[:] = x.real, -omega * x.imag, -omega**2 * x.real
+            kill_point("harmonic_start")
+        else:                    # from rest: the free coordinates cancel the moving inputs' modes
+            values = np.zeros(P.size)
+            lk.input_values(0.0, self.inputs_record, values)
+            q[P] = values
+            h = 1e-7 / omega
+            plus, minus = np.zeros(P.size), np.zeros(P.size)
+            lk.input_values(h, self.inputs_record, plus)
+            lk.input_values(-h, self.inputs_record, minus)
+            v[P] = (plus - minus) / (2 * h)
+            a[P] = (plus - 2 * values + minus) / (h * h)
+            MFF = model.M[np.ix_(F, F)]
+            q[F] = -np.linalg.solve(MFF, model.M[np.ix_(F, P)] @ q[P])
+            v[F] = -np.linalg.solve(MFF, model.M[np.ix_(F, P)] @ v[P])
+        rhs = self.structure.load - model.K @ q - model.C @ v - model.M[:, P] @ a[P]
+        a[F] = np.linalg.solve(model.M[np.ix_(F, F)], rhs[F])
+        self._bodies_at_rest()
+        self._seat()
+        self._sites_geometry_table()
+        self._started()
+
+    def _bodies_at_rest(self) -> None:
+        b = self.bodies_record
+        cfg = self.cfg
+        gdim = b.gdim
+        for i, body in enumerate(cfg.bodies):
+            sl = self.body_slices[body.name]
+            self.z[sl.start:sl.start + gdim] = body.position_m
+            self.zd[sl.start:sl.start + gdim] = body.velocity_m_per_s or [0.0] * gdim
+            for r, rot in enumerate(body.rotations):
+                j = sl.start + gdim + r
+                self.z[j] = rot.angle_rad
+                self.zd[j] = rot.rate_rad_per_s if rot.motion != "fixed" else 0.0
+        held = ~b.free
+        self.zd[held] = b.rate[held]
+        loaded = b.free & (b.mass > 0)
+        self.zdd[:] = 0.0
+        self.zdd[loaded] = (b.load[loaded] - b.brake[loaded] * self.zd[loaded]) / b.mass[loaded]
+
+    def _site_gaps(self, z: np.ndarray) -> np.ndarray:
+        """Every site's gap [m] at the current structure state and body coordinates ``z`` (rates zero)."""
+        sites, gdim = self.sites_record, self.model.gdim
+        work = lk.site_work(self.bodies_record.mass.size)
+        y = np.zeros(3)
+        zero = np.zeros(3)
+        out = np.zeros(sites.contact.size)
+        rows = sites.rows @ self.q
+        for i in range(out.size):
+            y[:gdim] = rows[i * gdim:(i + 1) * gdim]
+            out[i] = lk.site_force(i, y, zero, z, np.zeros_like(z), sites, self.contacts_record, self.bodies_record,
+                                   1.0, 1.0, False, work)[1]
+        return out
+
+    def _seat(self) -> None:
+        """Bodies with ``seat_on`` move along their one free translation axis until the smallest gap of that
+        contact's sites is zero (bisection on it: monotone in the distance)."""
+        cfg = self.cfg
+        kernel_index = {c.name: k for k, c in enumerate(c for c in cfg.contacts if c.kind != "point")}
+        for i, body in enumerate(cfg.bodies):
+            if body.seat_on is None:
+                continue
+            k = kernel_index[body.seat_on]
+            mine = self.sites_record.contact == k
+            axis = (body.free_axes or [True] * len(body.position_m)).index(True)
+            j = self.body_slices[body.name].start + axis
+
+            def smallest(s):
+                z = self.z.copy()
+                z[j] += s
+                return float(self._site_gaps(z)[mine].min())
+
+            g0 = smallest(0.0)
+            step = max(abs(g0), 1e-9)
+            # the gap grows one way along the axis: find it, bracket the root, bisect
+            direction = 1.0 if smallest(step) > g0 else -1.0
+            lo, hi = 0.0, direction * step
+            while (smallest(hi) < 0.0) == (g0 < 0.0) and abs(hi) < 1.0:
+                lo, hi = hi, 2.0 * hi
+            if g0 > 0.0:      # start above: move against the growth direction
+                lo, hi = 0.0, -direction * step
+                while smallest(hi) > 0.0 and abs(hi) < 1.0:
+                    lo, hi = hi, 2.0 * hi
+            for _ in range(200):
+                mid = 0.5 * (lo + hi)
+                if (smallest(mid) > 0.0) == (smallest(lo) > 0.0):
+                    lo = mid
+                else:
+                    hi = mid
+                if abs(hi - lo) <= 1e-15 * max(1.0, abs(hi)):
+                    break
+            distance = hi if smallest(hi) >= 0.0 else lo
+            self.z[j] += distance
+            self.log(f"modal tier: body {body.name!r} seated on {body.seat_on!r}: moved {distance * 1e6:.6g} um along "
+                     f"axis {axis}")
+
+    def restore(self, found: Found) -> None:
+        self._allocate()
+        data = found.arrays
+        for key in ("q", "v", "a", "z", "zd", "zdd", "istate", "fstate", "site_sums"):
+            if key not in data:
+                raise CaseError(str(found.pointer), key, "missing in the checkpoint's state")
+            getattr(self, key)[:] = data[key]
+        for k, name in enumerate(("dissipated", "power", "damping")):
+            getattr(self.sums, name)[:] = data[f"sums_{name}"]
+        self.next_sites_s = float(found.engine["next_sites_s"])
+        self.sites_started_s = float(found.engine["sites_started_s"])
+        self.scale_V = float(found.engine["drive_voltage_V"])
+        _, self._weights, self._phases = electrode_amplitudes(self.case, self.electrodes)
+        self.inputs_record = self._inputs(self._weights, self._phases, self.scale_V)
+        self._started()
+
+    def _started(self) -> None:
+        cfg = self.cfg
+        self.log(f"modal tier: {cfg.initial_state} start, drive {self.scale_V:.4g} V at {cfg.drive.frequency_Hz:.2f} "
+                 f"Hz, {len(cfg.bodies)} rigid bodies, {len(cfg.contacts)} contacts, {self.model.size} coordinates, "
+                 f"{self.sites_record.contact.size} contact sites, {cfg.end_time_s * 1e3:.4g} ms")
+        self._t0_wall = time.perf_counter()
+        self._loop_wall = 0.0
+
+    @property
+    def t(self) -> float:
+        return float(self.fstate[lk.F_TIME])
+
+    @property
+    def steps(self) -> int:
+        return int(self.istate[lk.I_STEPS])
+
+    # ---------------------------------------------------------------- stepping
+    def _kernel_contact_names(self) -> list[str]:
+        return [c.name for c in self.cfg.contacts if c.kind != "point"]
+
+    def columns(self) -> dict[str, str]:
+        cfg, model, case = self.cfg, self.model, self.case
+        units = {S.TIME: "s", S.STEP: "s", S.DRIVE: "V"}
+        for name in case.points:
+            units[S.point_displacement(name)] = "m"
+        if model.n_electrodes > 1:
+            for name in self.electrodes:
+                units[S.electrode_voltage(name)] = "V"
+        if case.output.energies:
+            for name in self.electrodes:
+                units[S.electrode_charge(name)] = "C"
+            units.update(S.ENERGY_COLUMNS)
+        for b in cfg.bodies:
+            units.update(S.body_columns(b.name))
+            if b.rotations:
+                axes = ", ".join(r.axis for r in b.rotations)
+                units[S.body_angle(b.name)] = f"rad ({axes})"
+                units[S.body_angular_velocity(b.name)] = f"rad/s ({axes})"
+        bodies = {b.name: b for b in cfg.bodies}
+        for c in cfg.contacts:
+            units.update(S.contact_columns(c.name))
+            units[S.contact_dissipated(c.name)] = "J (damping and friction, since t = 0)"
+            if c.kind == "surface" and bodies[c.body].rotations:
+                units[S.contact_torque(c.name)] = "N m (on the rigid body, about its rotation axes)"
+                units[S.contact_normal_force(c.name)] = "N"
+                units[S.contact_area(c.name)] = "m^2"
+            if c.kind == "surface" and case.output.contact_sites:
+                units[S.contact_probe(c.name)] = "m (n, e1, e2)"
+        return units
+
+    def advance(self, t_end: float, max_steps: int, stop_at_s: float) -> dict[str, np.ndarray]:
+        blocks = []
+        taken = 0
+        sites_on = self.case.output.contact_sites
+        start = time.perf_counter()
+        while self.t < t_end * (1 - 1e-12) and taken < max_steps:
+            cap = int(min(ROWS_PER_CALL, max_steps - taken))
+            out = lk.Outputs(*(arr[:cap] for arr in self._out), self.site_sums)
+            stop = min(stop_at_s, self.next_sites_s * (1 - 1e-12)) if sites_on else stop_at_s
+            self.fstate[lk.F_STOP] = stop
+            code, rows = lk.run(t_end, self.q, self.v, self.a, self.z, self.zd, self.zdd, self.istate, self.fstate,
+                                self.sums, self.structure, self.inputs_record, self.scheme, self.control,
+                                self.bodies_record, self.sites_record, self.contacts_record, self.links_record,
+                                self.sample_rows, self.cache, out, self.case.output.energies)
+            if rows:
+                blocks.append(self._block(out, rows))
+            taken += rows
+            if code == lk.STEP_FAILED:
+                raise NumericalFailure(f"modal tier: a step failed at t = {self.t:.6e} s after "
+                                       f"{self.istate[lk.I_CUTBACKS]} cut-backs (dt below min_s = "
+                                       f"{self.control.min_s:.3e} s)")
+            if sites_on and self.t >= self.next_sites_s * (1 - 1e-12):
+                self._sites_row()
+            if code == lk.DONE or (code == lk.STOPPED and self.t >= stop_at_s):
+                break
+        self._loop_wall += time.perf_counter() - start
+        if not blocks:
+            return {}
+        return {k: np.concatenate([b[k] for b in blocks]) for k in blocks[0]}
+
+    def _block(self, out, rows: int) -> dict[str, np.ndarray]:
+        cfg, model, case = self.cfg, self.model, self.case
+        gdim = model.gdim
+        block = {S.TIME: out.time[:rows].copy(), S.STEP: out.dt[:rows].copy(),
+                 S.DRIVE: out.inputs[:rows, 0].copy() if model.n_electrodes else np.zeros(rows)}
+        for i, name in enumerate(case.points):
+            block[S.point_displacement(name)] = out.samples[:rows, i].copy()
+        if model.n_electrodes > 1:
+            for e, name in enumerate(self.electrodes):
+                block[S.electrode_voltage(name)] = out.inputs[:rows, e].copy()
+        if case.output.energies:
+            n_points = len(case.points)
+            for e, name in enumerate(self.electrodes):
+                block[S.electrode_charge(name)] = out.samples[:rows, n_points + e].copy()
+            for k, name in enumerate(S.ENERGY_COLUMNS):
+                block[name] = out.energy[:rows, k].copy()
+        for b in cfg.bodies:
+            sl = self.body_slices[b.name]
+            block[S.body_position(b.name)] = out.z[:rows, sl.start:sl.start + gdim].copy()
+            block[S.body_velocity(b.name)] = out.zd[:rows, sl.start:sl.start + gdim].copy()
+            if b.rotations:
+                block[S.body_angle(b.name)] = out.z[:rows, sl.start + gdim:sl.stop].copy()
+                block[S.body_angular_velocity(b.name)] = out.zd[:rows, sl.start + gdim:sl.stop].copy()
+        bodies = {b.name: b for b in cfg.bodies}
+        k = 0
+        n_c = self.contacts_record.kind.size
+        l = 0
+        for c in cfg.contacts:
+            j = k if c.kind != "point" else n_c + l
+            block[S.contact_force(c.name)] = out.force[:rows, j, :gdim].copy()
+            block[S.contact_closed(c.name)] = out.closed[:rows, j].astype(float)
+            block[S.contact_dissipated(c.name)] = out.dissipated[:rows, j].copy()
+            if c.kind == "surface" and bodies[c.body].rotations:
+                axes = np.array([AXES[r.axis] for r in bodies[c.body].rotations])
+                block[S.contact_torque(c.name)] = out.torque[:rows, k] @ axes.T
+                block[S.contact_normal_force(c.name)] = out.normal[:rows, k].copy()
+                block[S.contact_area(c.name)] = out.area[:rows, k].copy()
+            if c.kind == "surface" and case.output.contact_sites:
+                block[S.contact_probe(c.name)] = out.probe[:rows, k].copy()
+            if c.kind == "point":
+                l += 1
+            else:
+                k += 1
+        return block
+
+    # ---------------------------------------------------------------- per-site diagnostics (tables)
+    def _sites_geometry_table(self) -> None:
+        """Once per run: each sampled contact's sites (position [m], area [m^2]) as a table."""
+        if not self.case.output.contact_sites:
+            return
+        for k, name in enumerate(self._kernel_contact_names()):
+            mine = self.sites_record.contact == k
+            if not mine.any() or self.contacts_record.kind[k] != lk.SURFACE:
+                continue
+            table = np.column_stack([self.model.site_points[mine], self.model.site_weight[mine]])
+            self._tables[S.sites_table(name, "geometry")] = ("m, m, m, m^2", table)
+
+    def _sites_row(self) -> None:
+        """A diagnostics row per sampled contact: over the interval since the last, per site, the mean pressure
+        [Pa] and the fractions of time closed, sticking, slipping along +e1 and along -e1."""
+        duration = self.t - self.sites_started_s
+        if duration <= 0:
+            return
+        for k, name in enumerate(self._kernel_contact_names()):
+            mine = self.sites_record.contact == k
+            if not mine.any() or self.contacts_record.kind[k] != lk.SURFACE:
+                continue
+            sums = self.site_sums[mine] / duration
+            self._append(S.sites_table(name, "time"), "s", np.array([[self.sites_started_s, self.t]]))
+            for col, key, unit in ((0, "pressure", "Pa"), (1, "closed", "1"), (2, "stick", "1"),
+                                   (3, "slip_positive", "1"), (4, "slip_negative", "1")):
+                self._append(S.sites_table(name, key), unit, sums[:, col].reshape(1, -1))
+        self.site_sums[:] = 0.0
+        self.sites_started_s = self.t
+        while self.next_sites_s <= self.t * (1 + 1e-12):
+            self.next_sites_s += self.sites_interval_s
+
+    def _append(self, name: str, unit: str, rows: np.ndarray) -> None:
+        if name in self._tables:
+            unit0, old = self._tables[name]
+            self._tables[name] = (unit0, np.vstack([old, rows]))
+        else:
+            self._tables[name] = (unit, rows)
+
+    def take_tables(self) -> dict:
+        out, self._tables = self._tables, {}
+        return out
+
+    # ---------------------------------------------------------------- checkpoints, fields, results
+    def snapshot(self) -> tuple[dict | None, dict]:
+        arrays = {"q": self.q, "v": self.v, "a": self.a, "z": self.z, "zd": self.zd, "zdd": self.zdd,
+                  "istate": self.istate, "fstate": self.fstate, "site_sums": self.site_sums,
+                  "sums_dissipated": self.sums.dissipated, "sums_power": self.sums.power,
+                  "sums_damping": self.sums.damping}
+        record = {"drive_voltage_V": self.scale_V, "next_sites_s": self.next_sites_s,
+                  "sites_started_s": self.sites_started_s}
+        return (arrays if self.comm.rank == 0 else None), record
+
+    def checkpoint_files(self, out_dir: Path) -> dict[str, str]:
+        return {"reduced_model": write_engine_file(out_dir, self.comm, MODEL_FILE, self.model.save)}
+
+    def field_export(self, out_dir: Path, resume_from_s: float | None):
+        if not self.case.output.fields:
+            return None
+        if not self.model.vertex_basis.size and self.comm.rank == 0:
+            raise CaseError(self.case.source, "output.fields", "the reduced model holds no vertex basis")
+        from app.transient.fields import FieldSeriesExport
+
+        gdim = self.model.gdim
+        bodies = [(b.name, slice(self.body_slices[b.name].start, self.body_slices[b.name].start + gdim),
+                   b.position_m) for b in self.cfg.bodies]
+        return FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", ReducedVertexFields(self.model, self.comm),
+                                 lambda: self.q, self.cfg.output_interval_s, bodies=bodies,
+                                 resume_from_s=resume_from_s)
+
+    def body_positions(self) -> np.ndarray:
+        return self.z
+
+    def results(self) -> dict:
+        model, cfg = self.model, self.cfg
+        out = {"newton_iterations": int(self.istate[lk.I_NEWTON]), "attempts": int(self.istate[lk.I_ATTEMPTS]),
+               "cutbacks": int(self.istate[lk.I_CUTBACKS]), "event_refinements": int(self.istate[lk.I_REFINEMENTS]),
+               "drive_voltage_V": self.scale_V, "drive_frequency_Hz": cfg.drive.frequency_Hz,
+               "initial_state": cfg.initial_state, "stepping_wall_time_s": self._loop_wall,
+               "reduction": {"interface_dofs": model.n_interface, "inputs": list(model.inputs),
+                             "modes": int(model.mode_frequencies_Hz.size), "size": model.size,
+                             "highest_mode_Hz": float(model.mode_frequencies_Hz.max(initial=0.0)),
+                             "enrichment_modes_Hz": model.enrichment_frequencies_Hz.tolist(),
+                             "resonances_near_drive_Hz": model.resonances_Hz(cfg.drive.frequency_Hz).tolist(),
+                             "contact_sites": int(self.sites_record.contact.size),
+                             "fe_dofs": model.fe_dofs, "build_wall_s": model.reduction_wall_s,
+                             "from_cache": self.from_cache, "setup_wall_s": self.setup_wall_s}}
+        self.log(f"modal tier: {self.steps} steps, {out['newton_iterations']} Newton iterations, "
+                 f"{out['cutbacks']} cut-backs, {self._loop_wall:.2f} s in the compiled loop")
+        return out
+
+    def statistics(self, h5_path: Path) -> tuple[dict, dict]:
+        from app.transient.impacts import statistics_from_file
+
+        return statistics_from_file(h5_path, self.case)
+
+    def close(self) -> None:
+        pass
+
+
+class ReducedVertexFields:
+    """The field output's vertex values from the reduced model's vertex basis (app/exports.py VertexFields'
+    interface): displacement [m] and potential [V] at the mesh vertices = V q, on rank 0."""
+
+    def __init__(self, model: ReducedModel, comm):
+        self.comm = comm
+        self.model = model
+        self.mesh_arrays = {"geometry": model.mesh_geometry, "topology": model.mesh_topology,
+                            "region": model.mesh_region}
+        self.topology_type = model.mesh_topology_type
+        self.n_nodes = model.mesh_geometry.shape[0]
+        self.n_cells = model.mesh_topology.shape[0]
+
+    def sample(self, q: np.ndarray):
+        if self.comm.rank != 0:
+            return None
+        values = self.model.vertex_basis @ q
+        n = self.n_nodes
+        return values[:3 * n].reshape(n, 3), values[3 * n:]
+

@@ -1,0 +1,439 @@
+"""The reduced model of a case for the modal tier: its FE model reduced on a Craig-Bampton basis whose interface
+is where the case's contacts act, and everything the compiled loop needs that depends on the mesh and the
+basis (reduced operators, site rows, point rows, charge rows, load projections, the vertex basis for field
+output) as plain arrays: cacheable and saved with the checkpoint.
+
+Interface coordinates (app/reduced/sites.py): a node contact's node; a surface contact's nodes (all of them,
+or ``reduction.interface_nodes`` of them). Inputs: the driven electrodes (a potential of 1 V on the
+electrode) and each base motion's four spatial patterns (n cos kx, n sin kx, e cos kx, e sin kx: a travelling
+wave is their combination with time functions, app/reduced/loop_kernel.py).
+
+What the model depends on, and only that, keys its cache (``PIEZODYN_CACHE_DIR``, default
+~/.cache/piezodyn): the mesh and materials, electrodes' kinds and facets (not their voltages or phases),
+supports, damping, the basis settings, the contacts' surfaces and sampling, the base motions' geometry, the
+points, and the enrichment's frequency. So a sweep over voltage, load, preload, friction, rotor or step
+sizes builds it once.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from app.errors import CaseError, NumericalFailure
+
+CACHE_VERSION = 3
+
+
+@dataclass
+class ReducedModel:
+    """Arrays of a reduced model (replicated on every rank). Coordinates: ``n_interface`` interface
+    displacements [m], one per input (electrode potentials [V], then base-motion pattern amplitudes), then
+    modal amplitudes."""
+
+    K: np.ndarray
+    M: np.ndarray
+    C: np.ndarray
+    n_interface: int
+    inputs: list                     # input coordinate names: electrodes, then "<motion>:<pattern>"
+    n_electrodes: int
+    mode_frequencies_Hz: np.ndarray
+    enrichment_frequencies_Hz: np.ndarray
+    charge_rows: np.ndarray          # (n_electrodes, n): Q_e [C] = row @ q
+    translation_loads: np.ndarray    # (gdim, n): T^T M t_k, the generalized load of a unit acceleration along k
+    sample_names: list               # named points
+    sample_rows: np.ndarray          # (n_points, n): the point's displacement component = row @ q
+    site_points: np.ndarray          # (n_sites, 3) reference positions [m]
+    site_weight: np.ndarray          # (n_sites,) areas [m^2] (1: a node)
+    site_contact: np.ndarray         # (n_sites,) index of the contact in the case
+    site_rows: np.ndarray            # (n_sites * gdim, n)
+    gdim: int
+    band_area_m2: np.ndarray         # (n_contacts,) area of each contact's facet group (0: not a surface)
+    vertex_basis: np.ndarray         # (n_vertices * (3 + 1), n) displacement and potential at the vertices, or (0, n)
+    mesh_geometry: np.ndarray        # vertex coordinates (input order), for field output
+    mesh_topology: np.ndarray
+    mesh_region: np.ndarray
+    mesh_topology_type: str
+    reduction_wall_s: float
+    fe_dofs: int
+    mass_kg: float                   # the FE structure's mass (the downforce acts like it)
+
+    @property
+    def size(self) -> int:
+        return self.K.shape[0]
+
+    def resonances_Hz(self, near_Hz: float, count: int = 2) -> np.ndarray:
+        """The reduced structure's ``count`` natural frequencies nearest ``near_Hz`` with every input held
+        (short circuit, as the driven transient sees them) [Hz], ascending."""
+        import scipy.linalg
+
+        keep = np.r_[0:self.n_interface, self.n_interface + len(self.inputs):self.size]
+        values = scipy.linalg.eigh(self.K[np.ix_(keep, keep)], self.M[np.ix_(keep, keep)], eigvals_only=True)
+        frequencies = np.sqrt(np.abs(values)) / (2 * math.pi)
+        return np.sort(frequencies[np.argsort(np.abs(frequencies - near_Hz))[:count]])
+
+    def save(self, fh) -> None:
+        arrays = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            arrays[f.name] = np.array(value, dtype=str) if f.name in ("inputs", "sample_names", "mesh_topology_type") \
+                else np.asarray(value)
+        np.savez(fh, **arrays)
+
+    @classmethod
+    def load(cls, path: Path) -> ReducedModel:
+        """Raises KeyError (a field missing: another version), OSError, ValueError (unreadable)."""
+        values = {}
+        with np.load(path, allow_pickle=False) as f:
+            for field in dataclasses.fields(cls):
+                value = f[field.name]
+                if field.name in ("inputs", "sample_names"):
+                    values[field.name] = [str(v) for v in value]
+                elif field.name == "mesh_topology_type":
+                    values[field.name] = str(value)
+                elif field.name in ("n_interface", "n_electrodes", "gdim", "fe_dofs"):
+                    values[field.name] = int(value)
+                elif field.name in ("reduction_wall_s", "mass_kg"):
+                    values[field.name] = float(value)
+                else:
+                    values[field.name] = np.array(value)
+        return cls(**values)
+
+
+# ------------------------------------------------------------------ the cache
+def cache_key(case) -> str:
+    """What the reduced model depends on (module docstring), hashed."""
+    from app.case.validate import to_dict
+
+    data = to_dict(case)
+    cfg = data["transient"]
+    electrodes = {name: {"kind": e["kind"], "facets": e["facets"]} for name, e in data["electrodes"].items()}
+    contacts = []
+    for c in cfg["contacts"]:
+        if c["kind"] == "point":
+            continue
+        keep = {k: c.get(k) for k in ("kind", "facets", "node_point", "sampling", "sample_points", "shape", "axis",
+                                      "radius_m", "half_angle_deg", "body", "friction")}
+        keep["friction"] = c.get("friction") is not None        # node DOFs kept: all components with friction
+        contacts.append(keep)
+    bodies = {b["name"]: {"position_m": b["position_m"], "rotations": [r["axis"] for r in b["rotations"]]}
+              for b in cfg["bodies"]}
+    motions = [{k: m[k] for k in ("facets", "wavelength_m", "direction", "normal")} for m in cfg["base_motions"]]
+    reduction = dict(data["reduction"])
+    relevant = {"version": CACHE_VERSION, "geometry": data["geometry"], "materials": repr(case.materials),
+                "regions": data["regions"], "electrodes": electrodes, "supports": data["supports"],
+                "damping": data["damping"], "reduction": reduction, "contacts": contacts, "bodies": bodies,
+                "motions": motions, "points": data["points"], "fields": bool(case.output.fields),
+                "enrich_near_Hz": (case.reduction.enrich_near_Hz or cfg["drive"]["frequency_Hz"])
+                if case.reduction.enrich_modes else None,
+                "damping_Hz": case.damping.reference_frequency_Hz or cfg["drive"]["frequency_Hz"]}
+    text = json.dumps(relevant, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("PIEZODYN_CACHE_DIR", Path.home() / ".cache" / "piezodyn"))
+
+
+def load_or_build(case, comm, log) -> tuple[ReducedModel, bool]:
+    """(the reduced model of ``case``, True if it came from the cache). Rank 0 reads and writes the cache;
+    every rank gets rank 0's model (the loop runs replicated and its checkpoints are collective)."""
+    path = cache_dir() / f"reduced-{cache_key(case)}.npz"
+    found = path.is_file() if comm.rank == 0 else None
+    found = comm.bcast(found, root=0) if comm.size > 1 else found
+    if found:
+        from app.loop.checkpoint import read_on_root
+
+        model = read_on_root(path, comm, ReducedModel.load, "a reduced model")
+        log(f"modal tier: reduced model from the cache {path}")
+        return model, True
+    model = build_reduced_model(case, comm, log)
+    if comm.size > 1:
+        model = comm.bcast(model if comm.rank == 0 else None, root=0)
+    if comm.rank == 0:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".tmp{os.getpid()}.npz")     # per process: sweep points may build it at once
+        with open(tmp, "wb") as fh:
+            model.save(fh)
+        os.replace(tmp, path)
+    return model, False
+
+
+# ------------------------------------------------------------------ building
+def node_dofs(model, point: np.ndarray) -> tuple[np.ndarray, list[int]]:
+    """(node coordinates, global displacement DOF per axis or -1 if held) of the mesh node nearest ``point``
+    (the same node on every rank)."""
+    comm = model.comm
+    W = model.W
+    imap = W.dofmap.index_map
+    n_owned = imap.size_local
+    held = set(np.asarray(model.support_dofs).tolist())
+    out, x_node = [], None
+    for k in range(model.mesh.geometry.dim):
+        V, parent = W.sub(0).sub(k).collapse()
+        parent = np.asarray(parent)
+        coords = V.tabulate_dof_coordinates()[:, : point.size]
+        owned = parent < n_owned
+        dist = np.linalg.norm(coords - point[: coords.shape[1]], axis=1)
+        dist[~owned] = np.inf
+        best = int(np.argmin(dist)) if dist.size else -1
+        d = float(dist[best]) if best >= 0 else np.inf
+        _, owner = comm.allreduce((d, comm.rank), op=MPI.MINLOC)
+        if comm.rank == owner:
+            local = int(parent[best])
+            dof = -1 if local in held else int(imap.local_to_global(np.array([local], dtype=np.int32))[0])
+            x = coords[best]
+        else:
+            dof, x = None, None
+        out.append(comm.bcast(dof, root=owner))
+        x_node = comm.bcast(x, root=owner)
+    return np.asarray(x_node, dtype=float), out
+
+
+def farthest_point_subset(points: np.ndarray, count: int) -> np.ndarray:
+    """``count`` indices of ``points`` spread over them (greedy farthest-point sampling from the first)."""
+    chosen = [0]
+    distance = np.linalg.norm(points - points[0], axis=1)
+    while len(chosen) < count:
+        nxt = int(np.argmax(distance))
+        chosen.append(nxt)
+        distance = np.minimum(distance, np.linalg.norm(points - points[nxt], axis=1))
+    return np.array(sorted(chosen))
+
+
+def contact_site_sets(case, model, log=None):
+    """The site sets of the case's node and surface contacts (app/reduced/sites.py) and the interface: global
+    DOFs in interface-coordinate order. Every check that needs the mesh (facet groups, node points, the
+    interface size) raises the one-line CaseError here, so ``validate`` runs it without reducing."""
+    from app.fe.model import facet_group_tag
+    from app.reduced.sites import SiteSet, ring_sites
+    from app.reduced.surface import surface_nodes
+    from forms.kinematics import volume_weight
+
+    file, cfg = case.source, case.transient
+    gdim = model.mesh.geometry.dim
+    weight = volume_weight(model.mesh, model.kind, case.geometry.thickness_m)
+    bodies = {b.name: b for b in cfg.bodies}
+    sets, areas = [], np.zeros(len(cfg.contacts))
+    for i, c in enumerate(cfg.contacts):
+        key = f"transient.contacts[{i}]"
+        if c.kind == "node":
+            if c.node_point not in case.points:
+                raise CaseError(file, f"{key}.node_point", f"unknown point {c.node_point!r} (see [points])")
+            normal = np.asarray(c.normal, dtype=float)
+            if normal.size != gdim or not math.isclose(np.linalg.norm(normal), 1.0, rel_tol=1e-9):
+                raise CaseError(file, f"{key}.normal", f"must be a unit vector with {gdim} components")
+            x_node, dofs = node_dofs(model, np.asarray(case.points[c.node_point].coordinates_m, dtype=float))
+            dofs = np.array(dofs, dtype=np.int64)
+            if c.friction is None:      # frictionless: only the normal's components move the gap
+                dofs = np.where(normal != 0.0, dofs, -1)
+            if (dofs < 0).all():
+                raise CaseError(file, f"{key}.node_point", "the node has no free displacement DOF along the normal")
+            point = np.zeros(3)
+            point[:gdim] = x_node
+            sets.append(SiteSet(i, c.name, point.reshape(1, 3), np.ones(1), dofs.reshape(1, gdim),
+                                dofs.reshape(1, gdim)))
+            continue
+        if c.kind != "surface":
+            continue
+        tag = facet_group_tag(model.mesh_data.facet_names, c.facets, file, f"{key}.facets")
+        nodes = surface_nodes(model.W, model.W.sub(0), model.mesh_data.facet_tags, tag, weight, model.support_dofs)
+        if nodes.size == 0:
+            raise CaseError(file, f"{key}.facets", f"facet group {c.facets!r} has no nodes")
+        areas[i] = float(nodes.area_m2.sum())
+        if c.sampling == "ring":
+            k = case.reduction.interface_nodes or min(64, nodes.size)
+            sets.append(ring_sites(i, c, case, bodies[c.body], nodes, areas[i], c.sample_points, k,
+                                   case.reduction.site_displacement, key))
+            continue
+        points = np.zeros((nodes.size, 3))
+        points[:, :gdim] = nodes.coordinates_m
+        k = case.reduction.interface_nodes
+        if k > nodes.size:
+            raise CaseError(file, "reduction.interface_nodes", f"the facet group of {key} has only {nodes.size} nodes")
+        chosen = np.arange(nodes.size) if k == 0 else farthest_point_subset(points, k)
+        sets.append(SiteSet(i, c.name, points, nodes.area_m2, nodes.global_dofs[chosen], nodes.global_dofs))
+    interface: list[int] = []
+    seen = set()
+    for s in sets:
+        for row in s.interface_dofs:
+            for d in row:
+                if d >= 0 and int(d) not in seen:
+                    seen.add(int(d))
+                    interface.append(int(d))
+    return sets, np.array(interface, dtype=np.int64), areas
+
+
+def base_motion_patterns(case, model) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each travelling-wave base motion's four patterns (n cos kx, n sin kx, e cos kx, e sin kx) on its DOFs:
+    name -> (local DOFs, values at unit amplitude)."""
+    from app.transient.motions import build_motions
+
+    out = {}
+    for motion in build_motions(case, model):
+        along = motion.coordinates_m @ motion.direction
+        kx = motion.wavenumber_per_m * along
+        n_comp = motion.normal[motion.axis]
+        e_comp = motion.direction[motion.axis]
+        for label, values in (("n_cos", np.cos(kx) * n_comp), ("n_sin", np.sin(kx) * n_comp),
+                              ("e_cos", np.cos(kx) * e_comp), ("e_sin", np.sin(kx) * e_comp)):
+            out[f"{motion.name}:{label}"] = (motion.dofs, values)
+    return out
+
+
+def build_reduced_model(case, comm, log) -> ReducedModel:
+    """Reduce the case's FE model (collective)."""
+    from app.fe.model import build_model
+    from app.fe.operators import assemble_operators
+    from app.reduced.craig_bampton import reduce_model
+
+    start = time.perf_counter()
+    cfg = case.transient
+    file = case.source
+    model = build_model(case, comm)
+    if model.electrodes_of("floating"):
+        raise CaseError(file, "electrodes", "floating electrodes are not supported by the transient analysis")
+    gdim = model.mesh.geometry.dim
+    sets, interface, areas = contact_site_sets(case, model, log)
+    damping_Hz = case.damping.reference_frequency_Hz or cfg.drive.frequency_Hz
+    log(f"modal tier: assembling {model.W.dofmap.index_map.size_global * model.W.dofmap.index_map_bs} DOFs")
+    ops = assemble_operators(model, damping_frequency_Hz=damping_Hz)
+    fixed = np.concatenate([model.support_dofs, model.grounded_dofs]
+                           + [model.electrode_dofs[n] for n in model.electrodes_of("ground")])
+    electrodes = {n: model.electrode_dofs[n] for n in model.electrodes_of("voltage")}
+    patterns = base_motion_patterns(case, model)
+    red = case.reduction
+    cutoff = red.cutoff_Hz if red.cutoff_Hz is not None else (
+        None if red.n_modes is not None else red.cutoff_factor * cfg.drive.frequency_Hz)
+    log(f"modal tier: Craig-Bampton basis: {interface.size} interface DOFs, {len(electrodes)} electrodes, "
+        f"{len(patterns)} base-motion patterns, fixed-interface modes "
+        + (f"up to {cutoff:.0f} Hz" if cutoff is not None else f"{red.n_modes}"))
+    basis = reduce_model(ops.K, ops.M, ops.C, model.W, fixed, interface, electrodes, n_modes=red.n_modes,
+                         cutoff_Hz=cutoff, n_enrich=red.enrich_modes,
+                         enrich_near_Hz=red.enrich_near_Hz or cfg.drive.frequency_Hz, patterns=patterns)
+    n = basis.size
+    # load projections: T^T M t_k per axis (gravity and the downforce act like the body's mass)
+    loads = np.zeros((gdim, n))
+    for k in range(gdim):
+        translation = ops.M.createVecRight()
+        _, sub = model.W.sub(0).sub(k).collapse()
+        sub = np.asarray(sub)
+        translation.array_w[sub[sub < translation.getLocalSize()]] = 1.0
+        load = ops.M.createVecLeft()
+        ops.M.mult(translation, load)
+        loads[k] = basis.project_vector(load)
+        translation.destroy()
+        load.destroy()
+    ops.destroy()
+    rows = site_rows(sets, interface, basis, model, gdim)
+    sample_names = list(case.points)
+    samples = np.zeros((len(sample_names), n))
+    for j, column in enumerate(basis.columns):
+        values = model.point_values(column)
+        for i, name in enumerate(sample_names):
+            samples[i, j] = values[name]
+    vertex, geometry, topology, region, topology_type = _vertex_basis(model, basis) if case.output.fields else (
+        np.zeros((0, n)), np.zeros((0, 3)), np.zeros((0, 0), np.int64), np.zeros(0, np.int32), "")
+    n_el = len(electrodes)
+    charge = np.array([basis.charge_rows[name] for name in list(electrodes)]).reshape(n_el, n)
+    wall = time.perf_counter() - start
+    points = np.concatenate([s.points_m for s in sets]) if sets else np.zeros((0, 3))
+    weights = np.concatenate([s.weight for s in sets]) if sets else np.zeros(0)
+    contact = np.concatenate([np.full(s.points_m.shape[0], s.contact) for s in sets]) if sets else np.zeros(0, int)
+    out = ReducedModel(basis.K, basis.M, basis.C if basis.C is not None else np.zeros_like(basis.K),
+                       basis.n_interface, list(basis.electrodes), n_el, basis.mode_frequencies_Hz,
+                       basis.enrichment_frequencies_Hz, charge, loads, sample_names, samples, points, weights,
+                       contact.astype(np.int64), rows, gdim, areas, vertex, geometry, topology, region, topology_type,
+                       wall,
+                       int(model.W.dofmap.index_map.size_global * model.W.dofmap.index_map_bs),
+                       float(model.total_mass_kg()))
+    log(f"modal tier: {basis.n_interface} interface DOFs, {len(basis.electrodes)} inputs, {basis.n_modes} "
+        f"fixed-interface modes up to {basis.mode_frequencies_Hz.max(initial=0.0):.0f} Hz"
+        + (f", the full model's modes at {', '.join(f'{f:.1f}' for f in basis.enrichment_frequencies_Hz)} Hz"
+           if basis.enrichment_frequencies_Hz.size else "")
+        + f", {n} coordinates, {points.shape[0]} contact sites ({wall:.1f} s)")
+    basis.destroy()
+    return out
+
+
+def site_rows(sets, interface: np.ndarray, basis, model, gdim: int) -> np.ndarray:
+    """(n_sites * gdim, n) displacement rows of every site: T at a node site's DOFs; a ring's sites
+    interpolated from its interface nodes or evaluated in the reduced field (app/reduced/sites.py)."""
+    from app.reduced.sites import ring_interface_rows
+
+    n = basis.size
+    position = {int(d): j for j, d in enumerate(interface)}
+    blocks = []
+    for s in sets:
+        if s.node_dofs is not None:
+            blocks.append(_rows_at_dofs(s.node_dofs, basis, model))
+        elif s.ring["rule"] == "interface":
+            first = position[int(next(d for d in s.interface_dofs.reshape(-1) if d >= 0))]
+            full = ring_interface_rows(s.ring, first, gdim, n)
+            blocks.append(full.reshape(-1, 3, n)[:, :gdim, :].reshape(-1, n))
+        else:
+            blocks.append(_rows_at_points(s.points_m[:, :gdim], basis, model, s.name))
+    return np.concatenate(blocks) if blocks else np.zeros((0, n))
+
+
+def _rows_at_dofs(dofs: np.ndarray, basis, model) -> np.ndarray:
+    """T at global displacement DOFs (n_nodes, gdim), -1 (held) giving zero rows."""
+    comm = basis.comm
+    lo, hi = basis.columns[0].getOwnershipRange() if basis.columns else (0, 0)
+    flat = dofs.reshape(-1)
+    out = np.zeros((flat.size, basis.size))
+    mine = (flat >= lo) & (flat < hi)
+    for j, column in enumerate(basis.columns):
+        if mine.any():
+            out[mine, j] = column.getValues(flat[mine].astype(np.int32))
+    return comm.allreduce(out, op=MPI.SUM) if comm.size > 1 else out
+
+
+def _rows_at_points(points: np.ndarray, basis, model, name: str) -> np.ndarray:
+    """The reduced field at points: each basis vector's displacement there, (n_points * gdim, n)."""
+    from dolfinx import fem
+
+    from app.fe.probe import PointSet
+
+    gdim = points.shape[1]
+    probe = PointSet(model.mesh, points)
+    if probe.missing.size:
+        raise NumericalFailure(f"contact {name!r}: {probe.missing.size} sample points lie outside the mesh "
+                               f"(the first at {points[probe.missing[0]].tolist()})")
+    f = fem.Function(model.W)
+    n_owned = model.W.dofmap.index_map.size_local * model.W.dofmap.index_map_bs
+    out = np.zeros((points.shape[0] * gdim, basis.size))
+    for j, column in enumerate(basis.columns):
+        f.x.array[:n_owned] = column.array_r
+        f.x.scatter_forward()
+        values = probe(f)
+        out[:, j] = values[:, :gdim].reshape(-1)
+    return out
+
+
+def _vertex_basis(model, basis):
+    """Displacement and potential of every basis vector at the mesh vertices (rank 0's arrays; the field output
+    is then V q), and the mesh in input order."""
+    from app.exports import VertexFields
+
+    vertex = VertexFields(model)
+    columns = []
+    for column in basis.columns:
+        sampled = vertex.sample(column)
+        if model.comm.rank == 0:
+            u, phi = sampled
+            columns.append(np.concatenate([u.reshape(-1), phi.reshape(-1)]))
+    if model.comm.rank != 0:
+        return np.zeros((0, basis.size)), np.zeros((0, 3)), np.zeros((0, 0), np.int64), np.zeros(0, np.int32), ""
+    arrays = vertex.mesh_arrays
+    return (np.column_stack(columns), arrays["geometry"], arrays["topology"], arrays["region"],
+            vertex.topology_type)

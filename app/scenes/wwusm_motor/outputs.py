@@ -1,0 +1,117 @@
+"""The motor's CSVs and plots of one operating point (from the time series of any tier): the pressure round the
+ring and the contact states along it (``motor_ring.csv``), the contact point's path over the last period
+(``motor_contact_path.csv``), and the rotor's speed against time with the steady window marked."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from app import series as S
+from app.files import replace_file
+
+RING_CSV = "motor_ring.csv"
+PATH_CSV = "motor_contact_path.csv"
+RING_PLOT = "motor_ring_pressure.png"
+PATH_PLOT = "motor_contact_path.png"
+SPEED_PLOT = "motor_speed.png"
+
+
+def write_csv(path: Path, rows: dict) -> None:
+    """Columns of equal length as CSV, a header of their names (whole or not at all: a killed run)."""
+    keys = list(rows)
+    lines = [",".join(keys)]
+    for i in range(len(rows[keys[0]])):
+        lines.append(",".join(f"{rows[k][i]:.8g}" for k in keys))
+    replace_file(path, ("\n".join(lines) + "\n").encode())
+
+
+def write_outputs(results: dict, out_dir: Path, title: str, plots: bool) -> list[str]:
+    from app.series import read_time_series
+
+    point = (results.get("statistics") or {}).get("motor")
+    if not point or not results.get("time_series"):
+        return []
+    data = read_time_series(out_dir / results["time_series"])
+    names = [k[: -len("_sites_geometry")] for k in data if k.endswith("_sites_geometry")]
+    written = []
+    window = point["window_s"]
+    t = data[S.TIME]
+    start = t[-1] - window
+    if names:
+        contact = names[0]
+        geometry = data[S.sites_table(contact, "geometry")]
+        times = data[S.sites_table(contact, "time")]
+        rows = (times[:, 0] >= start * (1 - 1e-9))
+        if not rows.any():
+            rows[-1] = True
+        angle = np.degrees(np.arctan2(geometry[:, 1], geometry[:, 0])) % 360.0
+        order = np.argsort(angle)
+        ring = {"angle_deg": angle[order],
+                "mean_pressure_Pa": data[S.sites_table(contact, "pressure")][rows].mean(axis=0)[order],
+                "last_period_pressure_Pa": data[S.sites_table(contact, "pressure")][-1][order],
+                "contact_fraction": data[S.sites_table(contact, "closed")][rows].mean(axis=0)[order],
+                "stick_fraction": data[S.sites_table(contact, "stick")][rows].mean(axis=0)[order]}
+        write_csv(out_dir / RING_CSV, ring)
+        written.append(RING_CSV)
+        probe = S.contact_probe(contact)
+        if probe in data:
+            period = point["window_s"] / max(point["window_periods"], 1)
+            last = t > t[-1] - period * (1 + 1e-9)
+            path = data[probe][last]
+            write_csv(out_dir / PATH_CSV, {"time_s": t[last], "normal_m": path[:, 0], "tangential_m": path[:, 1],
+                                           "meridional_m": path[:, 2]})
+            written.append(PATH_CSV)
+        if plots:
+            written += _plots(out_dir, ring, data, probe, t, start, title)
+    return written
+
+
+def _plots(out_dir, ring, data, probe, t, start, title) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.plot(ring["angle_deg"], ring["mean_pressure_Pa"] * 1e-6, label="mean over the steady window")
+    ax.plot(ring["angle_deg"], ring["last_period_pressure_Pa"] * 1e-6, ".", ms=3, label="mean over the last period")
+    ax.set_xlabel("angle round the ring [deg]")
+    ax.set_ylabel("contact pressure [MPa]")
+    ax.set_xlim(0, 360)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"{title}\ncontact pressure round the ring", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out_dir / RING_PLOT, dpi=110)
+    plt.close(fig)
+    written.append(RING_PLOT)
+    if probe in data:
+        path = data[probe][t > t[-1] - (t[-1] - start) / max(1, ring.get("periods", 1))]
+        fig, ax = plt.subplots(figsize=(4.5, 4))
+        ax.plot(path[:, 1] * 1e6, path[:, 0] * 1e6, "-")
+        ax.plot(path[:1, 1] * 1e6, path[:1, 0] * 1e6, "o", ms=4)
+        ax.set_xlabel("circumferential displacement [µm]")
+        ax.set_ylabel("normal displacement [µm]")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(f"{title}\npath of a contact point", fontsize=9)
+        fig.tight_layout()
+        fig.savefig(out_dir / PATH_PLOT, dpi=110)
+        plt.close(fig)
+        written.append(PATH_PLOT)
+    speed_key = next((k for k in data if k.endswith("_angular_velocity_rad_per_s")), None)
+    if speed_key is not None:
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        ax.plot(t * 1e3, data[speed_key][:, 0] * 60 / (2 * math.pi), lw=0.6)
+        ax.axvspan(start * 1e3, t[-1] * 1e3, color="0.85", label="steady window")
+        ax.set_xlabel("time [ms]")
+        ax.set_ylabel("rotor speed [rpm]")
+        ax.legend(loc="best", fontsize=8)
+        ax.set_title(f"{title}\nrotor speed against time", fontsize=9)
+        fig.tight_layout()
+        fig.savefig(out_dir / SPEED_PLOT, dpi=110)
+        plt.close(fig)
+        written.append(SPEED_PLOT)
+    return written
