@@ -96,8 +96,9 @@ def _browse(args, rank: int) -> int:
             print(format_cases())
         return 0
     from app.report import replot
+    from app.scenes import SCENES
 
-    written = replot(args.dir, (lambda line: print(line, flush=True)) if rank == 0 else (lambda line: None),
+    written = replot(args.dir, (lambda line: print(line, flush=True)) if rank == 0 else (lambda line: None), SCENES,
                      write=rank == 0)
     if rank == 0:
         print(f"{args.dir}: " + (", ".join(written) if written else "nothing to plot"))

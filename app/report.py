@@ -2,7 +2,7 @@
 unit per row) and the plots and CSVs of every result kind (frequency domain, every tier's time series, the
 scene's own), from summary.json and the time series alone, without solving anything.
 
-Top layer (beside the runner): it may ask the scene of a result (app/scenes/) for its rows and outputs.
+Top layer (beside the runner); the caller hands it the scene of a result (app/scenes/) for its rows and outputs.
 """
 
 from __future__ import annotations
@@ -141,19 +141,19 @@ def read_summary(result_dir: Path) -> dict:
     return summary
 
 
-def replot(result_dir: str | Path, log, write: bool = True) -> list[str]:
+def replot(result_dir: str | Path, log, scenes: dict, write: bool = True) -> list[str]:
     """``piezodyn plot DIR``: the table, plots and CSVs of an existing result directory, from summary.json and
     the time series, without solving anything (every result kind: modal, harmonic, the transient tiers, the
-    lumped tier, the scene's). A damaged or foreign directory is one CaseError naming the file."""
+    lumped tier, the scene's, looked up in ``scenes``). A damaged or foreign directory is one CaseError naming
+    the file."""
     from app.plots import frequency_domain_outputs, time_series_outputs
-    from app.scenes import scene_named
     from app.series import check_time_series
 
     result_dir = Path(result_dir)
     summary = read_summary(result_dir)
     results, case = summary["results"], summary.get("case") or {}
     name = case.get("scene")
-    scene = scene_named(name)
+    scene = scenes.get(name) if name is not None else None
     if name is not None and scene is None:
         raise CaseError(str(result_dir / "summary.json"), "case.scene", f"unknown scene {name!r}")
     for key in ("transient", "lumped"):

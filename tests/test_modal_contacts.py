@@ -4,7 +4,7 @@ The FE tier's tests (tests/test_transient_rod_impact.py, tests/test_transient_ba
 scenes with dolfinx and step the full FE equations. Here the same scenes run on the modal tier's
 pieces: a Craig-Bampton basis of the same FE model (app.reduced.craig_bampton, interface = every
 displacement DOF of the contact facets' nodes), the facet group as nodes with lumped areas
-(app.reduced.surface) and the compiled loop (app.reduced.kernel).
+(app.contact.surface) and the compiled loop (app.reduced.kernel).
 
 * Rod impact (surface contact against a plane, Saint-Venant): duration 2 L / c and force
   rho c A v0, with the FE tier's tolerances. The wave front is a step: the fixed-interface modes
@@ -29,7 +29,7 @@ from mpi4py import MPI
 
 from app.reduced import kernel as kr
 from app.reduced.craig_bampton import reduce_model
-from app.reduced.surface import (
+from app.contact.surface import (
     SURFACE_KEYS,
     SurfaceContactSpec,
     empty_surface_arrays,
@@ -322,7 +322,7 @@ def test_surface_contact_tangent_matches_finite_differences(shape):
         centre = np.array([0.0, -1e-6])
     else:
         spec_shape, normal, radius = "sphere", (np.array([0.0, -1.0]) if shape == "sphere-pole" else None), 4e-3
-    from app.reduced.surface import SurfaceNodes
+    from app.contact.surface import SurfaceNodes
 
     nodes = SurfaceNodes(nodes_x, np.array([[10, 11], [12, 13]]), np.array([2e-4, 3e-4]), "row sum")
     surface = kernel_surface_arrays([SurfaceContactSpec(nodes, 0, centre, spec_shape, normal, radius, 1e13, 3e6)],

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from app.reduced import kernel as kr
-from app.reduced.surface import SURFACE_KEYS, empty_surface_arrays
+from app.contact.surface import SURFACE_KEYS, empty_surface_arrays
 from forms.newmark import TimeScheme
 
 GDIM = 2

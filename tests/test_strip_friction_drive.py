@@ -1,4 +1,4 @@
-"""The travelling-wave friction drive in the FE tier against its semi-analytic law (issue 11).
+"""The travelling-wave friction drive in the FE and modal tiers against its semi-analytic law (issues 11, 22).
 
 cases/validation/strip-friction-drive.toml: a thin stiff strip (plane strain, one wavelength) whose
 bottom carries a prescribed travelling wave ([[transient.base_motions]]), under a rigid flat slider
@@ -14,8 +14,10 @@ the strip's through-thickness stiffness; everything is read from the case file. 
 the mean drive force within 5 %: here within 0.05 mu N at every speed (near the no-load speed the
 force passes through zero, so the error is measured against the force scale mu N), the normal force
 within 5 %, and the deficit of the no-load speed 1 - V0 / (omega U_s) within 5 %. Measured
-(serial): force ratio within 0.009 of the law,
-N 0.2 % low, deficit of the no-load speed 1.8 % above the law.
+(serial, FE tier): force ratio within 0.009 of the law,
+N 0.2 % low, deficit of the no-load speed 1.8 % above the law. The modal tier runs the same case (its
+base motion as four pattern inputs of the reduced strip, the top face's nodes as contact sites) against the
+same law and tolerances.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from scipy.optimize import brentq
 
 from app.case.schema import load_case
 from app.references import friction_drive as fd
-from app.transient.driver import run
+from app.runner import run_case
 
 CASE = Path(__file__).resolve().parents[1] / "cases" / "validation" / "strip-friction-drive.toml"
 MEASURED_PERIODS = 4        # the last four of eight periods (two of ramp, two settling)
@@ -60,15 +62,16 @@ def reference():
 REF = reference()
 
 
-def mean_forces(tmp_path, name: str, speed_ratio: float, overrides=()) -> tuple[float, float, dict]:
+def mean_forces(tmp_path, name: str, speed_ratio: float, overrides=(), tier: str = "fe") -> tuple[float, float, dict]:
     """(normal force N, drive force F (along the drive direction -x), run results) on the slider,
     averaged over the last periods, slider speed V = speed_ratio * omega U_s; the results get the
     mean power the contact dissipated over those periods, ``dissipated_W``."""
     comm = MPI.COMM_WORLD
     folder = comm.bcast(tmp_path / name if comm.rank == 0 else None, root=0)
     speed = speed_ratio * REF["surface_speed"]
-    case = load_case(CASE, [f"transient.bodies[0].velocity_m_per_s=[{-speed!r}, 0.0]", *overrides])
-    results = run(case, folder, comm, lambda *args: None)
+    sets = [f"transient.bodies[0].velocity_m_per_s=[{-speed!r}, 0.0]", f'tier="{tier}"', *overrides]
+    case = load_case(CASE, sets)
+    results = run_case(CASE, sets, folder, comm=comm, quiet=True)["results"]["transient"]
     with h5py.File(folder / "transient.h5", "r") as f:
         t, force = f["time_s"][()], f["strip_slider_force_N"][()]
         dissipated = f["strip_slider_dissipated_J"][()]
@@ -84,11 +87,12 @@ def mean_forces(tmp_path, name: str, speed_ratio: float, overrides=()) -> tuple[
     return mean(force[:, 1]), -mean(force[:, 0]), results
 
 
-def test_mean_drive_force_follows_the_friction_drive_law(tmp_path):
+@pytest.mark.parametrize("tier", ["fe", "modal"])
+def test_mean_drive_force_follows_the_friction_drive_law(tmp_path, tier):
     ratios = [0.0, 0.5, 0.7, 0.85, 0.92, 0.95, 0.97, 1.2]
     measured = []
     for r in ratios:
-        normal, drive, results = mean_forces(tmp_path, f"v{r}", r)
+        normal, drive, results = mean_forces(tmp_path, f"v{r}", r, tier=tier)
         assert results["cutbacks"] == 0
         law = fd.force_ratio(r * REF["surface_speed"], REF["surface_speed"], REF["theta_c"])
         measured.append(drive / (REF["mu"] * normal))
@@ -144,7 +148,7 @@ def test_top_face_moves_as_thin_layer_kinematics_say(tmp_path):
     points = [f'points.top_{c}={{coordinates_m=[{x}, {h}], component="{c}"}}' for c in ("x", "z")]
     comm = MPI.COMM_WORLD
     folder = comm.bcast(tmp_path / "free" if comm.rank == 0 else None, root=0)
-    run(load_case(CASE, ["transient.contacts=[]", *points]), folder, comm, lambda *args: None)
+    run_case(CASE, ["transient.contacts=[]", *points], folder, comm=comm, quiet=True)
     with h5py.File(folder / "transient.h5", "r") as f:
         t = f["time_s"][()]
         steady = t >= case.transient.end_time_s - MEASURED_PERIODS * REF["period_s"] - 1e-12

@@ -189,7 +189,13 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
             raise NumericalFailure(f"Craig-Bampton static mode: LU solve failed "
                                    f"(KSP reason {ksp.getConvergedReason()})")
         columns.append(x)
-    frequencies, modes = _fixed_interface_modes(K, M, W, held - lo, n_modes, cutoff_Hz)
+    # the interior: what the boundary (interface, inputs, supports) leaves free; none (a strip whose every node
+    # is interface or prescribed), no fixed-interface modes
+    interior = comm.allreduce((hi - lo) - held.size, op=MPI.SUM)
+    if interior > 0:
+        frequencies, modes = _fixed_interface_modes(K, M, W, held - lo, n_modes, cutoff_Hz, interior)
+    else:
+        frequencies, modes = np.zeros(0), []
     enrichment_Hz = np.zeros(0)
     if n_enrich > 0:
         if enrich_near_Hz is None:
@@ -298,7 +304,8 @@ def _mult(A, x, out):
     return out
 
 
-def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int | None, cutoff_Hz: float | None):
+def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int | None, cutoff_Hz: float | None,
+                           interior: int = MAX_MODES):
     """Lowest fixed-interface modes (mass normalised), by SLEPc shift-invert about 0. With a cutoff,
     the number asked for grows until the highest mode found lies above it."""
     from app.fe.operators import Operators
@@ -306,7 +313,7 @@ def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int |
 
     constraints = ConstraintSet(W, held_owned_local.astype(np.int32), [])
     ops = Operators(K, M)
-    want = n_modes or 16
+    want = min(n_modes or 16, interior)
     dim = W.mesh.geometry.dim
     while True:
         # target 0: the clamped K is non-singular, so the modes nearest 0 are the lowest ones
@@ -316,13 +323,13 @@ def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int |
             raise NumericalFailure(f"fixed-interface modes: SLEPc failed for {want} modes ({exc}); "
                                    f"lower reduction.cutoff_Hz / n_modes") from None
         top = modes[-1].frequency_Hz if modes else 0.0
-        if cutoff_Hz is None or top > cutoff_Hz or want >= MAX_MODES:
+        if cutoff_Hz is None or top > cutoff_Hz or want >= min(MAX_MODES, interior):
             break
         # Weyl: the count below f grows like f^dim; ask once more for what the cutoff needs (+20 %)
         estimate = int(math.ceil(1.2 * len(modes) * (cutoff_Hz / max(top, 1e-30)) ** dim)) + 8
         for m in modes:
             m.vector.destroy()
-        want = min(max(estimate, 2 * want), MAX_MODES)
+        want = min(max(estimate, 2 * want), MAX_MODES, interior)
     keep = [m for m in modes if (n_modes is not None and modes.index(m) < n_modes)
             or (cutoff_Hz is not None and m.frequency_Hz <= cutoff_Hz)]
     for m in modes:

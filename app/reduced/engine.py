@@ -16,17 +16,17 @@ from pathlib import Path
 import numpy as np
 
 from app import series as S
+from app.contact.records import AXES, bodies_record, contact_records, sites_record
+from app.contact.tables import SiteTables
 from app.drive import electrode_amplitudes
 from app.errors import CaseError, NumericalFailure
 from app.killpoint import kill_point
-from app.loop.checkpoint import Found, load_arrays, read_on_root, write_engine_file
+from app.loop.checkpoint import Found, read_on_root, write_engine_file
 from app.reduced import kernel as lk
 from app.reduced.model import ReducedModel, load_or_build
 
 MODEL_FILE = "reduced-model.npz"
 ROWS_PER_CALL = 4096
-AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0), "plane": (0.0, 0.0, 1.0)}
-SHAPES = {"plane": lk.PLANE, "sphere": lk.SPHERE, "cone": lk.CONE}
 
 
 class ModalEngine:
@@ -52,7 +52,6 @@ class ModalEngine:
             self.model, self.from_cache = load_or_build(case, comm, log)
         self.setup_wall_s = time.perf_counter() - start
         self._records()
-        self._tables: dict = {}
 
     @classmethod
     def check(cls, case, comm, log) -> None:
@@ -87,145 +86,16 @@ class ModalEngine:
         self.scheme = lk.Scheme(s.beta, s.gamma, s.alpha_m, s.alpha_f)
         st = cfg.steps
         self.control = lk.Control(st.open_s, st.closed_s, st.change_s, st.min_s, 2.0)
-        self.bodies_record, self.body_slices = self._bodies(gravity)
-        self.contacts_record, self.links_record = self._contacts()
-        self.sites_record = self._sites()
+        self.bodies_record, self.body_slices = bodies_record(case, gdim, gravity)
+        self.contacts_record, self.links_record = contact_records(case)
+        self.sites_record = sites_record(case, model.site_points, model.site_weight, model.site_contact, model.site_rows,
+                                         self.contacts_record, self.bodies_record)
         self.electrodes = list(model.inputs[:model.n_electrodes])
         self.scale_V, amplitudes, phases = electrode_amplitudes(case, self.electrodes)
         self.inputs_record = self._inputs(amplitudes, phases, 1.0)
         self.sample_rows = np.vstack([model.sample_rows, model.charge_rows]) if model.n_electrodes else \
             model.sample_rows
         self.cache = lk.make_cache(free.size, model.site_rows.shape[0])
-
-    def _bodies(self, gravity):
-        case, cfg = self.case, self.cfg
-        gdim = self.model.gdim
-        start, mass, free, load, brake, axis, rate = [], [], [], [], [], [], []
-        reference = np.zeros((max(len(cfg.bodies), 1), 3))
-        slices = {}
-        m = 0
-        for i, b in enumerate(cfg.bodies):
-            if len(b.position_m) != gdim:
-                raise CaseError(case.source, f"transient.bodies[{i}].position_m", f"needs {gdim} coordinates")
-            start.append(m)
-            reference[i, :gdim] = b.position_m
-            velocity = list(b.velocity_m_per_s or [0.0] * gdim)
-            free_axes = [False] * gdim if b.fixed else list(b.free_axes or [True] * gdim)
-            force = np.asarray(b.applied_force_N or [0.0] * gdim, dtype=float)
-            g = np.zeros(gdim) if b.fixed else gravity
-            for k in range(gdim):
-                mass.append(b.mass_kg)
-                free.append(free_axes[k])
-                load.append(b.mass_kg * g[k] + force[k])
-                brake.append(0.0)
-                axis.append((0.0, 0.0, 0.0))
-                rate.append(0.0 if b.fixed or free_axes[k] else velocity[k])
-            for r in b.rotations:
-                mass.append(r.inertia_kg_m2)
-                free.append(r.motion == "free")
-                load.append(r.torque_N_m if r.motion == "free" else 0.0)
-                brake.append(r.brake_N_m_s_per_rad if r.motion == "free" else 0.0)
-                axis.append(AXES[r.axis])
-                rate.append(r.rate_rad_per_s if r.motion == "constant_rate" else 0.0)
-            slices[b.name] = slice(m, m + gdim + len(b.rotations))
-            m += gdim + len(b.rotations)
-        record = lk.Bodies(gdim, np.array(start, np.int64), np.array(mass, float), np.array(free, np.bool_),
-                           np.array(load, float), np.array(brake, float), np.array(axis, float).reshape(m, 3),
-                           np.array(rate, float), reference)
-        return record, slices
-
-    def _contacts(self):
-        cfg = self.cfg
-        index = {b.name: i for i, b in enumerate(cfg.bodies)}
-        rows = []
-        for c in cfg.contacts:
-            if c.kind == "point":
-                continue
-            f = c.friction
-            friction = (f.mu_dynamic, f.static_ratio, f.decay_s_per_m,
-                        f.shear_cap_Pa if c.kind == "surface" else f.force_cap_N,
-                        f.regularisation_speed_m_per_s) if f is not None else (0.0, 1.0, 0.0, 1e20, 1e-4)
-            vector = np.zeros(3)
-            if c.kind == "node":
-                vector[:len(c.normal)] = c.normal
-                rows.append((lk.NODE, lk.SPHERE, index[c.body], vector, c.radius_m, 0.0, c.stiffness, c.damping, 0.0,
-                             1.5, *friction))
-                continue
-            if c.shape == "cone":
-                vector[:] = c.axis
-            elif c.normal is not None:
-                vector[:len(c.normal)] = c.normal
-            rows.append((lk.SURFACE, SHAPES[c.shape], index[c.body], vector, c.radius_m or 0.0,
-                         math.radians(c.half_angle_deg or 0.0), c.stiffness, c.damping, c.rounding_m, 1.0, *friction))
-        cols = list(zip(*rows)) if rows else [[]] * 15
-        contacts = lk.Contacts(np.array(cols[0], np.int64), np.array(cols[1], np.int64), np.array(cols[2], np.int64),
-                               np.array(cols[3], float).reshape(-1, 3), *(np.array(cols[k], float) for k in range(4, 15)))
-        links = []
-        for c in cfg.contacts:
-            if c.kind != "point":
-                continue
-            f = c.friction
-            friction = (f.mu_dynamic, f.static_ratio, f.decay_s_per_m, f.force_cap_N, f.regularisation_speed_m_per_s) \
-                if f is not None else (0.0, 1.0, 0.0, 1e20, 1e-4)
-            direction = np.zeros(3)
-            direction[:len(c.direction)] = np.asarray(c.direction, float) / np.linalg.norm(c.direction)
-            links.append((index[c.lower], index[c.upper], direction, c.touch_distance_m, c.stiffness, c.damping,
-                          c.contact_offset_m, *friction))
-        cols = list(zip(*links)) if links else [[]] * 12
-        links = lk.Links(np.array(cols[0], np.int64), np.array(cols[1], np.int64), np.array(cols[2], float).reshape(-1, 3),
-                         *(np.array(cols[k], float) for k in range(3, 12)))
-        return contacts, links
-
-    def _sites(self):
-        """Sites in the kernel's terms: reference geometry relative to their body and obstacle, excluded initial
-        gaps, diagnostics frames."""
-        from app.reduced.sites import site_frames
-
-        model, cfg = self.model, self.cfg
-        contacts = self.contacts_record
-        kernel_index = {}            # case contact index -> kernel contact index (node and surface contacts)
-        k = 0
-        for i, c in enumerate(cfg.contacts):
-            if c.kind != "point":
-                kernel_index[i] = k
-                k += 1
-        site_contact = np.array([kernel_index[int(c)] for c in model.site_contact], np.int64)
-        ns = site_contact.size
-        rel = np.zeros((ns, 3))
-        lever = np.zeros((ns, 3))
-        gap_ref = np.zeros(ns)
-        normals = np.zeros((ns, 3))
-        n = np.zeros(3)
-        Dn = np.zeros((3, 3))
-        for i in range(ns):
-            c = site_contact[i]
-            b = contacts.body[c]
-            ref = self.bodies_record.reference[b]
-            x = model.site_points[i]
-            lever[i] = x - ref
-            rel[i] = x - ref
-            if contacts.kind[c] == lk.SURFACE and contacts.shape[c] == lk.SPHERE and np.any(contacts.vector[c]):
-                rel[i] = x - (ref + contacts.radius[c] * contacts.vector[c])
-            if contacts.kind[c] == lk.NODE:
-                normals[i] = contacts.vector[c]
-                continue
-            gap = lk.shape_gap(contacts.shape[c], contacts.vector[c], contacts.radius[c], contacts.half_angle[c],
-                               rel[i].copy(), n, Dn)
-            normals[i] = n
-            case_index = next(j for j, kk in kernel_index.items() if kk == c)
-            if cfg.contacts[case_index].exclude_initial_gap:
-                gap_ref[i] = gap
-        frames = np.zeros((ns, 3, 3))
-        for i in range(ns):
-            c = site_contact[i]
-            b = contacts.body[c]
-            sl = self.bodies_record.start[b]
-            gdim = model.gdim
-            body = cfg.bodies[b]
-            spin = np.array(AXES[body.rotations[0].axis]) if body.rotations else None
-            frames[i] = site_frames(model.site_points[i:i + 1], normals[i:i + 1], spin, self.bodies_record.reference[b])[0]
-            _ = sl, gdim
-        return lk.Sites(model.site_rows, rel, lever, gap_ref, model.site_weight, site_contact, frames)
 
     def _inputs(self, amplitudes, phases, scale):
         """The prescribed coordinates' time functions: electrodes (amplitude [V], phase), then each base motion's
@@ -268,16 +138,17 @@ class ModalEngine:
                      np.zeros((cap, n_c + n_l, 3)), np.zeros((cap, n_c, 3)), np.zeros((cap, n_c)),
                      np.zeros((cap, n_c)), np.zeros((cap, n_c + n_l), np.bool_), np.zeros((cap, n_c + n_l)),
                      np.zeros((cap, 5)), np.zeros((cap, n_c, 3)))
-        self.site_sums = np.zeros((self.sites_record.contact.size, 5))
+        ns = self.sites_record.contact.size
+        sampled = [(name, self.sites_record.contact == k) for k, name in enumerate(self._kernel_contact_names())
+                   if self.contacts_record.kind[k] == lk.SURFACE]
+        self.tables = SiteTables(sampled, ns, self.cfg.output_interval_s)
+        self.site_sums = self.tables.sums
         self.q, self.v, self.a = np.zeros(n), np.zeros(n), np.zeros(n)
         self.z, self.zd, self.zdd = np.zeros(m), np.zeros(m), np.zeros(m)
         self.istate = np.zeros(lk.N_ISTATE, np.int64)
         self.fstate = np.zeros(lk.N_FSTATE)
         self.fstate[lk.F_CAP] = np.inf
         self.sums = lk.Sums(np.zeros(n_c + n_l), np.full(n_c + n_l, np.nan), np.zeros(2))   # power: none yet
-        self.sites_interval_s = self.cfg.output_interval_s
-        self.next_sites_s = self.sites_interval_s
-        self.sites_started_s = 0.0
 
     def _harmonic(self, scale: float) -> np.ndarray:
         """Complex steady-state coordinates for the electrodes' phasors (amplitude ``scale`` x weight,
@@ -332,7 +203,8 @@ class ModalEngine:
         a[F] = np.linalg.solve(model.M[np.ix_(F, F)], rhs[F])
         self._bodies_at_rest()
         self._seat()
-        self._sites_geometry_table()
+        if self.case.output.contact_sites:
+            self.tables.geometry(self.model.site_points, self.model.site_weight)
         self._started()
 
     def _bodies_at_rest(self) -> None:
@@ -412,14 +284,13 @@ class ModalEngine:
     def restore(self, found: Found) -> None:
         self._allocate()
         data = found.arrays
-        for key in ("q", "v", "a", "z", "zd", "zdd", "istate", "fstate", "site_sums"):
+        for key in ("q", "v", "a", "z", "zd", "zdd", "istate", "fstate"):
             if key not in data:
                 raise CaseError(str(found.pointer), key, "missing in the checkpoint's state")
             getattr(self, key)[:] = data[key]
-        for k, name in enumerate(("dissipated", "power", "damping")):
+        for name in ("dissipated", "power", "damping"):
             getattr(self.sums, name)[:] = data[f"sums_{name}"]
-        self.next_sites_s = float(found.engine["next_sites_s"])
-        self.sites_started_s = float(found.engine["sites_started_s"])
+        self.tables.restore(data, found.engine)
         self.scale_V = float(found.engine["drive_voltage_V"])
         _, self._weights, self._phases = electrode_amplitudes(self.case, self.electrodes)
         self.inputs_record = self._inputs(self._weights, self._phases, self.scale_V)
@@ -430,7 +301,15 @@ class ModalEngine:
         self.log(f"modal tier: {cfg.initial_state} start, drive {self.scale_V:.4g} V at {cfg.drive.frequency_Hz:.2f} "
                  f"Hz, {len(cfg.bodies)} rigid bodies, {len(cfg.contacts)} contacts, {self.model.size} coordinates, "
                  f"{self.sites_record.contact.size} contact sites, {cfg.end_time_s * 1e3:.4g} ms")
-        self._t0_wall = time.perf_counter()
+        # load (or compile) the kernel on a call that takes no step: set-up, not time-loop cost
+        mark = time.perf_counter()
+        saved = (self.fstate.copy(), self.istate.copy())
+        out = lk.Outputs(*(arr[:1] for arr in self._out), self.site_sums)
+        lk.run(self.t, self.q, self.v, self.a, self.z, self.zd, self.zdd, self.istate, self.fstate, self.sums,
+               self.structure, self.inputs_record, self.scheme, self.control, self.bodies_record, self.sites_record,
+               self.contacts_record, self.links_record, self.sample_rows, self.cache, out, self.case.output.energies)
+        self.fstate[:], self.istate[:] = saved
+        self.compile_wall_s = time.perf_counter() - mark
         self._loop_wall = 0.0
 
     @property
@@ -483,7 +362,7 @@ class ModalEngine:
         while self.t < t_end * (1 - 1e-12) and taken < max_steps:
             cap = int(min(ROWS_PER_CALL, max_steps - taken))
             out = lk.Outputs(*(arr[:cap] for arr in self._out), self.site_sums)
-            stop = min(stop_at_s, self.next_sites_s * (1 - 1e-12)) if sites_on else stop_at_s
+            stop = min(stop_at_s, self.tables.next_s * (1 - 1e-12)) if sites_on else stop_at_s
             self.fstate[lk.F_STOP] = stop
             code, rows = lk.run(t_end, self.q, self.v, self.a, self.z, self.zd, self.zdd, self.istate, self.fstate,
                                 self.sums, self.structure, self.inputs_record, self.scheme, self.control,
@@ -496,8 +375,8 @@ class ModalEngine:
                 raise NumericalFailure(f"modal tier: a step failed at t = {self.t:.6e} s after "
                                        f"{self.istate[lk.I_CUTBACKS]} cut-backs (dt below min_s = "
                                        f"{self.control.min_s:.3e} s)")
-            if sites_on and self.t >= self.next_sites_s * (1 - 1e-12):
-                self._sites_row()
+            if sites_on and self.tables.due(self.t):
+                self.tables.row(self.t)
             if code == lk.DONE or (code == lk.STOPPED and self.t >= stop_at_s):
                 break
         self._loop_wall += time.perf_counter() - start
@@ -550,57 +429,16 @@ class ModalEngine:
                 k += 1
         return block
 
-    # ---------------------------------------------------------------- per-site diagnostics (tables)
-    def _sites_geometry_table(self) -> None:
-        """Once per run: each sampled contact's sites (position [m], area [m^2]) as a table."""
-        if not self.case.output.contact_sites:
-            return
-        for k, name in enumerate(self._kernel_contact_names()):
-            mine = self.sites_record.contact == k
-            if not mine.any() or self.contacts_record.kind[k] != lk.SURFACE:
-                continue
-            table = np.column_stack([self.model.site_points[mine], self.model.site_weight[mine]])
-            self._tables[S.sites_table(name, "geometry")] = ("m, m, m, m^2", table)
-
-    def _sites_row(self) -> None:
-        """A diagnostics row per sampled contact: over the interval since the last, per site, the mean pressure
-        [Pa] and the fractions of time closed, sticking, slipping along +e1 and along -e1."""
-        duration = self.t - self.sites_started_s
-        if duration <= 0:
-            return
-        for k, name in enumerate(self._kernel_contact_names()):
-            mine = self.sites_record.contact == k
-            if not mine.any() or self.contacts_record.kind[k] != lk.SURFACE:
-                continue
-            sums = self.site_sums[mine] / duration
-            self._append(S.sites_table(name, "time"), "s", np.array([[self.sites_started_s, self.t]]))
-            for col, key, unit in ((0, "pressure", "Pa"), (1, "closed", "1"), (2, "stick", "1"),
-                                   (3, "slip_positive", "1"), (4, "slip_negative", "1")):
-                self._append(S.sites_table(name, key), unit, sums[:, col].reshape(1, -1))
-        self.site_sums[:] = 0.0
-        self.sites_started_s = self.t
-        while self.next_sites_s <= self.t * (1 + 1e-12):
-            self.next_sites_s += self.sites_interval_s
-
-    def _append(self, name: str, unit: str, rows: np.ndarray) -> None:
-        if name in self._tables:
-            unit0, old = self._tables[name]
-            self._tables[name] = (unit0, np.vstack([old, rows]))
-        else:
-            self._tables[name] = (unit, rows)
-
     def take_tables(self) -> dict:
-        out, self._tables = self._tables, {}
-        return out
+        return self.tables.take()
 
     # ---------------------------------------------------------------- checkpoints, fields, results
     def snapshot(self) -> tuple[dict | None, dict]:
+        site_arrays, site_record = self.tables.snapshot()
         arrays = {"q": self.q, "v": self.v, "a": self.a, "z": self.z, "zd": self.zd, "zdd": self.zdd,
-                  "istate": self.istate, "fstate": self.fstate, "site_sums": self.site_sums,
-                  "sums_dissipated": self.sums.dissipated, "sums_power": self.sums.power,
-                  "sums_damping": self.sums.damping}
-        record = {"drive_voltage_V": self.scale_V, "next_sites_s": self.next_sites_s,
-                  "sites_started_s": self.sites_started_s}
+                  "istate": self.istate, "fstate": self.fstate, "sums_dissipated": self.sums.dissipated,
+                  "sums_power": self.sums.power, "sums_damping": self.sums.damping, **site_arrays}
+        record = {"drive_voltage_V": self.scale_V, **site_record}
         return (arrays if self.comm.rank == 0 else None), record
 
     def checkpoint_files(self, out_dir: Path) -> dict[str, str]:
@@ -636,7 +474,8 @@ class ModalEngine:
                              "resonances_near_drive_Hz": model.resonances_Hz(cfg.drive.frequency_Hz).tolist(),
                              "contact_sites": int(self.sites_record.contact.size),
                              "fe_dofs": model.fe_dofs, "build_wall_s": model.reduction_wall_s,
-                             "from_cache": self.from_cache, "setup_wall_s": self.setup_wall_s}}
+                             "from_cache": self.from_cache, "setup_wall_s": self.setup_wall_s,
+                             "kernel_load_wall_s": self.compile_wall_s}}
         self.log(f"modal tier: {self.steps} steps, {out['newton_iterations']} Newton iterations, "
                  f"{out['cutbacks']} cut-backs, {self._loop_wall:.2f} s in the compiled loop")
         return out

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from app.contact.sites import contact_site_sets
 from app.errors import CaseError, NumericalFailure
 
 CACHE_VERSION = 3
@@ -169,110 +170,6 @@ def load_or_build(case, comm, log) -> tuple[ReducedModel, bool]:
 
 
 # ------------------------------------------------------------------ building
-def node_dofs(model, point: np.ndarray) -> tuple[np.ndarray, list[int]]:
-    """(node coordinates, global displacement DOF per axis or -1 if held) of the mesh node nearest ``point``
-    (the same node on every rank)."""
-    comm = model.comm
-    W = model.W
-    imap = W.dofmap.index_map
-    n_owned = imap.size_local
-    held = set(np.asarray(model.support_dofs).tolist())
-    out, x_node = [], None
-    for k in range(model.mesh.geometry.dim):
-        V, parent = W.sub(0).sub(k).collapse()
-        parent = np.asarray(parent)
-        coords = V.tabulate_dof_coordinates()[:, : point.size]
-        owned = parent < n_owned
-        dist = np.linalg.norm(coords - point[: coords.shape[1]], axis=1)
-        dist[~owned] = np.inf
-        best = int(np.argmin(dist)) if dist.size else -1
-        d = float(dist[best]) if best >= 0 else np.inf
-        _, owner = comm.allreduce((d, comm.rank), op=MPI.MINLOC)
-        if comm.rank == owner:
-            local = int(parent[best])
-            dof = -1 if local in held else int(imap.local_to_global(np.array([local], dtype=np.int32))[0])
-            x = coords[best]
-        else:
-            dof, x = None, None
-        out.append(comm.bcast(dof, root=owner))
-        x_node = comm.bcast(x, root=owner)
-    return np.asarray(x_node, dtype=float), out
-
-
-def farthest_point_subset(points: np.ndarray, count: int) -> np.ndarray:
-    """``count`` indices of ``points`` spread over them (greedy farthest-point sampling from the first)."""
-    chosen = [0]
-    distance = np.linalg.norm(points - points[0], axis=1)
-    while len(chosen) < count:
-        nxt = int(np.argmax(distance))
-        chosen.append(nxt)
-        distance = np.minimum(distance, np.linalg.norm(points - points[nxt], axis=1))
-    return np.array(sorted(chosen))
-
-
-def contact_site_sets(case, model, log=None):
-    """The site sets of the case's node and surface contacts (app/reduced/sites.py) and the interface: global
-    DOFs in interface-coordinate order. Every check that needs the mesh (facet groups, node points, the
-    interface size) raises the one-line CaseError here, so ``validate`` runs it without reducing."""
-    from app.fe.model import facet_group_tag
-    from app.reduced.sites import SiteSet, ring_sites
-    from app.reduced.surface import surface_nodes
-    from forms.kinematics import volume_weight
-
-    file, cfg = case.source, case.transient
-    gdim = model.mesh.geometry.dim
-    weight = volume_weight(model.mesh, model.kind, case.geometry.thickness_m)
-    bodies = {b.name: b for b in cfg.bodies}
-    sets, areas = [], np.zeros(len(cfg.contacts))
-    for i, c in enumerate(cfg.contacts):
-        key = f"transient.contacts[{i}]"
-        if c.kind == "node":
-            if c.node_point not in case.points:
-                raise CaseError(file, f"{key}.node_point", f"unknown point {c.node_point!r} (see [points])")
-            normal = np.asarray(c.normal, dtype=float)
-            if normal.size != gdim or not math.isclose(np.linalg.norm(normal), 1.0, rel_tol=1e-9):
-                raise CaseError(file, f"{key}.normal", f"must be a unit vector with {gdim} components")
-            x_node, dofs = node_dofs(model, np.asarray(case.points[c.node_point].coordinates_m, dtype=float))
-            dofs = np.array(dofs, dtype=np.int64)
-            if c.friction is None:      # frictionless: only the normal's components move the gap
-                dofs = np.where(normal != 0.0, dofs, -1)
-            if (dofs < 0).all():
-                raise CaseError(file, f"{key}.node_point", "the node has no free displacement DOF along the normal")
-            point = np.zeros(3)
-            point[:gdim] = x_node
-            sets.append(SiteSet(i, c.name, point.reshape(1, 3), np.ones(1), dofs.reshape(1, gdim),
-                                dofs.reshape(1, gdim)))
-            continue
-        if c.kind != "surface":
-            continue
-        tag = facet_group_tag(model.mesh_data.facet_names, c.facets, file, f"{key}.facets")
-        nodes = surface_nodes(model.W, model.W.sub(0), model.mesh_data.facet_tags, tag, weight, model.support_dofs)
-        if nodes.size == 0:
-            raise CaseError(file, f"{key}.facets", f"facet group {c.facets!r} has no nodes")
-        areas[i] = float(nodes.area_m2.sum())
-        if c.sampling == "ring":
-            k = case.reduction.interface_nodes or min(64, nodes.size)
-            sets.append(ring_sites(i, c, case, bodies[c.body], nodes, areas[i], c.sample_points, k,
-                                   case.reduction.site_displacement, key))
-            continue
-        points = np.zeros((nodes.size, 3))
-        points[:, :gdim] = nodes.coordinates_m
-        k = case.reduction.interface_nodes
-        if k > nodes.size:
-            raise CaseError(file, "reduction.interface_nodes", f"the facet group of {key} has only {nodes.size} nodes")
-        chosen = np.arange(nodes.size) if k == 0 else farthest_point_subset(points, k)
-        sets.append(SiteSet(i, c.name, points, nodes.area_m2, nodes.global_dofs[chosen], nodes.global_dofs))
-    interface: list[int] = []
-    seen = set()
-    for s in sets:
-        for row in s.interface_dofs:
-            for d in row:
-                if d >= 0 and int(d) not in seen:
-                    seen.add(int(d))
-                    interface.append(int(d))
-    return sets, np.array(interface, dtype=np.int64), areas
-
-
 def base_motion_patterns(case, model) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Each travelling-wave base motion's four patterns (n cos kx, n sin kx, e cos kx, e sin kx) on its DOFs:
     name -> (local DOFs, values at unit amplitude)."""
@@ -303,7 +200,7 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
     if model.electrodes_of("floating"):
         raise CaseError(file, "electrodes", "floating electrodes are not supported by the transient analysis")
     gdim = model.mesh.geometry.dim
-    sets, interface, areas = contact_site_sets(case, model, log)
+    sets, interface, areas = contact_site_sets(case, model)
     damping_Hz = case.damping.reference_frequency_Hz or cfg.drive.frequency_Hz
     log(f"modal tier: assembling {model.W.dofmap.index_map.size_global * model.W.dofmap.index_map_bs} DOFs")
     ops = assemble_operators(model, damping_frequency_Hz=damping_Hz)
@@ -368,7 +265,7 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
 def site_rows(sets, interface: np.ndarray, basis, model, gdim: int) -> np.ndarray:
     """(n_sites * gdim, n) displacement rows of every site: T at a node site's DOFs; a ring's sites
     interpolated from its interface nodes or evaluated in the reduced field (app/reduced/sites.py)."""
-    from app.reduced.sites import ring_interface_rows
+    from app.contact.sites import ring_interface_rows
 
     n = basis.size
     position = {int(d): j for j, d in enumerate(interface)}
@@ -410,12 +307,16 @@ def _rows_at_points(points: np.ndarray, basis, model, name: str) -> np.ndarray:
         raise NumericalFailure(f"contact {name!r}: {probe.missing.size} sample points lie outside the mesh "
                                f"(the first at {points[probe.missing[0]].tolist()})")
     f = fem.Function(model.W)
+    V, parent = model.W.sub(0).collapse()          # the displacement space: eval takes no mixed element
+    parent = np.asarray(parent)
+    u = fem.Function(V)
     n_owned = model.W.dofmap.index_map.size_local * model.W.dofmap.index_map_bs
     out = np.zeros((points.shape[0] * gdim, basis.size))
     for j, column in enumerate(basis.columns):
         f.x.array[:n_owned] = column.array_r
         f.x.scatter_forward()
-        values = probe(f)
+        u.x.array[:] = f.x.array[parent]
+        values = probe(u)
         out[:, j] = values[:, :gdim].reshape(-1)
     return out
 

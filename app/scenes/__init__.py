@@ -24,57 +24,11 @@ from __future__ import annotations
 
 import importlib
 import os
-from pathlib import Path
-from typing import Protocol
 
+from app.scenes.registry import SCENES, Scene, SceneReport, register, scene_named
 
-class Scene(Protocol):
-    name: str
-    sweep_columns: tuple[str, ...]
-
-    def check(self, case) -> None: ...
-
-    def statistics(self, data: dict, case, results: dict) -> dict: ...
-
-    def table_rows(self, results: dict) -> list[tuple[str, str, str]]: ...
-
-    def outputs(self, results: dict, out_dir: Path, title: str, plots: bool = True) -> list[str]: ...
-
-    def steady_floors(self, case) -> tuple[float, float]: ...
-
-
-class SceneReport:
-    """A scene that adds nothing: subclass it and override what the scene knows."""
-
-    name = ""
-    sweep_columns: tuple[str, ...] = ()
-
-    def check(self, case) -> None:
-        return None
-
-    def statistics(self, data: dict, case, results: dict) -> dict:
-        return {}
-
-    def table_rows(self, results: dict) -> list[tuple[str, str, str]]:
-        return []
-
-    def outputs(self, results: dict, out_dir: Path, title: str, plots: bool = True) -> list[str]:
-        return []
-
-    def steady_floors(self, case) -> tuple[float, float]:
-        return 0.0, 0.0
-
-
-SCENES: dict[str, Scene] = {}
+__all__ = ["SCENES", "Scene", "SceneReport", "register", "scene_named", "scene_of"]
 _SHIPPED = ("app.scenes.percussion_drill", "app.scenes.wwusm_motor")
-
-
-def register(scene: Scene) -> Scene:
-    """Add ``scene`` to the registry under ``scene.name`` (a later registration of the same name replaces it)."""
-    if not scene.name:
-        raise ValueError("a scene needs a name")
-    SCENES[scene.name] = scene
-    return scene
 
 
 def _load() -> None:
@@ -94,10 +48,6 @@ def scene_of(case) -> Scene | None:
     with one line first)."""
     name = getattr(case, "scene", None)
     return None if name is None else SCENES[name]
-
-
-def scene_named(name: str | None) -> Scene | None:
-    return None if name is None else SCENES.get(name)
 
 
 _load()

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from app import series as S
+from app.errors import CaseError
 from app.fe.layout import CellLayout
 from app.killpoint import kill_point
 from app.loop.checkpoint import Found
@@ -35,8 +36,10 @@ class FEEngine:
         self.layout = CellLayout(self.tm.model.W)
         s = cfg.steps
         sizes = StepSizes(open_s=s.open_s, closed_s=s.closed_s, change_s=s.change_s, min_s=s.min_s)
-        self.stepper = TimeStepper(self.system, StepController(sizes))
+        self.stepper = TimeStepper(self.system, StepController(sizes), track_energy=case.output.energies)
         self.sampler = PointSampler(self.tm.model)
+        self.charges = self._charge_vectors() if case.output.energies else {}
+        self.sites = SiteProbe(case, self.tm) if case.output.contact_sites else None
         self.end_time_s = cfg.end_time_s
         self.checkpoint_interval_steps = cfg.checkpoint_interval_steps
         self.state: TransientState | None = None
@@ -56,6 +59,8 @@ class FEEngine:
     # ---------------------------------------------------------------- start / restore
     def start(self) -> None:
         self.state, self.voltage_V = self.tm.initial_state()
+        if self.sites is not None:
+            self.sites.tables.geometry(self.sites.points, self.sites.record.weight)
         self._started()
 
     def restore(self, found: Found) -> None:
@@ -70,7 +75,24 @@ class FEEngine:
         self.voltage_V = float(found.engine["voltage_V"])
         self.tm.resume_drive(self.voltage_V)
         self.stepper.restore(found.engine["stepper"])
+        if self.sites is not None:
+            self.sites.tables.restore(data, found.engine)
         self._started()
+
+    def _charge_vectors(self) -> dict:
+        """Per driven electrode the vector w = K 1_e: its charge Q_e = -w . x [C] (the reaction of its potential
+        DOFs, as the modal tier's charge rows; K symmetric, assembled without boundary conditions)."""
+        model, fe = self.tm.model, self.tm.fe
+        out = {}
+        for name in model.electrodes_of("voltage"):
+            ones = fe.new_vector()
+            dofs = np.asarray(model.electrode_dofs[name])
+            ones.array_w[dofs[dofs < fe.n_owned]] = 1.0
+            w = fe.new_vector()
+            fe.K.mult(ones, w)
+            out[name] = w
+            ones.destroy()
+        return out
 
     def _started(self) -> None:
         cfg = self.cfg
@@ -89,7 +111,13 @@ class FEEngine:
 
     # ---------------------------------------------------------------- stepping
     def columns(self) -> dict[str, str]:
-        return units(self.tm, self.case)
+        out = units(self.tm, self.case)
+        if self.charges:
+            out.update({S.electrode_charge(name): "C" for name in self.charges})
+            out.update(S.ENERGY_COLUMNS)
+        if self.sites is not None:
+            out.update(self.sites.columns())
+        return out
 
     def advance(self, t_end: float, max_steps: int, stop_at_s: float) -> dict[str, np.ndarray]:
         rows = []
@@ -98,6 +126,8 @@ class FEEngine:
             self.state, rec = self.stepper.step(self.state, t_end)
             rows.append(self._row(rec))
             taken += 1
+            if self.sites is not None and self.sites.tables.due(self.state.t):
+                self.sites.tables.row(self.state.t)
             kill_point("step")
             if self.state.t >= stop_at_s:
                 break
@@ -125,17 +155,34 @@ class FEEngine:
         for j, c in enumerate(system.interactions):
             row.update(c.row(rec["contact_force_N"][c.name], bool(rec["contact_closed"][j])))
             row[S.contact_dissipated(c.name)] = rec["dissipated_J"][c.name]
+        if self.charges:
+            x = system.solution_vector
+            for name, w in self.charges.items():
+                row[S.electrode_charge(name)] = -w.dot(x)
+            energy = rec["energy_J"]
+            row["kinetic_energy_J"] = energy["kinetic_fe_J"]
+            row["strain_energy_J"] = energy["strain_fe_J"]
+            row["rigid_kinetic_energy_J"] = energy["kinetic_rigid_J"]
+            row["contact_energy_J"] = energy["contact_J"]
+            row["damping_dissipated_J"] = rec["damping_dissipated_J"]
+        if self.sites is not None:
+            row.update(self.sites.step(self.state, rec["dt_s"]))
         return row
 
     def take_tables(self) -> dict:
-        return {}
+        return self.sites.tables.take() if self.sites is not None else {}
 
     # ---------------------------------------------------------------- checkpoints, fields, results
     def snapshot(self) -> tuple[dict | None, dict]:
         state = self.state
         fields = {k: self.layout.gather(getattr(state, k)) for k in ("u", "v", "a")}
-        arrays = dict(z=state.z, zd=state.zd, zdd=state.zdd, **fields) if self.comm.rank == 0 else None
-        return arrays, {"voltage_V": self.voltage_V, "stepper": self.stepper.snapshot()}
+        record = {"voltage_V": self.voltage_V, "stepper": self.stepper.snapshot()}
+        site_arrays = {}
+        if self.sites is not None:
+            site_arrays, site_record = self.sites.tables.snapshot()
+            record.update(site_record)
+        arrays = dict(z=state.z, zd=state.zd, zdd=state.zdd, **fields, **site_arrays) if self.comm.rank == 0 else None
+        return arrays, record
 
     def checkpoint_files(self, out_dir: Path) -> dict[str, str]:
         return {}
@@ -175,3 +222,71 @@ class FEEngine:
 
     def close(self) -> None:
         self.system.destroy()
+
+
+class SiteProbe:
+    """The FE tier's per-site diagnostics (``output.contact_sites``): the sites of every sampled surface contact
+    (app/contact/sites.py, the modal tier's sampling) evaluated after every step from the FE fields, with the
+    contact law at a point (app/contact/law.py), into the tables of app/contact/tables.py; and each contact's
+    first site's displacement in its frame (the contact point's path, ``<contact>_probe_displacement_m``)."""
+
+    def __init__(self, case, tm):
+        from dolfinx import fem
+
+        from app.contact.law import site_work
+        from app.contact.records import bodies_record, contact_records, sites_record
+        from app.contact.sites import contact_site_sets
+        from app.contact.tables import SiteTables
+        from app.fe.probe import PointSet
+
+        model = tm.model
+        self.gdim = gdim = model.mesh.geometry.dim
+        sets, _, _ = contact_site_sets(case, model)
+        surface = [s for s in sets if case.transient.contacts[s.contact].kind == "surface"]
+        self.points = np.concatenate([s.points_m for s in surface]) if surface else np.zeros((0, 3))
+        weight = np.concatenate([s.weight for s in surface]) if surface else np.zeros(0)
+        index = np.concatenate([np.full(s.points_m.shape[0], s.contact) for s in surface]).astype(np.int64) \
+            if surface else np.zeros(0, np.int64)
+        gravity = np.asarray(case.transient.loads.gravity_m_per_s2 or [0.0] * gdim, dtype=float)
+        self.bodies, self.slices = bodies_record(case, gdim, gravity)
+        self.contacts, _ = contact_records(case)
+        self.record = sites_record(case, self.points, weight, index, np.zeros((self.points.shape[0] * gdim, 0)),
+                                   self.contacts, self.bodies)
+        self.pointset = PointSet(model.mesh, self.points[:, :gdim])
+        if self.pointset.missing.size:
+            raise CaseError(case.source, "transient.contacts", f"{self.pointset.missing.size} contact sample points "
+                                                               "lie outside the mesh")
+        V, parent = model.W.sub(0).collapse()          # the displacement space: eval takes no mixed element
+        self.parent = np.asarray(parent)
+        self.u = fem.Function(V)
+        self.v = fem.Function(V)
+        names = [c.name for c in case.transient.contacts]
+        self.tables = SiteTables([(s.name, index == s.contact) for s in surface], self.points.shape[0],
+                                 case.transient.output_interval_s)
+        self.first = {s.name: int(np.argmax(index == s.contact)) for s in surface}
+        self.work = site_work(self.bodies.mass.size)
+        self.rigid = tm.rigid
+        self.names = names
+
+    def columns(self) -> dict[str, str]:
+        return {S.contact_probe(name): "m (n, e1, e2)" for name in self.first}
+
+    def step(self, state, dt: float) -> dict:
+        """Accumulate the step's site states (end-of-step fields) and return the probe columns of the row."""
+        from app.contact.law import accumulate_sites
+
+        gdim = self.gdim
+        self.u.x.array[:] = state.u[self.parent]
+        self.v.x.array[:] = state.v[self.parent]
+        y = np.zeros((self.points.shape[0], 3))
+        v = np.zeros_like(y)
+        y[:, :gdim] = self.pointset(self.u)[:, :gdim]
+        v[:, :gdim] = self.pointset(self.v)[:, :gdim]
+        z, zd = self._packed(state.z), self._packed(state.zd)
+        accumulate_sites(y, v, z, zd, dt, self.record, self.contacts, self.bodies, self.tables.sums, self.work)
+        return {S.contact_probe(name): self.record.frame[i] @ y[i] for name, i in self.first.items()}
+
+    def _packed(self, values: np.ndarray) -> np.ndarray:
+        """The FE tier's rigid coordinates in the law's body-major packing (the same: translations, then
+        angles, body by body)."""
+        return np.asarray(values, dtype=float)

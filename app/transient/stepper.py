@@ -52,6 +52,7 @@ class EnergyAccount:
     def __init__(self, system: CoupledSystem):
         self.system = system
         self.work_J = 0.0
+        self.damping_J = 0.0
         fe = system.fe
         if fe is not None:
             self._x = fe.new_vector()
@@ -80,7 +81,14 @@ class EnergyAccount:
         return out
 
     def add_work(self, old: TransientState, new: TransientState) -> None:
+        """The external loads' work over a step (trapezoidal) and the structure's damping loss,
+        dt vm.C vm with vm = (v_old + v_new) / 2 (the discrete loss of average acceleration)."""
         sysm = self.system
+        if sysm.fe is not None and sysm.fe.C is not None:
+            n = sysm.n_fe
+            self._x.array_w[:] = 0.5 * (old.v[:n] + new.v[:n])
+            sysm.fe.C.mult(self._x, self._y)
+            self.damping_J += (new.t - old.t) * self._x.dot(self._y)
         dz = (new.z - old.z) * sysm.rigid.free_mask
         f0 = sysm.rigid.external_force_N(old.t) + sysm.rigid.brake_force_N(old.zd)
         f1 = sysm.rigid.external_force_N(new.t) + sysm.rigid.brake_force_N(new.zd)
@@ -127,6 +135,7 @@ class TimeStepper:
         if self.energy is not None:
             rec["energy_J"] = self.energy.energy_J(state)
             rec["external_work_J"] = self.energy.work_J
+            rec["damping_dissipated_J"] = self.energy.damping_J
         return rec
 
     # ------------------------------------------------------------ checkpoints
@@ -141,7 +150,9 @@ class TimeStepper:
                 "factorisations": self._factorisations(),
                 "dissipated_J": dict(self.dissipated_J), "dissipation_W": dict(self.dissipation_W),
                 "statistics": {k: v for k, v in stats.as_dict().items() if k not in _DERIVED},
-                "failure_reasons": {str(k): v for k, v in stats.failure_reasons.items()}}
+                "failure_reasons": {str(k): v for k, v in stats.failure_reasons.items()},
+                "energy": ({"work_J": self.energy.work_J, "damping_J": self.energy.damping_J}
+                           if self.energy is not None else None)}
 
     def restore(self, snap: dict) -> None:
         ctl, stats = self.controller, self.stats
@@ -155,6 +166,9 @@ class TimeStepper:
         for key, value in snap["statistics"].items():
             setattr(stats, key, value)
         stats.failure_reasons = {int(k): v for k, v in snap["failure_reasons"].items()}
+        if self.energy is not None and snap.get("energy"):
+            self.energy.work_J = float(snap["energy"]["work_J"])
+            self.energy.damping_J = float(snap["energy"]["damping_J"])
 
     def _factorisations(self) -> int:
         cache = self.system.cache

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from app import series as S
-from app.scenes import SceneReport, register
+from app.scenes.registry import SceneReport, register
 from app.transient.impacts import closed_intervals, period_average
 
 

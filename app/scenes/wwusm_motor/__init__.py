@@ -22,7 +22,7 @@ import numpy as np
 
 from app import series as S
 from app.errors import CaseError
-from app.scenes import SceneReport, register
+from app.scenes.registry import SceneReport, register
 
 DEFAULT_WINDOW = 20
 

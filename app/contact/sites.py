@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from mpi4py import MPI
 
 from app.errors import CaseError
 
@@ -171,3 +172,106 @@ def site_frames(points: np.ndarray, normals: np.ndarray, spin_axis: np.ndarray |
         t = t / norm if norm > 0 else np.array([0.0, 0.0, 1.0])
         frames[i] = [n, t, np.cross(n, t)]
     return frames
+
+
+def node_dofs(model, point: np.ndarray) -> tuple[np.ndarray, list[int]]:
+    """(node coordinates, global displacement DOF per axis or -1 if held) of the mesh node nearest ``point``
+    (the same node on every rank)."""
+    comm = model.comm
+    W = model.W
+    imap = W.dofmap.index_map
+    n_owned = imap.size_local
+    held = set(np.asarray(model.support_dofs).tolist())
+    out, x_node = [], None
+    for k in range(model.mesh.geometry.dim):
+        V, parent = W.sub(0).sub(k).collapse()
+        parent = np.asarray(parent)
+        coords = V.tabulate_dof_coordinates()[:, : point.size]
+        owned = parent < n_owned
+        dist = np.linalg.norm(coords - point[: coords.shape[1]], axis=1)
+        dist[~owned] = np.inf
+        best = int(np.argmin(dist)) if dist.size else -1
+        d = float(dist[best]) if best >= 0 else np.inf
+        _, owner = comm.allreduce((d, comm.rank), op=MPI.MINLOC)
+        if comm.rank == owner:
+            local = int(parent[best])
+            dof = -1 if local in held else int(imap.local_to_global(np.array([local], dtype=np.int32))[0])
+            x = coords[best]
+        else:
+            dof, x = None, None
+        out.append(comm.bcast(dof, root=owner))
+        x_node = comm.bcast(x, root=owner)
+    return np.asarray(x_node, dtype=float), out
+
+
+def farthest_point_subset(points: np.ndarray, count: int) -> np.ndarray:
+    """``count`` indices of ``points`` spread over them (greedy farthest-point sampling from the first)."""
+    chosen = [0]
+    distance = np.linalg.norm(points - points[0], axis=1)
+    while len(chosen) < count:
+        nxt = int(np.argmax(distance))
+        chosen.append(nxt)
+        distance = np.minimum(distance, np.linalg.norm(points - points[nxt], axis=1))
+    return np.array(sorted(chosen))
+
+
+def contact_site_sets(case, model):
+    """The site sets of the case's node and surface contacts (app/reduced/sites.py) and the interface: global
+    DOFs in interface-coordinate order. Every check that needs the mesh (facet groups, node points, the
+    interface size) raises the one-line CaseError here, so ``validate`` runs it without reducing."""
+    from app.contact.surface import surface_nodes
+    from app.fe.model import facet_group_tag
+    from forms.kinematics import volume_weight
+
+    file, cfg = case.source, case.transient
+    gdim = model.mesh.geometry.dim
+    weight = volume_weight(model.mesh, model.kind, case.geometry.thickness_m)
+    bodies = {b.name: b for b in cfg.bodies}
+    sets, areas = [], np.zeros(len(cfg.contacts))
+    for i, c in enumerate(cfg.contacts):
+        key = f"transient.contacts[{i}]"
+        if c.kind == "node":
+            if c.node_point not in case.points:
+                raise CaseError(file, f"{key}.node_point", f"unknown point {c.node_point!r} (see [points])")
+            normal = np.asarray(c.normal, dtype=float)
+            if normal.size != gdim or not math.isclose(np.linalg.norm(normal), 1.0, rel_tol=1e-9):
+                raise CaseError(file, f"{key}.normal", f"must be a unit vector with {gdim} components")
+            x_node, dofs = node_dofs(model, np.asarray(case.points[c.node_point].coordinates_m, dtype=float))
+            dofs = np.array(dofs, dtype=np.int64)
+            if c.friction is None:      # frictionless: only the normal's components move the gap
+                dofs = np.where(normal != 0.0, dofs, -1)
+            if (dofs < 0).all():
+                raise CaseError(file, f"{key}.node_point", "the node has no free displacement DOF along the normal")
+            point = np.zeros(3)
+            point[:gdim] = x_node
+            sets.append(SiteSet(i, c.name, point.reshape(1, 3), np.ones(1), dofs.reshape(1, gdim),
+                                dofs.reshape(1, gdim)))
+            continue
+        if c.kind != "surface":
+            continue
+        tag = facet_group_tag(model.mesh_data.facet_names, c.facets, file, f"{key}.facets")
+        nodes = surface_nodes(model.W, model.W.sub(0), model.mesh_data.facet_tags, tag, weight, model.support_dofs)
+        if nodes.size == 0:
+            raise CaseError(file, f"{key}.facets", f"facet group {c.facets!r} has no nodes")
+        areas[i] = float(nodes.area_m2.sum())
+        if c.sampling == "ring":
+            k = case.reduction.interface_nodes or min(64, nodes.size)
+            sets.append(ring_sites(i, c, case, bodies[c.body], nodes, areas[i], c.sample_points, k,
+                                   case.reduction.site_displacement, key))
+            continue
+        points = np.zeros((nodes.size, 3))
+        points[:, :gdim] = nodes.coordinates_m
+        k = case.reduction.interface_nodes
+        if k is not None and k > nodes.size:
+            raise CaseError(file, "reduction.interface_nodes", f"the facet group of {key} has only {nodes.size} nodes")
+        chosen = np.arange(nodes.size) if k is None else farthest_point_subset(points, k)
+        sets.append(SiteSet(i, c.name, points, nodes.area_m2, nodes.global_dofs[chosen], nodes.global_dofs))
+    interface: list[int] = []
+    seen = set()
+    for s in sets:
+        for row in s.interface_dofs:
+            for d in row:
+                if d >= 0 and int(d) not in seen:
+                    seen.add(int(d))
+                    interface.append(int(d))
+    return sets, np.array(interface, dtype=np.int64), areas
