@@ -28,30 +28,15 @@ from app.files import write_json_atomic
 
 TAG_PROGRESS = 11
 
-# Headline results plotted against a swept parameter (the CSV holds every scalar); the first present are used.
+# Headline results plotted against a swept parameter (the CSV holds every scalar); the first present are used:
+# the scene's own (app/scenes/, below the analysis that ran: "transient." or "lumped."), then these.
 PLOT_COLUMNS = (
-    "transient.motor.speed_rpm",
-    "transient.motor.output_power_W",
-    "transient.motor.efficiency",
-    "transient.motor.friction_torque_N_m",
     "modal.working_resonance_Hz",
     "modal.working_antiresonance_Hz",
     "modal.working_k_eff",
     "harmonic.admittance_peak_Hz",
     "harmonic.voltage_for_target_amplitude_V",
     "circuit.mechanical_quality_factor",
-    "transient.statistics.transducer.max_rise_m",
-    "transient.statistics.transducer.flight_rate_per_s",
-    "transient.statistics.impact_rate_per_s.stem_rock",
-    "transient.statistics.stem_rock_foundation.mean_force_N",
-    "transient.statistics.stem_rock_foundation.mean_power_W",
-    "transient.statistics.stem_rock_foundation.impulse_per_impact_mean_N_s",
-    "lumped.statistics.transducer.max_rise_m",
-    "lumped.statistics.transducer.flight_rate_per_s",
-    "lumped.statistics.impact_rate_per_s.tip_ball",
-    "lumped.statistics.stem_rock_foundation.mean_power_W",
-    "lumped.statistics.stem_rock_foundation.impulse_per_impact_mean_N_s",
-    "lumped.statistics.impact_rate_per_s.stem_rock",
 )
 MAX_PLOTS = 6
 # Results that describe the run, not the physics: kept in the CSV, never plotted.
@@ -229,7 +214,8 @@ def run_sweep(case_path, params, out_dir, sets=None, comm=None, progress=True) -
         rows = [r for part in gathered for r in part]
     rows.sort(key=lambda r: r["point"])
     title = (points[0]["case"].title if points else "") or Path(case_path).name
-    write_table(rows, [k for k, _ in params], out_dir, case_path, title)
+    headline = scene_columns(points[0]["case"]) if points else []
+    write_table(rows, [k for k, _ in params], out_dir, case_path, title, headline)
     return rows
 
 
@@ -255,7 +241,8 @@ def table_columns(rows: list[dict], keys: list[str]) -> list[str]:
     return columns
 
 
-def write_table(rows: list[dict], keys: list[str], out_dir: Path, case_path: str, title: str = "") -> None:
+def write_table(rows: list[dict], keys: list[str], out_dir: Path, case_path: str, title: str = "",
+                headline: list[str] | None = None) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     columns = table_columns(rows, keys)
     with open(out_dir / "sweep.csv", "w", newline="") as f:
@@ -267,7 +254,7 @@ def write_table(rows: list[dict], keys: list[str], out_dir: Path, case_path: str
                                                "columns": columns, "rows": rows}, indent=1)
     ok = [r for r in rows if "_failed" not in r]
     if ok:
-        write_sweep_plots(ok, keys, out_dir, title)
+        write_sweep_plots(ok, keys, out_dir, title, headline)
 
 
 def _csv(value):
@@ -311,15 +298,27 @@ def _legend(key: str, value) -> str:
     return f"{name} = {value}"
 
 
-def plot_columns(rows: list[dict]) -> list[str]:
-    present = [c for c in PLOT_COLUMNS if all(_is_number(r.get(c)) for r in rows)]
+def scene_columns(case) -> list[str]:
+    """The headline result paths of the case's scene (app/scenes/), below the analysis that reports them."""
+    from app.scenes import scene_of
+
+    scene = scene_of(case)
+    if scene is None:
+        return []
+    analysis = "lumped" if case.tier == "lumped" else "transient"
+    return [f"{analysis}.{column}" for column in scene.sweep_columns]
+
+
+def plot_columns(rows: list[dict], headline: list[str] | None = None) -> list[str]:
+    present = [c for c in [*(headline or []), *PLOT_COLUMNS] if all(_is_number(r.get(c)) for r in rows)]
     if not present:  # a tier without headlines: its first scalar results
         present = [c for c in table_columns(rows, []) if c != "point" and not c.endswith(_BOOKKEEPING)
                    and all(_is_number(r.get(c)) for r in rows)]
     return present[:MAX_PLOTS]
 
 
-def write_sweep_plots(rows: list[dict], keys: list[str], out_dir: Path, title: str = "") -> list[str]:
+def write_sweep_plots(rows: list[dict], keys: list[str], out_dir: Path, title: str = "",
+                      headline: list[str] | None = None) -> list[str]:
     """One figure per swept parameter: headline results against it, one line per combination of the
     others; labels and units as the rest of piezodyn shows them (mm, kHz, g)."""
     import matplotlib
@@ -329,7 +328,7 @@ def write_sweep_plots(rows: list[dict], keys: list[str], out_dir: Path, title: s
 
     from app.plots import quantity_label
 
-    columns = plot_columns(rows)
+    columns = plot_columns(rows, headline)
     files = []
     for key in keys:
         x_all, x_label = _axis(rows, key)

@@ -3,17 +3,17 @@
 The FE tier's tests (tests/test_transient_rod_impact.py, tests/test_transient_ball.py) build the
 scenes with dolfinx and step the full FE equations. Here the same scenes run on the modal tier's
 pieces: a Craig-Bampton basis of the same FE model (app.reduced.craig_bampton, interface = every
-displacement DOF of the contact facets' nodes), the facet group as nodes with lumped areas
-(app.contact.surface) and the compiled loop (app.reduced.kernel).
+displacement DOF of the contact facets' nodes), the facet group as sites at its nodes with lumped areas
+(app.contact.surface) and the compiled loop (app.reduced.kernel, tests/reduced_scene.py builds its records).
 
 * Rod impact (surface contact against a plane, Saint-Venant): duration 2 L / c and force
   rho c A v0, with the FE tier's tolerances. The wave front is a step: the fixed-interface modes
   kept must carry it, so the error falls as modes are added (test_rod_impact_error_falls_with_modes).
 * Ball drop (rigid-rigid Kelvin-Voigt link: the FE tier's scene has no FE part either): duration
   and restitution against the closed form, with the FE tier's tolerances.
-* A ball bouncing on an elastic block (sphere surface contact, the shaken-block scene without the
-  shaking, which the modal tier does not model): contact duration, peak force and rebound speed
-  against the FE tier on the same mesh.
+* A ball bouncing on an elastic bar's end face (sphere surface contact) from a case file: contact duration,
+  peak force, impulse and rebound speed against the FE tier on the same mesh.
+The derivatives of the condensed step against finite differences: tests/test_reduced_kernel.py.
 """
 
 from __future__ import annotations
@@ -27,85 +27,17 @@ from dolfinx import fem, mesh
 from dolfinx.fem.petsc import assemble_matrix
 from mpi4py import MPI
 
+from app.contact import law
+from app.contact.surface import surface_nodes
 from app.reduced import kernel as kr
 from app.reduced.craig_bampton import reduce_model
-from app.contact.surface import (
-    SURFACE_KEYS,
-    SurfaceContactSpec,
-    empty_surface_arrays,
-    kernel_surface_arrays,
-    surface_nodes,
-)
 from demos.demo_ball_drop import BallDrop, ball_drop_closed_form, ball_step_sizes, measured_impact
 from demos.demo_rod_impact import RodImpact, contact_pulse, rod_step_sizes
 from forms.dynamics import mass
 from forms.newmark import TimeScheme
 from forms.piezo import elastic_stiffness
 from forms.voigt import isotropic_stiffness
-
-EMPTY_POINTS = (np.zeros(0, np.int64), np.zeros(0, np.int64), None, np.zeros(0), np.zeros(0), np.zeros(0))
-
-
-@dataclasses.dataclass
-class ReducedScene:
-    """What the compiled loop needs besides the step sizes and the scheme."""
-
-    K: np.ndarray
-    M: np.ndarray
-    C: np.ndarray
-    q: np.ndarray              # initial coordinates, velocities, accelerations
-    v: np.ndarray
-    a: np.ndarray
-    body_mass: np.ndarray
-    body_force: np.ndarray
-    zfree: np.ndarray
-    z: np.ndarray
-    zd: np.ndarray
-    gdim: int
-    surface: dict
-    points: tuple = None
-    n_modes: int = 0
-
-
-def run_reduced(scene: ReducedScene, sizes, scheme: TimeScheme, t_end: float):
-    """Step ``scene`` to ``t_end`` -> (records as the FE tier's run_scene gives them, controller state)."""
-    gdim, z = scene.gdim, scene.z.copy()
-    m = z.size
-    nc = 0
-    points = scene.points or (*EMPTY_POINTS[:2], np.zeros((0, gdim)), *EMPTY_POINTS[3:])
-    n_surface = scene.surface["sc_k"].size
-    n_contacts = points[-1].size + n_surface
-    zdd = np.zeros(m)
-    for b, mass_kg in enumerate(scene.body_mass):
-        if mass_kg > 0:
-            zdd[b * gdim:(b + 1) * gdim] = scene.body_force[b * gdim:(b + 1) * gdim] / mass_kg
-    zdd[~scene.zfree] = 0.0
-    istate = np.zeros(kr.N_ISTATE, np.int64)
-    fstate = np.array([0.0, np.inf])
-    cap = 200000
-    out = [np.zeros(cap), np.zeros(cap), np.zeros((cap, 0)), np.zeros((cap, 0)), np.zeros((cap, m)),
-           np.zeros((cap, m)), np.zeros((cap, n_contacts)), np.zeros((cap, n_contacts), np.bool_),
-           np.zeros((cap, n_surface * gdim))]
-    nodes = (np.zeros((nc, gdim), np.int64), np.zeros((nc, gdim)), np.zeros(nc), np.zeros((nc, gdim)),
-             np.zeros(nc, np.int64), np.zeros(nc), np.zeros(nc), np.zeros(nc))
-    r = scene.K.shape[0]
-    code, rows = kr.run(t_end, scene.q.copy(), scene.v.copy(), scene.a.copy(), z, scene.zd.copy(), zdd,
-                        np.zeros(n_contacts, np.bool_), istate, fstate, scene.K, scene.M, scene.C, np.zeros(r),
-                        np.arange(r, dtype=np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0), 1.0, False,
-                        scene.body_mass, scene.body_force, scene.zfree, gdim, *nodes, *points,
-                        *[scene.surface[k] for k in SURFACE_KEYS], scheme.beta, scheme.gamma, scheme.alpha_m,
-                        scheme.alpha_f, sizes.open_s, sizes.closed_s, sizes.change_s, sizes.min_s, 2.0,
-                        np.zeros((0, r)), *out)
-    assert code == kr.DONE
-    records = []
-    for i in range(rows):
-        force = {}
-        if n_surface:
-            force["surface"] = out[8][i, :gdim]
-        records.append({"time_s": out[0][i], "position_m": out[4][i], "velocity_m_per_s": out[5][i],
-                        "contact_force_N": force, "contact_closed": out[7][i].astype(int),
-                        "link_force_N": out[6][i]})
-    return records, istate
+from reduced_scene import Body, Contact, Link, bodies_record, contacts_record, run, sites_record
 
 
 def _vector_space(msh, degree: int):
@@ -120,26 +52,9 @@ def _assembled(form):
     return A
 
 
-def _reduce_elastic(W, young_Pa, poisson, density, held_local, specs_of, n_modes):
-    """K, M of an elastic plane-strain body on W and its Craig-Bampton basis with the surface
-    contacts' nodes as interface -> (basis, surface arrays)."""
-    msh = W.mesh
-    u, w = ufl.split(ufl.TrialFunction(W))[0], ufl.split(ufl.TestFunction(W))[0]
-    c = fem.Constant(msh, isotropic_stiffness(young_Pa, poisson))
-    K = _assembled(elastic_stiffness(u, w, c, "plane_strain", ufl.dx(domain=msh)))
-    M = _assembled(mass(u, w, fem.Constant(msh, density), ufl.dx(domain=msh)))
-    specs = specs_of(W)
-    interface: list[int] = []
-    surface = kernel_surface_arrays(specs, interface, msh.geometry.dim)
-    basis = reduce_model(K, M, None, W, np.asarray(held_local, dtype=np.int32), np.array(interface, np.int64), {},
-                         n_modes=n_modes)
-    K.destroy()
-    M.destroy()
-    return basis, surface
-
-
-def rod_scene(rod: RodImpact, n_modes: int, comm=MPI.COMM_SELF) -> ReducedScene:
-    """The FE tier's rod impact (demos/demo_rod_impact.py) as a reduced scene."""
+def rod_scene(rod: RodImpact, n_modes: int, comm=MPI.COMM_SELF):
+    """The FE tier's rod impact (demos/demo_rod_impact.py) reduced: the end face's nodes are the interface and
+    the contact's sites (lumped areas), a fixed wall as a plane obstacle -> (K, M, q, v, a, body, sites, contact)."""
     msh = mesh.create_rectangle(comm, [np.array([0.0, 0.0]), np.array([rod.length_m, rod.height_m])],
                                 [rod.elements_along, 1], cell_type=mesh.CellType.quadrilateral,
                                 ghost_mode=mesh.GhostMode.shared_facet)
@@ -147,37 +62,42 @@ def rod_scene(rod: RodImpact, n_modes: int, comm=MPI.COMM_SELF) -> ReducedScene:
     fdim = msh.topology.dim - 1
     end = mesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], rod.length_m))
     tags = mesh.meshtags(msh, fdim, np.sort(end), np.full(end.size, 1, dtype=np.int32))
-    wall = np.array([rod.length_m + rod.gap_m, 0.0])
-
-    def specs_of(space):
-        nodes = surface_nodes(space, space.sub(0), tags, 1, 1.0, np.zeros(0, np.int32))
-        return [SurfaceContactSpec(nodes, 0, wall, "plane", np.array([-1.0, 0.0]), 0.0, rod.penalty_Pa_per_m, 0.0)]
-
-    basis, surface = _reduce_elastic(W, rod.young_Pa, 0.0, rod.density_kg_per_m3, [], specs_of, n_modes)
+    u, w = ufl.split(ufl.TrialFunction(W))[0], ufl.split(ufl.TestFunction(W))[0]
+    c = fem.Constant(msh, isotropic_stiffness(rod.young_Pa, 0.0))
+    K = _assembled(elastic_stiffness(u, w, c, "plane_strain", ufl.dx(domain=msh)))
+    M = _assembled(mass(u, w, fem.Constant(msh, rod.density_kg_per_m3), ufl.dx(domain=msh)))
+    nodes = surface_nodes(W, W.sub(0), tags, 1, 1.0, np.zeros(0, np.int32))
+    interface = nodes.global_dofs.reshape(-1)
+    basis = reduce_model(K, M, None, W, np.zeros(0, np.int32), interface.astype(np.int64), {}, n_modes=n_modes)
     # initial velocity v0 along x everywhere: the M-projection onto the basis
     field = fem.Function(W)
     field.sub(0).interpolate(lambda x: np.vstack([np.full(x.shape[1], rod.speed_m_per_s), np.zeros(x.shape[1])]))
-    u, w = ufl.split(ufl.TrialFunction(W))[0], ufl.split(ufl.TestFunction(W))[0]
-    M = _assembled(mass(u, w, fem.Constant(msh, rod.density_kg_per_m3), ufl.dx(domain=msh)))
     Mv = M.createVecLeft()
     M.mult(field.vector, Mv)
     v = np.linalg.solve(basis.M, basis.project_vector(Mv))
+    K.destroy()
     M.destroy()
     Mv.destroy()
-    r = basis.size
-    scene = ReducedScene(basis.K, basis.M, np.zeros((r, r)), np.zeros(r), v, np.zeros(r), np.array([0.0]),
-                         np.zeros(2), np.array([False, False]), wall.copy(), np.zeros(2), 2, surface,
-                         n_modes=basis.n_modes)
+    n = basis.size
+    wall = Body(0.0, [rod.length_m + rod.gap_m, 0.0], [False, False])
+    contact = Contact(0, law.SURFACE, "plane", (-1.0, 0.0, 0.0), stiffness=rod.penalty_Pa_per_m)
+    rows = np.zeros((interface.size, n))
+    rows[np.arange(interface.size), np.arange(interface.size)] = 1.0      # sites = the interface nodes
+    points = np.zeros((nodes.size, 3))
+    points[:, :2] = nodes.coordinates_m
+    sites = sites_record(points, nodes.area_m2, np.zeros(nodes.size, np.int64), rows, contacts_record([contact]),
+                         bodies_record([wall], 2))
+    scene = (basis.K, basis.M, np.zeros((n, n)), np.zeros(n), v, np.zeros(n), wall, sites, contact)
     basis.destroy()
     return scene
 
 
 def _run_rod(rod: RodImpact, n_modes: int, scheme=None, comm=MPI.COMM_SELF):
-    scene = rod_scene(rod, n_modes, comm)
-    records, istate = run_reduced(scene, rod_step_sizes(rod), scheme or TimeScheme.generalized_alpha(0.5),
-                                  1.4 * rod.contact_duration_s)
+    K, M, C, q, v, a, wall, sites, contact = rod_scene(rod, n_modes, comm)
+    records, istate = run(K, M, C, q, v, a, [wall], 2, sites, [contact], [],
+                          scheme or TimeScheme.generalized_alpha(0.5), rod_step_sizes(rod), 1.4 * rod.contact_duration_s)
     for r in records:
-        r["contact_force_N"] = {"rod_wall": r["contact_force_N"]["surface"]}
+        r["contact_force_N"] = {"rod_wall": r["contact_force_N"]["c0"]}
     return records, istate
 
 
@@ -268,22 +188,19 @@ def test_rod_impact_with_1000x_penalty_in_the_modal_tier():
 
 
 # ---------------------------------------------------------------- ball drop (rigid-rigid link)
-def ball_scene(ball: BallDrop) -> ReducedScene:
-    """demos/demo_ball_drop.py's scene: ground (fixed) and ball, 1D vertical, no structure."""
-    points = (np.array([0]), np.array([1]), np.array([[1.0]]), np.array([ball.diameter_m / 2]),
-              np.array([ball.stiffness_N_per_m]), np.array([ball.damping_N_s_per_m]))
-    empty = np.zeros((0, 0))
-    return ReducedScene(empty, empty, empty, np.zeros(0), np.zeros(0), np.zeros(0),
-                        np.array([0.0, ball.mass_kg]), np.array([0.0, -ball.mass_kg * ball.gravity_m_per_s2]),
-                        np.array([False, True]), np.array([0.0, ball.height_m + ball.diameter_m / 2]), np.zeros(2),
-                        1, empty_surface_arrays(1), points)
-
-
 def _drop(ball: BallDrop):
+    """demos/demo_ball_drop.py's scene: ground (fixed) and ball, 1D vertical, no structure."""
     fall_s = np.sqrt(2 * ball.height_m / ball.gravity_m_per_s2)
     duration_cf, restitution_cf = ball_drop_closed_form(ball)
-    records, istate = run_reduced(ball_scene(ball), ball_step_sizes(ball), TimeScheme.newmark(),
-                                  fall_s + 3 * duration_cf)
+    ground = Body(0.0, [0.0], [False])
+    falling = Body(ball.mass_kg, [ball.height_m + ball.diameter_m / 2], [True],
+                   load_N=[-ball.mass_kg * ball.gravity_m_per_s2])
+    link = Link(0, 1, (1.0, 0.0, 0.0), ball.diameter_m / 2, ball.stiffness_N_per_m, ball.damping_N_s_per_m)
+    empty = np.zeros((0, 0))
+    records, istate = run(empty, empty, empty, [], [], [], [ground, falling], 1, None, [], [link],
+                          TimeScheme.newmark(), ball_step_sizes(ball), fall_s + 3 * duration_cf)
+    for r in records:
+        r["contact_force_N"] = {"ground_ball": r["contact_force_N"]["c0"]}
     return measured_impact(ball, records), (duration_cf, restitution_cf), istate
 
 
@@ -306,58 +223,6 @@ def test_ball_drop_without_damping_rebounds_fully_in_the_modal_tier():
     assert restitution_cf == pytest.approx(1.0, abs=1e-9)
     assert restitution == pytest.approx(1.0, abs=2e-3)
     assert duration == pytest.approx(duration_cf, rel=0.01)
-
-
-# ---------------------------------------------------------------- the surface tangent
-@pytest.mark.parametrize("shape", ["plane", "sphere", "sphere-pole"])
-def test_surface_contact_tangent_matches_finite_differences(shape):
-    """The condensed Newton system's Jacobian with a damped surface contact (two penetrating
-    nodes, a moving free body) against central differences: the sphere's turning normal included."""
-    rng = np.random.default_rng(7)
-    gdim, s = 2, 4
-    nodes_x = np.array([[-0.3e-3, 0.0], [0.4e-3, 0.0]])
-    centre = np.array([0.0, 4.0e-3 - 3e-5])             # radius 4 mm: the nodes 19 and 10 um inside
-    if shape == "plane":                                # the FE body below the plane, 1 um inside
-        spec_shape, normal, radius = "plane", np.array([0.0, -1.0]), 0.0
-        centre = np.array([0.0, -1e-6])
-    else:
-        spec_shape, normal, radius = "sphere", (np.array([0.0, -1.0]) if shape == "sphere-pole" else None), 4e-3
-    from app.contact.surface import SurfaceNodes
-
-    nodes = SurfaceNodes(nodes_x, np.array([[10, 11], [12, 13]]), np.array([2e-4, 3e-4]), "row sum")
-    surface = kernel_surface_arrays([SurfaceContactSpec(nodes, 0, centre, spec_shape, normal, radius, 1e13, 3e6)],
-                                    [10, 11, 12, 13], gdim)
-    G = rng.normal(size=(s, s)) * 1e-9             # K_eff^-1 block [m/N]: k A G ~ 1, all terms count
-    G = G @ G.T + 1e-9 * np.eye(s)
-    uS0 = rng.normal(size=s) * 1e-7
-    qS0, vS0, aS0 = rng.normal(size=s) * 1e-7, rng.normal(size=s) * 1e-2, rng.normal(size=s) * 1e3
-    z0, zd0, zdd0 = centre.copy(), np.array([0.01, -0.2]), np.array([0.0, -9.81])
-    scheme, dt = TimeScheme.generalized_alpha(0.5), 1e-7
-    m = gdim
-
-    def system(x, want):
-        F, J = np.zeros(s + m), np.zeros((s + m, s + m))
-        kr._contact_system(x[:s], x[s:], uS0, G, qS0, vS0, aS0, z0, zd0, zdd0, dt, scheme.beta, scheme.gamma,
-                           scheme.alpha_m, scheme.alpha_f, np.array([1e-9]), np.array([0.0, -1e-9 * 9.81]),
-                           np.array([True, True]), gdim, np.zeros((0, gdim), np.int64), np.zeros((0, gdim)),
-                           np.zeros(0), np.zeros((0, gdim)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0),
-                           np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, gdim)),
-                           np.zeros(0), np.zeros(0), np.zeros(0), *[surface[k] for k in SURFACE_KEYS], F, J, want,
-                           np.zeros(1), np.zeros((1, gdim)))
-        return F, J
-
-    x = np.concatenate([rng.normal(size=s) * 1e-3, dt * zd0 + 0.5 * dt * dt * zdd0])
-    F, J = system(x, True)
-    assert np.all(np.abs(F[[1, 3]] + x[[1, 3]]) > 100.0)      # both nodes push (kN)
-    # [N] for g (G g ~ 1e-12 m), [m] for dz: well above the gap's round-off (eps R without a pole)
-    steps = np.concatenate([np.full(s, 1e-3), np.full(m, 1e-12)])
-    numeric = np.zeros_like(J)
-    for j in range(s + m):
-        e = np.zeros(s + m)
-        e[j] = steps[j]
-        numeric[:, j] = (system(x + e, False)[0] - system(x - e, False)[0]) / (2 * steps[j])
-    for j in range(s + m):
-        np.testing.assert_allclose(J[:, j], numeric[:, j], rtol=1e-5, atol=1e-7 * np.abs(numeric[:, j]).max())
 
 
 @pytest.mark.mpi

@@ -1,9 +1,14 @@
-"""The modal tier's compiled time loop (app.reduced.kernel) against closed forms of impacts.
+"""The modal tier's compiled time loop (app/reduced/kernel.py) and the contact law at a site
+(app/contact/law.py) against closed forms and finite differences.
 
-A ball strikes a node of a stiff, heavy structure (one reduced coordinate) through a Hertz contact:
-contact duration 2.9432 delta_m / v with delta_m = (5 m v^2 / (4 K))^(2/5) (Johnson, Contact
-Mechanics, 11.2), rebound at the impact speed (trapezoidal rule: no numerical damping). Two rigid
-bodies collide through a linear Kelvin-Voigt link: duration pi sqrt(m_eff / k), elastic rebound.
+* A ball strikes a node of a stiff, heavy structure (one reduced coordinate) through a Hertz contact: contact
+  duration 2.9432 delta_m / v with delta_m = (5 m v^2 / (4 K))^(2/5) (Johnson, Contact Mechanics, 11.2),
+  rebound at the impact speed (trapezoidal rule: no numerical damping).
+* Two rigid bodies collide through a linear Kelvin-Voigt link: duration pi sqrt(m_eff / k), elastic rebound.
+* A site's force derivatives (the site's own increment, its body's translations and spin) equal central
+  differences for every obstacle shape, damped, in stick and in slip, on a spinning body: the Newton
+  iteration's quadratic convergence rests on them. So does the assembled Newton matrix of the condensed
+  step (active sites + body corrections), checked against differences of the residual.
 """
 
 import math
@@ -11,42 +16,14 @@ import math
 import numpy as np
 import pytest
 
+from app.contact import law
 from app.reduced import kernel as kr
-from app.contact.surface import SURFACE_KEYS, empty_surface_arrays
 from forms.newmark import TimeScheme
-
-GDIM = 2
-
-
-def _empty_points():
-    return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, GDIM)), np.zeros(0), np.zeros(0), np.zeros(0))
+from reduced_scene import Body, Contact, Link, bodies_record, contacts_record, links_record, run, sites_record
 
 
-def _empty_nodes():
-    return (np.zeros((0, GDIM), np.int64), np.zeros((0, GDIM)), np.zeros(0), np.zeros((0, GDIM)), np.zeros(0, np.int64),
-            np.zeros(0), np.zeros(0), np.zeros(0))
-
-
-def _run(t_end, structure, bodies, nodes, points, sizes, scheme, samples):
-    K, M, C, fq, free_q = structure
-    body_mass, body_force, zfree, z, zd = bodies
-    r, m = K.shape[0], z.size
-    n_contacts = nodes[-1].size + points[-1].size
-    q, v, a = np.zeros(r), np.zeros(r), np.zeros(r)
-    zdd = np.zeros(m)
-    closed = np.zeros(n_contacts, np.bool_)
-    istate = np.zeros(kr.N_ISTATE, np.int64)
-    fstate = np.array([0.0, np.inf])
-    cap = 100000
-    out = [np.zeros(cap), np.zeros(cap), np.zeros((cap, samples.shape[0])), np.zeros((cap, 0)), np.zeros((cap, m)),
-           np.zeros((cap, m)), np.zeros((cap, n_contacts)), np.zeros((cap, n_contacts), np.bool_), np.zeros((cap, 0))]
-    surface = empty_surface_arrays(GDIM)
-    code, rows = kr.run(t_end, q, v, a, z, zd, zdd, closed, istate, fstate, K, M, C, fq, free_q, np.zeros(0, np.int64),
-                        np.zeros(0), np.zeros(0), 1.0, False, body_mass, body_force, zfree, GDIM, *nodes, *points,
-                        *[surface[k] for k in SURFACE_KEYS], scheme.beta, scheme.gamma, scheme.alpha_m,
-                        scheme.alpha_f, *sizes, 2.0, samples, *out)
-    assert code == kr.DONE
-    return rows, [o[:rows] for o in out], istate
+class Sizes:
+    open_s, closed_s, change_s, min_s = 1e-6, 1e-8, 1e-9, 1e-14
 
 
 def _contact_interval(time, closed):
@@ -57,15 +34,20 @@ def _contact_interval(time, closed):
 
 def test_hertz_impact_on_a_structure_node():
     mass, speed, radius, hertz = 2.1e-3, 1.0, 0.004, 9.27e9       # the drill's ball on steel
-    structure = (np.array([[1e14]]), np.array([[1e4]]), np.zeros((1, 1)), np.zeros(1), np.array([0]))
     start_gap = 1e-6
-    z = np.array([0.0, -radius - start_gap])                         # below the node, moving up
-    bodies = (np.array([mass]), np.zeros(GDIM), np.array([False, True]), z, np.array([0.0, speed]))
-    nodes = (np.array([[-1, 0]]), np.array([[0.0, 1.0]]), np.array([start_gap]), z[None, :].copy(), np.array([0]),
-             np.array([hertz]), np.array([0.0]), np.array([1.5]))
-    rows, out, istate = _run(1e-4, structure, bodies, nodes, _empty_points(), (1e-6, 1e-8, 1e-9, 1e-14),
-                             TimeScheme.newmark(), np.array([[1.0]]))
-    time, closed, velocity = out[0], out[7][:, 0], out[5][:, 1]
+    K, M = np.array([[1e14]]), np.array([[1e4]])
+    ball = Body(mass, [0.0, -radius - start_gap], [False, True], velocity=[0.0, speed])
+    contact = Contact(body=0, kind=law.NODE, shape="sphere", vector=(0.0, 1.0, 0.0), radius_m=radius,
+                      stiffness=hertz, exponent=1.5)
+    C, B = contacts_record([contact]), bodies_record([ball], 2)
+    # the node at the origin, its z displacement the structure's one coordinate
+    sites = sites_record([[0.0, 0.0, 0.0]], [1.0], [0], np.array([[0.0], [1.0]]), C, B)
+    records, istate = run(K, M, np.zeros((1, 1)), [0.0], [0.0], [0.0], [ball], 2, sites, [contact], [], TimeScheme.newmark(),
+                          Sizes, 1e-4)
+    time = np.array([r["time_s"] for r in records])
+    closed = np.array([r["contact_closed"][0] for r in records]) > 0
+    velocity = np.array([r["velocity_m_per_s"][1] for r in records])
+    force = np.array([np.linalg.norm(r["contact_force_N"]["c0"]) for r in records])
     opened, closed_at = _contact_interval(time, closed)
     delta_max = (5 * mass * speed**2 / (4 * hertz)) ** 0.4
     duration = 2.9432 * delta_max / speed
@@ -73,22 +55,157 @@ def test_hertz_impact_on_a_structure_node():
     assert closed_at - opened == pytest.approx(duration, abs=2e-8)
     assert velocity[-1] == pytest.approx(-speed, rel=1e-5)
     assert istate[kr.I_CUTBACKS] == 0
-    assert np.max(out[6][:, 0]) == pytest.approx(hertz * delta_max**1.5, rel=1e-3)
+    assert np.max(force) == pytest.approx(hertz * delta_max**1.5, rel=1e-3)
 
 
 def test_kelvin_voigt_collision_of_two_bodies():
     m1, m2, k, v1 = 0.04, 0.002, 5e7, 0.5
     m_eff = m1 * m2 / (m1 + m2)
-    structure = (np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros(0), np.zeros(0, np.int64))
-    z = np.array([0.0, 0.0, 0.0, 0.00401])                             # body 1 below body 2, touch at 0.004
-    bodies = (np.array([m1, m2]), np.zeros(2 * GDIM), np.array([False, True, False, True]), z,
-              np.array([0.0, v1, 0.0, 0.0]))
-    points = (np.array([0]), np.array([1]), np.array([[0.0, 1.0]]), np.array([0.004]), np.array([k]), np.array([0.0]))
-    rows, out, _ = _run(2e-4, structure, bodies, _empty_nodes(), points, (1e-6, 1e-8, 1e-9, 1e-14),
-                        TimeScheme.newmark(), np.zeros((0, 0)))
-    opened, closed_at = _contact_interval(out[0], out[7][:, 0])
+    lower = Body(m1, [0.0, 0.0], [False, True], velocity=[0.0, v1])
+    upper = Body(m2, [0.0, 0.00401], [False, True])
+    link = Link(0, 1, (0.0, 1.0, 0.0), 0.004, k)
+    empty = np.zeros((0, 0))
+    records, _ = run(empty, empty, empty, [], [], [], [lower, upper], 2, None, [], [link], TimeScheme.newmark(), Sizes,
+                     2e-4)
+    time = np.array([r["time_s"] for r in records])
+    closed = np.array([r["contact_closed"][0] for r in records]) > 0
+    opened, closed_at = _contact_interval(time, closed)
     assert closed_at - opened == pytest.approx(math.pi * math.sqrt(m_eff / k), abs=2e-8)
     # elastic: velocities after the collision as for rigid balls with e = 1
-    after = out[5][-1]
+    after = records[-1]["velocity_m_per_s"]
     assert after[1] == pytest.approx((m1 - m2) / (m1 + m2) * v1, rel=1e-6)
     assert after[3] == pytest.approx(2 * m1 / (m1 + m2) * v1, rel=1e-6)
+
+
+# ------------------------------------------------------------------ derivatives against differences
+SHAPE_CASES = {
+    # shape, vector, radius, half angle, the site relative to the body's reference point
+    "plane": ("plane", (0.0, 0.0, 1.0), 0.0, 0.0, (3e-3, -2e-3, -2e-8)),
+    "sphere": ("sphere", (0.0, 0.0, 0.0), 4e-3, 0.0, (1e-3, 0.5e-3, 3.84e-3)),
+    "sphere-pole": ("sphere", (0.0, 0.0, 1.0), 4e-3, 0.0, (1e-3, 0.5e-3, 3.84e-3)),
+    "cone": ("cone", (0.0, 0.0, 1.0), 0.0128, math.radians(15.0), (0.0128, 0.0, 0.0)),
+}
+
+
+def _site_scene(shape_key, slip, friction, spinning):
+    shape, vector, radius, half, point = SHAPE_CASES[shape_key]
+    rotations = [(0.0, 0.0, 1.0)] if spinning else []
+    body = Body(0.018, [0.0, 0.0, 0.0], [True, True, True] + [True] * len(rotations), rotations=rotations,
+                inertia=[1.5e-6] * len(rotations))
+    contact = Contact(0, law.SURFACE, shape, vector, radius, half, stiffness=4e13, damping=3e5, rounding_m=1e-9,
+                      friction=(0.57, 1.298, 50.0, 124.13e6, 1e-4) if friction else (0.0, 1.0, 0.0, 1e20, 1e-4))
+    B, C = bodies_record([body], 3), contacts_record([contact])
+    S = sites_record([point], [4e-7], [0], np.zeros((3, 0)), C, B)
+    rng = np.random.default_rng(3)
+    y = rng.normal(size=3) * 1e-9
+    if shape_key == "cone":         # into the cone face: along its outward normal, inwards
+        y = np.array([-3e-8, 1e-9, 2e-9])
+    v = rng.normal(size=3) * slip
+    m = B.mass.size
+    z_mid, zd_mid = np.zeros(m), np.zeros(m)
+    zd_mid[:3] = rng.normal(size=3) * slip * 0.3
+    if spinning:       # fast enough that the spin's share of the slip, omega x (the site's move), shows
+        zd_mid[3] = 3e5
+    return S, C, B, y, v, z_mid, zd_mid
+
+
+@pytest.mark.parametrize("spinning", [False, True])
+@pytest.mark.parametrize("friction,slip", [(False, 1e-3), (True, 1e-5), (True, 3e-2)], ids=["frictionless", "stick",
+                                                                                          "slip"])
+@pytest.mark.parametrize("shape_key", list(SHAPE_CASES))
+def test_site_force_derivatives_equal_differences(shape_key, friction, slip, spinning):
+    S, C, B, y, v, z_mid, zd_mid = _site_scene(shape_key, slip, friction, spinning)
+    c_vel, w_f = 2.9e6, 0.75
+    work = law.site_work(B.mass.size)
+    fn, gap, *_ = law.site_force(0, y, v, z_mid, zd_mid, S, C, B, c_vel, w_f, True, work)
+    assert fn > 0 and gap < 0
+    Fd, Fz = work.Fd.copy(), work.Fz[:, :B.mass.size].copy()
+
+    def force(dd, dz):
+        """f at the site increment dd and body increments dz (the mid-point and rate factors applied)."""
+        w = law.site_work(B.mass.size)
+        law.site_force(0, y + w_f * dd, v + w_f * c_vel * dd, z_mid + w_f * dz, zd_mid + w_f * c_vel * dz, S, C, B,
+                       c_vel, w_f, False, w)
+        return w.f.copy()
+
+    h = 1e-13          # a displacement increment [m]: 1e-6 of the penetration, well above its round-off
+    numeric = np.column_stack([(force(e * h, 0 * z_mid) - force(-e * h, 0 * z_mid)) / (2 * h) for e in np.eye(3)])
+    scale = np.abs(numeric).max()
+    np.testing.assert_allclose(Fd, numeric, rtol=2e-4, atol=2e-4 * scale)
+    numeric_z = np.column_stack([(force(np.zeros(3), e * h) - force(np.zeros(3), -e * h)) / (2 * h)
+                                 for e in np.eye(B.mass.size)])
+    np.testing.assert_allclose(Fz, numeric_z, rtol=2e-4, atol=2e-4 * max(scale, np.abs(numeric_z).max()))
+
+
+def test_newton_matrix_equals_differences_of_the_residual():
+    """The condensed step on a cone (the motor's geometry): 6 sites round a ring on a spinning, translating rotor,
+    some in contact, friction in stick and slip; the Newton matrix on the active sites and the free body
+    corrections against central differences of the residuals, with a random SPD compliance H."""
+    rng = np.random.default_rng(11)
+    n_sites, gdim = 6, 3
+    alpha = math.radians(15.0)
+    rotor = Body(0.018, [0.0, 0.0, 0.0], [False, False, True, True], load_N=[0.0, 0.0, -0.98, -0.004],
+                 rotations=[(0.0, 0.0, 1.0)], inertia=[1.52e-6], brake=[1e-4])
+    contact = Contact(0, law.SURFACE, "cone", (0.0, 0.0, 1.0), 0.0128, alpha, stiffness=4e13, damping=0.0,
+                      rounding_m=1e-9, friction=(0.57, 1.298, 50.0, 124.13e6, 1e-4))
+    B, C, L = bodies_record([rotor], 3), contacts_record([contact]), links_record([])
+    angles = 2 * math.pi * np.arange(n_sites) / n_sites
+    points = np.column_stack([0.0128 * np.cos(angles), 0.0128 * np.sin(angles), np.zeros(n_sites)])
+    S = sites_record(points, np.full(n_sites, 4e-7), np.zeros(n_sites, np.int64), np.zeros((n_sites * 3, 0)), C, B,
+                     exclude=True)
+    nr = n_sites * gdim
+    A = rng.normal(size=(nr, nr))
+    H = 1e-9 * (A @ A.T / nr + np.eye(nr))
+    scheme = (0.25, 0.5, 0.0, 0.0)
+    dt = 6.93e-7
+    m = B.mass.size
+    wk = kr.step_work(n_sites, gdim, m, 4, 0)
+    normals = np.column_stack([math.cos(alpha) * np.cos(angles), math.cos(alpha) * np.sin(angles),
+                               np.full(n_sites, -math.sin(alpha))])
+    depth = np.where(np.arange(n_sites) % 2 == 0, -3e-8, 1e-8)          # half the sites 30 nm inside
+    wk.y0[:] = depth[:, None] * normals
+    wk.v0[:] = rng.normal(size=(n_sites, 3)) * 1e-3
+    wk.a0[:] = rng.normal(size=(n_sites, 3)) * 10.0
+    wk.dw[:] = rng.normal(size=nr) * 1e-10
+    z0, zd0, zdd0 = np.zeros(m), np.array([0.0, 0.0, 1e-4, 3.0]), np.array([0.0, 0.0, -50.0, 0.0])
+    z_mid, zd_mid, z1, zd1, zdd1 = (np.zeros(m) for _ in range(5))
+    free_body = np.array([2, 3], np.int64)
+
+    def residual(dd, xi, want=False):
+        n_active = kr._evaluate(dd, xi, wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt, scheme, B, S, C, L,
+                                want)
+        return n_active, wk.R.copy(), wk.rz.copy()
+
+    dd0 = wk.dw + rng.normal(size=nr) * 1e-10
+    xi0 = np.array([0.0, 0.0, 2e-12, 1e-10])
+    n_active, R, rz = residual(dd0, xi0, True)
+    assert 0 < n_active < n_sites
+    J, rhs = kr._newton_matrix(n_active, wk, H, B, C, S, free_body, dt, scheme)
+    active = wk.active[:n_active].copy()
+    rows = np.concatenate([np.r_[3 * i:3 * i + 3] for i in active])
+
+    def vector(dd, xi):
+        _, R_, rz_ = residual(dd, xi)
+        return np.concatenate([R_[rows], rz_[free_body]])
+
+    np.testing.assert_allclose(-rhs, vector(dd0, xi0), rtol=1e-12, atol=1e-30)
+    N = rhs.size
+    numeric = np.zeros((N, N))
+    for col in range(N):
+        dd, xi = dd0.copy(), xi0.copy()
+        if col < rows.size:
+            h = 1e-13
+            dd[rows[col]] += h
+            up = vector(dd, xi)
+            dd[rows[col]] -= 2 * h
+            down = vector(dd, xi)
+        else:
+            j = free_body[col - rows.size]
+            h = 1e-13
+            xi[j] += h
+            up = vector(dd, xi)
+            xi[j] -= 2 * h
+            down = vector(dd, xi)
+        numeric[:, col] = (up - down) / (2 * h)
+    column_scale = np.abs(numeric).max(axis=0)
+    assert np.max(np.abs(J - numeric) / column_scale) < 1e-3

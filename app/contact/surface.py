@@ -1,4 +1,4 @@
-"""Surface (facet) contacts in the modal tier: a facet group as interface nodes with lumped areas.
+"""A facet group as nodes with lumped areas: the sites of a surface contact sampled at its nodes.
 
 The FE tier integrates the penalty pressure over the facets at quadrature points. The modal tier
 keeps the facet group's nodes as Craig-Bampton interface coordinates (every displacement DOF of
@@ -27,8 +27,6 @@ from dolfinx import fem
 from dolfinx.fem.petsc import assemble_matrix, assemble_vector
 from mpi4py import MPI
 from petsc4py import PETSc
-
-PLANE, SPHERE = 0, 1
 
 
 @dataclass
@@ -104,73 +102,3 @@ def surface_nodes(space, displacement, facet_tags, tag: int, weight, held_local:
     order = np.lexsort(keys.T[::-1])
     return SurfaceNodes(x[order], np.concatenate([g[1] for g in gathered]).reshape(-1, gdim)[order],
                         np.concatenate([g[2] for g in gathered])[order], lumping)
-
-
-@dataclass
-class SurfaceContactSpec:
-    """One frictionless surface contact of the modal tier, in the kernel's terms."""
-
-    nodes: SurfaceNodes
-    body: int                           # index of the rigid body
-    body_reference_m: np.ndarray        # (gdim,) the body's reference position (its start)
-    shape: str                          # "plane" or "sphere"
-    normal: np.ndarray | None           # plane: outward unit normal (towards the FE body); sphere: pole or None
-    radius_m: float                     # sphere radius (plane: unused)
-    stiffness_Pa_per_m: float
-    damping_Pa_s_per_m: float
-    offset_m: np.ndarray | None = None  # obstacle point relative to the body's reference point
-
-
-def kernel_surface_arrays(specs: list[SurfaceContactSpec], interface: list[int], gdim: int) -> dict:
-    """The kernel's ``sn_*`` / ``sc_*`` arrays; appends the nodes' DOFs to ``interface`` (global DOF
-    list, the Craig-Bampton interface order) and maps them to its coordinates.
-
-    The reference relative position of a node is formed here once, in float64: x - (p_ref + offset)
-    for a plane or a sphere without pole, x - (p_ref + offset + R pole) for a sphere with a pole
-    (the kernel then forms the gap without cancellation, as the FE tier)."""
-    n_nodes = sum(spec.nodes.size for spec in specs)
-    out = {"sn_contact": np.zeros(n_nodes, np.int64), "sn_coord": np.full((n_nodes, gdim), -1, np.int64),
-           "sn_rel": np.zeros((n_nodes, gdim)), "sn_area": np.zeros(n_nodes),
-           "sc_body": np.zeros(len(specs), np.int64), "sc_kind": np.zeros(len(specs), np.int64),
-           "sc_normal": np.zeros((len(specs), gdim)), "sc_radius": np.zeros(len(specs)),
-           "sc_k": np.zeros(len(specs)), "sc_c": np.zeros(len(specs)), "sc_ref": np.zeros((len(specs), gdim))}
-    position = {d: i for i, d in enumerate(interface)}
-    row = 0
-    for c, spec in enumerate(specs):
-        ref = np.asarray(spec.body_reference_m, dtype=float)
-        offset = np.zeros(gdim) if spec.offset_m is None else np.asarray(spec.offset_m, dtype=float)
-        point = ref + offset
-        pole = np.zeros(gdim)
-        if spec.shape == "plane":
-            out["sc_kind"][c] = PLANE
-            out["sc_normal"][c] = spec.normal
-        else:
-            out["sc_kind"][c] = SPHERE
-            if spec.normal is not None:
-                pole = np.asarray(spec.normal, dtype=float)
-                out["sc_normal"][c] = pole
-                point = point + spec.radius_m * pole
-        out["sc_body"][c], out["sc_radius"][c] = spec.body, spec.radius_m
-        out["sc_k"][c], out["sc_c"][c], out["sc_ref"][c] = spec.stiffness_Pa_per_m, spec.damping_Pa_s_per_m, ref
-        for i in range(spec.nodes.size):
-            out["sn_contact"][row] = c
-            out["sn_rel"][row] = spec.nodes.coordinates_m[i] - point
-            out["sn_area"][row] = spec.nodes.area_m2[i]
-            for k in range(gdim):
-                dof = int(spec.nodes.global_dofs[i, k])
-                if dof < 0:
-                    continue
-                if dof not in position:
-                    position[dof] = len(interface)
-                    interface.append(dof)
-                out["sn_coord"][row, k] = position[dof]
-            row += 1
-    return out
-
-
-def empty_surface_arrays(gdim: int) -> dict:
-    return kernel_surface_arrays([], [], gdim)
-
-
-SURFACE_KEYS = ("sn_contact", "sn_coord", "sn_rel", "sn_area", "sc_body", "sc_kind", "sc_normal", "sc_radius",
-                "sc_k", "sc_c", "sc_ref")

@@ -123,7 +123,10 @@ class DirectoryLock:
             raise CaseError(flag, str(out_dir), why)
 
     def release(self) -> None:
+        """Remove the lock file while holding the lock, then let go (a run killed before this leaves the file;
+        the kernel has released its lock, so the next run takes it)."""
         if self.handle is not None:
+            Path(self.handle.name).unlink(missing_ok=True)
             fcntl.flock(self.handle.fileno(), fcntl.LOCK_UN)
             self.handle.close()
             self.handle = None

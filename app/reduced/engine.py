@@ -467,14 +467,16 @@ class ModalEngine:
                "cutbacks": int(self.istate[lk.I_CUTBACKS]), "event_refinements": int(self.istate[lk.I_REFINEMENTS]),
                "drive_voltage_V": self.scale_V, "drive_frequency_Hz": cfg.drive.frequency_Hz,
                "initial_state": cfg.initial_state, "stepping_wall_time_s": self._loop_wall,
-               "reduction": {"interface_dofs": model.n_interface, "inputs": list(model.inputs),
+               "reduction": {"interface_dofs": model.n_interface, "electrodes": list(self.electrodes),
+                             "inputs": list(model.inputs),
                              "modes": int(model.mode_frequencies_Hz.size), "size": model.size,
                              "highest_mode_Hz": float(model.mode_frequencies_Hz.max(initial=0.0)),
                              "enrichment_modes_Hz": model.enrichment_frequencies_Hz.tolist(),
                              "resonances_near_drive_Hz": model.resonances_Hz(cfg.drive.frequency_Hz).tolist(),
                              "contact_sites": int(self.sites_record.contact.size),
                              "fe_dofs": model.fe_dofs, "build_wall_s": model.reduction_wall_s,
-                             "from_cache": self.from_cache, "setup_wall_s": self.setup_wall_s,
+                             "from_cache": self.from_cache, "from_checkpoint": self.from_cache is None,
+                             "setup_wall_s": self.setup_wall_s,
                              "kernel_load_wall_s": self.compile_wall_s}}
         self.log(f"modal tier: {self.steps} steps, {out['newton_iterations']} Newton iterations, "
                  f"{out['cutbacks']} cut-backs, {self._loop_wall:.2f} s in the compiled loop")

@@ -251,10 +251,10 @@ class TimeStepper:
 _DERIVED = ("failure_reasons",)
 
 
-def run_scene(system, state, sizes, t_end_s: float, exports=(), track_energy=False):
-    """Step ``system`` from ``state`` to ``t_end_s`` with step sizes ``sizes`` (StepSizes) and return
+def run_scene(system, state, sizes, t_end_s: float, track_energy=False):
+    """Step ``system`` from ``state`` to ``t_end_s`` with step sizes ``sizes`` (StepSizes) in memory and return
     (records of every accepted step, final state, the stepper with its statistics)."""
     records = []
-    stepper = TimeStepper(system, StepController(sizes), exports=exports, track_energy=track_energy)
+    stepper = TimeStepper(system, StepController(sizes), track_energy=track_energy)
     final = stepper.run(state, t_end_s, on_step=records.append)
     return records, final, stepper
