@@ -143,9 +143,10 @@ def run(K, M, C, q, v, a, bodies: list[Body], gdim: int, sites: law.Sites | None
     fstate[kr.F_CAP] = np.inf
     fstate[kr.F_STOP] = np.inf
     cache = kr.make_cache(n, sites.rows.shape[0])
-    code, rows = kr.run(t_end, np.array(q, float), np.array(v, float), np.array(a, float), z, zd, zdd, istate, fstate,
-                        sums, structure, inputs, kr.Scheme(scheme.beta, scheme.gamma, scheme.alpha_m, scheme.alpha_f),
-                        control, B, sites, Cr, L, np.zeros((0, n)), cache, out, False)
+    state = kr.State(np.array(q, float), np.array(v, float), np.array(a, float), z, zd, zdd, istate, fstate, sums)
+    model = kr.Model(structure, inputs, kr.Scheme(scheme.beta, scheme.gamma, scheme.alpha_m, scheme.alpha_f), control,
+                     B, sites, Cr, L, np.zeros((0, n)))
+    code, rows = kr.run(t_end, state, model, cache, out, False)
     assert code == kr.DONE, code
     records = []
     for i in range(rows):

@@ -26,6 +26,7 @@ import ufl
 from dolfinx import fem, mesh
 from dolfinx.fem.petsc import assemble_matrix
 from mpi4py import MPI
+from reduced_scene import Body, Contact, Link, bodies_record, contacts_record, run, sites_record
 
 from app.contact import law
 from app.contact.surface import surface_nodes
@@ -37,7 +38,6 @@ from forms.dynamics import mass
 from forms.newmark import TimeScheme
 from forms.piezo import elastic_stiffness
 from forms.voigt import isotropic_stiffness
-from reduced_scene import Body, Contact, Link, bodies_record, contacts_record, run, sites_record
 
 
 def _vector_space(msh, degree: int):
@@ -95,7 +95,8 @@ def rod_scene(rod: RodImpact, n_modes: int, comm=MPI.COMM_SELF):
 def _run_rod(rod: RodImpact, n_modes: int, scheme=None, comm=MPI.COMM_SELF):
     K, M, C, q, v, a, wall, sites, contact = rod_scene(rod, n_modes, comm)
     records, istate = run(K, M, C, q, v, a, [wall], 2, sites, [contact], [],
-                          scheme or TimeScheme.generalized_alpha(0.5), rod_step_sizes(rod), 1.4 * rod.contact_duration_s)
+                          scheme or TimeScheme.generalized_alpha(0.5), rod_step_sizes(rod),
+                          1.4 * rod.contact_duration_s)
     for r in records:
         r["contact_force_N"] = {"rod_wall": r["contact_force_N"]["c0"]}
     return records, istate

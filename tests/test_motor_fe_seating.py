@@ -5,7 +5,7 @@ On a very coarse stator (P1, 4 mm / 2 mm elements, 5.8k DOFs) the held rotor sta
 harmonic steady state:
 
 * the seating distance is the modal tier's rule, dz0 = -min_i(n_i . u_i) / sin(alpha) over the band nodes (the
-  rotor just touches the highest crest; app/reduced/motor.py), found here by the FE contact's secant iteration;
+  rotor just touches the highest crest; app/reduced/engine.py), found here by the FE contact's secant iteration;
 * seated, the rotor starts without an impulse and is not thrown: over three periods it never rises above its
   seat and the contact stays closed (started on the design position instead, it overlaps the crests and its
   first step takes 3.6 N, 3.7 times the preload).
@@ -22,7 +22,8 @@ from conftest import CASES
 from mpi4py import MPI
 
 from app.case.schema import load_case
-from app.transient.driver import build, run
+from app.runner import run_case
+from app.transient.driver import build
 
 ALPHA = math.radians(15.0)
 TINY_FE = ['tier="fe"', "geometry.degree=1", "geometry.parameters.mesh_size_m=0.004",
@@ -39,7 +40,7 @@ def seated(tmp_path_factory):
     comm = MPI.COMM_WORLD
     case = load_case(CASES / "wwusm-motor.toml", TINY_FE)
     out = tmp_path_factory.mktemp("seated")
-    results = run(case, out / "out", comm, quiet)
+    results = run_case(CASES / "wwusm-motor.toml", TINY_FE, out / "out", comm=comm, quiet=True)["results"]["transient"]
     with h5py.File(out / "out" / "transient.h5", "r") as f:
         data = {k: f[k][()] for k in f}
     return case, results, data

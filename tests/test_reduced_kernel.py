@@ -15,11 +15,11 @@ import math
 
 import numpy as np
 import pytest
+from reduced_scene import Body, Contact, Link, bodies_record, contacts_record, links_record, run, sites_record
 
 from app.contact import law
 from app.reduced import kernel as kr
 from forms.newmark import TimeScheme
-from reduced_scene import Body, Contact, Link, bodies_record, contacts_record, links_record, run, sites_record
 
 
 class Sizes:
@@ -42,8 +42,8 @@ def test_hertz_impact_on_a_structure_node():
     C, B = contacts_record([contact]), bodies_record([ball], 2)
     # the node at the origin, its z displacement the structure's one coordinate
     sites = sites_record([[0.0, 0.0, 0.0]], [1.0], [0], np.array([[0.0], [1.0]]), C, B)
-    records, istate = run(K, M, np.zeros((1, 1)), [0.0], [0.0], [0.0], [ball], 2, sites, [contact], [], TimeScheme.newmark(),
-                          Sizes, 1e-4)
+    records, istate = run(K, M, np.zeros((1, 1)), [0.0], [0.0], [0.0], [ball], 2, sites, [contact], [],
+                          TimeScheme.newmark(), Sizes, 1e-4)
     time = np.array([r["time_s"] for r in records])
     closed = np.array([r["contact_closed"][0] for r in records]) > 0
     velocity = np.array([r["velocity_m_per_s"][1] for r in records])
@@ -168,19 +168,23 @@ def test_newton_matrix_equals_differences_of_the_residual():
     wk.a0[:] = rng.normal(size=(n_sites, 3)) * 10.0
     wk.dw[:] = rng.normal(size=nr) * 1e-10
     z0, zd0, zdd0 = np.zeros(m), np.array([0.0, 0.0, 1e-4, 3.0]), np.array([0.0, 0.0, -50.0, 0.0])
-    z_mid, zd_mid, z1, zd1, zdd1 = (np.zeros(m) for _ in range(5))
+    state = kr.State(np.zeros(0), np.zeros(0), np.zeros(0), z0, zd0, zdd0, np.zeros(kr.N_ISTATE, np.int64),
+                     np.zeros(kr.N_FSTATE), kr.Sums(np.zeros(1), np.zeros(1), np.zeros(2)))
+    empty = np.zeros((0, 0))
+    model = kr.Model(kr.Structure(empty, empty, empty, np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64)),
+                     kr.Inputs(np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0), 1.0, False),
+                     kr.Scheme(*scheme), kr.Control(dt, dt, dt, 1e-14, 2.0), B, S, C, L, np.zeros((0, 0)))
     free_body = np.array([2, 3], np.int64)
 
     def residual(dd, xi, want=False):
-        n_active = kr._evaluate(dd, xi, wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt, scheme, B, S, C, L,
-                                want)
+        n_active = kr._evaluate(dd, xi, wk, H, state, dt, model, want)
         return n_active, wk.R.copy(), wk.rz.copy()
 
     dd0 = wk.dw + rng.normal(size=nr) * 1e-10
     xi0 = np.array([0.0, 0.0, 2e-12, 1e-10])
     n_active, R, rz = residual(dd0, xi0, True)
     assert 0 < n_active < n_sites
-    J, rhs = kr._newton_matrix(n_active, wk, H, B, C, S, free_body, dt, scheme)
+    J, rhs = kr._newton_matrix(n_active, wk, H, model, free_body, dt)
     active = wk.active[:n_active].copy()
     rows = np.concatenate([np.r_[3 * i:3 * i + 3] for i in active])
 

@@ -277,7 +277,8 @@ def site_force(i, y, v_site, z_mid, zd_mid, sites, contacts, bodies, c_vel, w_f,
         for r in range(3):
             bvec[r] = -dT_dfn * s[r] / reg
             for k in range(3):
-                A[r, k] = -T * ((1.0 if r == k else 0.0) / reg - s[r] * s[k] / r3) - s[r] / reg * dT_dspeed * s[k] / speed
+                A[r, k] = -T * ((1.0 if r == k else 0.0) / reg - s[r] * s[k] / r3) \
+                    - s[r] / reg * dT_dspeed * s[k] / speed
     Jd = out.Jd           # d f / d d
     Jv = out.Jv           # d f / d v
     for r in range(3):
@@ -292,7 +293,8 @@ def site_force(i, y, v_site, z_mid, zd_mid, sites, contacts, bodies, c_vel, w_f,
             Jd[r, k] = jd
             Jv[r, k] = jv
     # chain to the unknowns: d(d)/d(site increment) = w_f I, d(v)/d(...) = w_f (c_vel I - [omega]x)
-    # body translation: d(d)/dz = -w_f I, dv/dz = -w_f (c_vel I - [omega]x); angle k: dv/dtheta_k = -w_f c_vel a_k x lever
+    # body translation: d(d)/dz = -w_f I, dv/dz = -w_f (c_vel I - [omega]x);
+    # angle k: dv/dtheta_k = -w_f c_vel a_k x lever
     for r in range(3):
         for k in range(3):
             om = 0.0        # ([omega]x)[m, k] applied: Jv @ [omega]x

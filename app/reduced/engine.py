@@ -88,7 +88,8 @@ class ModalEngine:
         self.control = lk.Control(st.open_s, st.closed_s, st.change_s, st.min_s, 2.0)
         self.bodies_record, self.body_slices = bodies_record(case, gdim, gravity)
         self.contacts_record, self.links_record = contact_records(case)
-        self.sites_record = sites_record(case, model.site_points, model.site_weight, model.site_contact, model.site_rows,
+        self.sites_record = sites_record(case, model.site_points, model.site_weight, model.site_contact,
+                                         model.site_rows,
                                          self.contacts_record, self.bodies_record)
         self.electrodes = list(model.inputs[:model.n_electrodes])
         self.scale_V, amplitudes, phases = electrode_amplitudes(case, self.electrodes)
@@ -211,7 +212,7 @@ class ModalEngine:
         b = self.bodies_record
         cfg = self.cfg
         gdim = b.gdim
-        for i, body in enumerate(cfg.bodies):
+        for body in cfg.bodies:
             sl = self.body_slices[body.name]
             self.z[sl.start:sl.start + gdim] = body.position_m
             self.zd[sl.start:sl.start + gdim] = body.velocity_m_per_s or [0.0] * gdim
@@ -244,7 +245,7 @@ class ModalEngine:
         contact's sites is zero (bisection on it: monotone in the distance)."""
         cfg = self.cfg
         kernel_index = {c.name: k for k, c in enumerate(c for c in cfg.contacts if c.kind != "point")}
-        for i, body in enumerate(cfg.bodies):
+        for body in cfg.bodies:
             if body.seat_on is None:
                 continue
             k = kernel_index[body.seat_on]
@@ -252,7 +253,7 @@ class ModalEngine:
             axis = (body.free_axes or [True] * len(body.position_m)).index(True)
             j = self.body_slices[body.name].start + axis
 
-            def smallest(s):
+            def smallest(s, j=j, mine=mine):
                 z = self.z.copy()
                 z[j] += s
                 return float(self._site_gaps(z)[mine].min())
@@ -305,12 +306,17 @@ class ModalEngine:
         mark = time.perf_counter()
         saved = (self.fstate.copy(), self.istate.copy())
         out = lk.Outputs(*(arr[:1] for arr in self._out), self.site_sums)
-        lk.run(self.t, self.q, self.v, self.a, self.z, self.zd, self.zdd, self.istate, self.fstate, self.sums,
-               self.structure, self.inputs_record, self.scheme, self.control, self.bodies_record, self.sites_record,
-               self.contacts_record, self.links_record, self.sample_rows, self.cache, out, self.case.output.energies)
+        lk.run(self.t, self._state(), self._model(), self.cache, out, self.case.output.energies)
         self.fstate[:], self.istate[:] = saved
         self.compile_wall_s = time.perf_counter() - mark
         self._loop_wall = 0.0
+
+    def _state(self) -> lk.State:
+        return lk.State(self.q, self.v, self.a, self.z, self.zd, self.zdd, self.istate, self.fstate, self.sums)
+
+    def _model(self) -> lk.Model:
+        return lk.Model(self.structure, self.inputs_record, self.scheme, self.control, self.bodies_record,
+                        self.sites_record, self.contacts_record, self.links_record, self.sample_rows)
 
     @property
     def t(self) -> float:
@@ -364,10 +370,7 @@ class ModalEngine:
             out = lk.Outputs(*(arr[:cap] for arr in self._out), self.site_sums)
             stop = min(stop_at_s, self.tables.next_s * (1 - 1e-12)) if sites_on else stop_at_s
             self.fstate[lk.F_STOP] = stop
-            code, rows = lk.run(t_end, self.q, self.v, self.a, self.z, self.zd, self.zdd, self.istate, self.fstate,
-                                self.sums, self.structure, self.inputs_record, self.scheme, self.control,
-                                self.bodies_record, self.sites_record, self.contacts_record, self.links_record,
-                                self.sample_rows, self.cache, out, self.case.output.energies)
+            code, rows = lk.run(t_end, self._state(), self._model(), self.cache, out, self.case.output.energies)
             if rows:
                 blocks.append(self._block(out, rows))
             taken += rows

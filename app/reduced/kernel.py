@@ -147,12 +147,42 @@ class Outputs(NamedTuple):
     site_sums: np.ndarray     # (n_sites, 5): time integrals of pressure [Pa s], closed, stick, slip +, slip - [s]
 
 
+class Model(NamedTuple):
+    """Everything constant through a run: the structure, its inputs, the scheme and step control, the bodies,
+    sites, contacts and links, and the rows of the sampled outputs (named points, electrode charges)."""
+
+    structure: Structure
+    inputs: Inputs
+    scheme: Scheme
+    control: Control
+    bodies: Bodies
+    sites: Sites
+    contacts: Contacts
+    links: Links
+    sample_rows: np.ndarray
+
+
 class Sums(NamedTuple):
     """Running sums the loop carries between calls (part of the state)."""
 
     dissipated: np.ndarray    # (n_contacts + n_links,) [J]
     power: np.ndarray         # (n_contacts + n_links,) dissipation power of the last step [W]
     damping: np.ndarray       # (2,) structural damping loss [J], its power at the last step [W]
+
+
+class State(NamedTuple):
+    """Everything the next call needs (changed in place): the structure's coordinates, rates and accelerations,
+    the bodies', the integer and float controller slots and the running sums."""
+
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    z: np.ndarray
+    zd: np.ndarray
+    zdd: np.ndarray
+    istate: np.ndarray
+    fstate: np.ndarray
+    sums: Sums
 
 
 @njit(cache=True)
@@ -210,6 +240,11 @@ class StepWork(NamedTuple):
     lP: np.ndarray            # (3, m)
     link_fn: np.ndarray       # (n_links,)
     active: np.ndarray        # (ns,) int64 positions of the active sites
+    z_mid: np.ndarray         # (m,) the bodies at the generalized mid-point and at the step's end
+    zd_mid: np.ndarray
+    z1: np.ndarray
+    zd1: np.ndarray
+    zdd1: np.ndarray
 
 
 @njit(cache=True)
@@ -219,14 +254,18 @@ def step_work(ns, gdim, m, kmax, n_links):
                     np.zeros((ns, 3)), np.zeros((ns, 3, 3)), np.zeros((ns, 3, max(kmax, 1))), np.zeros((ns, 3)),
                     np.zeros(ns * gdim), np.zeros(ns * gdim), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
                     np.zeros(m), np.zeros((m, m)), np.zeros(3), np.zeros(3), site_work(kmax), np.zeros(3),
-                    np.zeros((3, max(m, 1))), np.zeros(max(n_links, 1)), np.zeros(max(ns, 1), np.int64))
+                    np.zeros((3, max(m, 1))), np.zeros(max(n_links, 1)), np.zeros(max(ns, 1), np.int64), np.zeros(m),
+                    np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m))
 
 
 @njit(cache=True)
-def _body_kinematics(xi, z0, zd0, zdd0, dt, scheme, bodies, t1, z_mid, zd_mid, z1, zd1, zdd1):
-    """End-of-step and mid-point body coordinates for corrections ``xi`` of the free coordinates to their
-    predictors (held coordinates move at their rate)."""
-    beta, gamma, am, af = scheme
+def _body_kinematics(xi, state, dt, model, wk):
+    """End-of-step and mid-point body coordinates (into ``wk``) for corrections ``xi`` of the free coordinates to
+    their predictors (held coordinates move at their rate)."""
+    z0, zd0, zdd0 = state.z, state.zd, state.zdd
+    z_mid, zd_mid, z1, zd1, zdd1 = wk.z_mid, wk.zd_mid, wk.z1, wk.zd1, wk.zdd1
+    bodies = model.bodies
+    beta, gamma, am, af = model.scheme
     c_acc = 1.0 / (beta * dt * dt)
     for j in range(z0.size):
         if bodies.free[j]:
@@ -243,17 +282,19 @@ def _body_kinematics(xi, z0, zd0, zdd0, dt, scheme, bodies, t1, z_mid, zd_mid, z
 
 
 @njit(cache=True)
-def _evaluate(dd, xi, wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt, scheme, bodies, sites, contacts,
-              links, want):
+def _evaluate(dd, xi, wk, H, state, dt, model, want):
     """Site forces at the iterate (site increments ``dd``, body corrections ``xi``), the site residuals
     R = dd - dw - H f, the body residuals rz, and (``want``) the derivatives of the active sites and the
     bodies' load derivative dQ. Returns the number of active sites (listed in wk.active)."""
+    bodies, sites, contacts, links = model.bodies, model.sites, model.contacts, model.links
+    z0, zdd0 = state.z, state.zdd
+    z_mid, zd_mid = wk.z_mid, wk.zd_mid
     gdim = bodies.gdim
-    beta, gamma, am, af = scheme
+    beta, gamma, am, af = model.scheme
     w_f = 1.0 - af
     c_acc = 1.0 / (beta * dt * dt)
     c_vel = gamma / (beta * dt)
-    _body_kinematics(xi, z0, zd0, zdd0, dt, scheme, bodies, 0.0, z_mid, zd_mid, z1, zd1, zdd1)
+    _body_kinematics(xi, state, dt, model, wk)
     ns = sites.contact.size
     m = z0.size
     for j in range(m):
@@ -428,10 +469,11 @@ def _scales(dd, xi, wk, bodies, dt, scheme):
 
 
 @njit(cache=True)
-def _newton_matrix(n_active, wk, H, bodies, contacts, sites, free_body, dt, scheme):
+def _newton_matrix(n_active, wk, H, model, free_body, dt):
     """J and -R of the Newton system on the active sites' increments and the free body corrections."""
+    bodies, contacts, sites = model.bodies, model.contacts, model.sites
     gdim = bodies.gdim
-    beta, gamma, am, af = scheme
+    beta, gamma, am, af = model.scheme
     c_acc = 1.0 / (beta * dt * dt)
     c_vel = gamma / (beta * dt)
     w_f = 1.0 - af
@@ -506,18 +548,19 @@ def _newton_matrix(n_active, wk, H, bodies, contacts, sites, free_body, dt, sche
 
 
 @njit(cache=True)
-def _newton(wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt, scheme, bodies, sites, contacts, links,
-            free_body):
+def _newton(wk, H, state, dt, model, free_body):
     """Newton on the condensed step; True when converged (wk.dd, wk.xi hold the solution). Returns
     (converged, iterations)."""
+    bodies, sites, contacts = model.bodies, model.sites, model.contacts
+    scheme = model.scheme
+    zdd0, zd_mid = state.zdd, wk.zd_mid
     gdim = bodies.gdim
     nr = wk.dd.size
     m = wk.xi.size
     tol_site = SITE_TOL_M
     for r in range(nr):
         tol_site = max(tol_site, SITE_RTOL * abs(wk.dw[r]))
-    n_active = _evaluate(wk.dd, wk.xi, wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt, scheme, bodies,
-                         sites, contacts, links, True)
+    n_active = _evaluate(wk.dd, wk.xi, wk, H, state, dt, model, True)
     scale_b = _scales(wk.dd, wk.xi, wk, bodies, dt, scheme)
     its = 0
     for its in range(1, MAX_NEWTON + 1):
@@ -526,12 +569,13 @@ def _newton(wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt, scheme, bodi
             res = max(res, abs(wk.R[r]) / tol_site)
         for q in range(free_body.size):
             j = free_body[q]
-            scale = abs(bodies.load[j]) + abs(bodies.mass[j] * zdd0[j]) + abs(wk.Q[j]) + abs(bodies.brake[j] * zd_mid[j])
+            scale = abs(bodies.load[j]) + abs(bodies.mass[j] * zdd0[j]) + abs(wk.Q[j]) \
+                + abs(bodies.brake[j] * zd_mid[j])
             tol = FORCE_RTOL * scale + 1e-300
             res = max(res, abs(wk.rz[j]) / tol)
         if res <= 1.0:
             return True, its
-        J, rhs = _newton_matrix(n_active, wk, H, bodies, contacts, sites, free_body, dt, scheme)
+        J, rhs = _newton_matrix(n_active, wk, H, model, free_body, dt)
         N = rhs.size
         dy = np.linalg.solve(J, rhs)
         # the correction of every site: active ones from dy; a separated one follows from the others
@@ -582,8 +626,7 @@ def _newton(wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt, scheme, bodi
                 wk.dd_try[r] = wk.dd[r] + lam * du[r]
             for j in range(m):
                 wk.xi_try[j] = wk.xi[j] + lam * dxi[j]
-            n_trial = _evaluate(wk.dd_try, wk.xi_try, wk, H, z0, zd0, zdd0, z_mid, zd_mid, z1, zd1, zdd1, dt,
-                                scheme, bodies, sites, contacts, links, True)
+            n_trial = _evaluate(wk.dd_try, wk.xi_try, wk, H, state, dt, model, True)
             r_trial = np.zeros(N)
             for a in range(n_active):
                 i = active_rows[a]
@@ -664,9 +707,10 @@ def _snap(level, dt):
 
 
 @njit(cache=True)
-def _status(y, v, z, zd, wk, sites, contacts, bodies, links, closed_sites, closed):
+def _status(y, v, z, zd, wk, model, closed_sites, closed):
     """Contact status at an end-of-step state (site displacements ``y`` (ns, 3), velocities ``v``): closed per
     contact and link (into ``closed``) and per site, and the earliest predicted closure [s] (inf if none)."""
+    sites, contacts, bodies, links = model.sites, model.contacts, model.bodies, model.links
     closure = np.inf
     n_c = contacts.kind.size
     for c in range(closed.size):
@@ -689,13 +733,13 @@ def _status(y, v, z, zd, wk, sites, contacts, bodies, links, closed_sites, close
 
 
 @njit(cache=True)
-def run(t_end, q, v, a, z, zd, zdd, istate, fstate, sums, structure, inputs, scheme, control, bodies, sites,
-        contacts, links, sample_rows, cache, out, track_energy):
-    """Advance the state arrays (in place) until ``t_end``, until the output buffers are full, or until the first
-    accepted step at or after ``fstate[F_STOP]``. Returns (code, rows written): one output row per accepted
+def run(t_end, state, model, cache, out, track_energy):
+    """Advance ``state`` (in place) until ``t_end``, until the output buffers are full, or until the first
+    accepted step at or after ``state.fstate[F_STOP]``. Returns (code, rows written): one output row per accepted
     step (``out``), the per-site diagnostics integrated into ``out.site_sums``."""
+    q, v, a, z, zd, zdd, istate, fstate, sums = state
+    structure, inputs, scheme, control, bodies, sites, contacts, links, sample_rows = model
     gdim = bodies.gdim
-    n = q.size
     free = structure.free
     nf = free.size
     P = structure.inputs
@@ -727,19 +771,13 @@ def run(t_end, q, v, a, z, zd, zdd, istate, fstate, sums, structure, inputs, sch
     closed_new_sites = np.zeros(ns, np.bool_)
     closed = np.zeros(n_c + n_l, np.bool_)
     closed_new = np.zeros(n_c + n_l, np.bool_)
-    z_mid = np.zeros(m)
-    zd_mid = np.zeros(m)
-    z1 = np.zeros(m)
-    zd1 = np.zeros(m)
-    zdd1 = np.zeros(m)
     # the status of the current state
     for i in range(ns):
         for k in range(gdim):
             y_end[i, k] = rows_R[i * gdim + k] @ q
             v_end[i, k] = rows_R[i * gdim + k] @ v
-    closure = _status(y_end, v_end, z, zd, wk, sites, contacts, bodies, links, closed_sites, closed)
+    closure = _status(y_end, v_end, z, zd, wk, model, closed_sites, closed)
     beta, gamma, am, af = scheme
-    load_scale = np.sqrt(np.sum(structure.load ** 2))
     rows = 0
     capacity = out.time.size
     t = fstate[F_TIME]
@@ -798,8 +836,7 @@ def run(t_end, q, v, a, z, zd, zdd, istate, fstate, sums, structure, inputs, sch
                 wk.dd[r] = wk.dw[r]
             for j in range(m):
                 wk.xi[j] = 0.0
-            converged, its = _newton(wk, H, z, zd, zdd, z_mid, zd_mid, z1, zd1, zdd1, dt_try, scheme, bodies,
-                                     sites, contacts, links, free_body)
+            converged, its = _newton(wk, H, state, dt_try, model, free_body)
             istate[I_NEWTON] += max(its, 1)
             if not converged:
                 istate[I_CUTBACKS] += 1
@@ -824,8 +861,7 @@ def run(t_end, q, v, a, z, zd, zdd, istate, fstate, sums, structure, inputs, sch
                 for k in range(gdim):
                     y_end[i, k] = wk.y0[i, k] + wk.dd[i * gdim + k]
                     v_end[i, k] = rows_R[i * gdim + k] @ v1
-            new_closure = _status(y_end, v_end, z1, zd1, wk, sites, contacts, bodies, links, closed_new_sites,
-                                  closed_new)
+            new_closure = _status(y_end, v_end, wk.z1, wk.zd1, wk, model, closed_new_sites, closed_new)
             changed = False
             for c in range(n_c + n_l):
                 changed = changed or (closed_new[c] != closed[c])
@@ -835,15 +871,14 @@ def run(t_end, q, v, a, z, zd, zdd, istate, fstate, sums, structure, inputs, sch
                 continue
             break
         # accepted: the step's forces (at its mid-point) were evaluated last by the Newton iteration
-        _record(rows, t1, dt_try, q1, v, v1, z1, zd1, pq, wk, sums, structure, sites, contacts, bodies, links,
-                sample_rows, out, closed_new, y_end, track_energy)
+        _record(rows, t1, dt_try, q1, v1, pq, wk, state, model, out, closed_new, y_end, track_energy)
         rows += 1
         q[:] = q1
         v[:] = v1
         a[:] = a1
-        z[:] = z1
-        zd[:] = zd1
-        zdd[:] = zdd1
+        z[:] = wk.z1
+        zd[:] = wk.zd1
+        zdd[:] = wk.zdd1
         for c in range(n_c + n_l):
             closed[c] = closed_new[c]
         closure = new_closure
@@ -862,10 +897,11 @@ def run(t_end, q, v, a, z, zd, zdd, istate, fstate, sums, structure, inputs, sch
 
 
 @njit(cache=True)
-def _record(row, t1, dt, q1, v0, v1, z1, zd1, pq, wk, sums, structure, sites, contacts, bodies, links, sample_rows,
-            out, closed, y_end, track_energy):
+def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track_energy):
     """One output row, the dissipated energies and the per-site diagnostics of an accepted step."""
-    gdim = bodies.gdim
+    structure, sites, contacts, bodies, links, sample_rows = (model.structure, model.sites, model.contacts,
+                                                              model.bodies, model.links, model.sample_rows)
+    sums, v0, z1, zd1 = state.sums, state.v, wk.z1, wk.zd1
     n_c = contacts.kind.size
     n_l = links.lower.size
     out.time[row] = t1

@@ -64,7 +64,8 @@ class WedgeWaveMotor(SceneReport):
         if rotor is None or len(rotor.rotations) < 1:
             raise CaseError(file, "transient.bodies", "the motor needs a rotor: a body with a rotation")
         if contact is None:
-            raise CaseError(file, "transient.contacts", f"the motor needs a surface contact on its rotor {rotor.name!r}")
+            raise CaseError(file, "transient.contacts",
+                            f"the motor needs a surface contact on its rotor {rotor.name!r}")
         if not case.output.energies:
             raise CaseError(file, "output.energies", "the motor's powers and efficiency need the charges and "
                                                      "energies: set it to true")
@@ -117,7 +118,8 @@ class WedgeWaveMotor(SceneReport):
             p_out = -_integral(tw, applied * speed_all[idx]) / duration
         else:          # a prescribed or held spin: the constraint takes the contact torque's work
             p_out = torque * speed
-        friction_J = float(data[S.contact_dissipated(contact.name)][idx][-1] - data[S.contact_dissipated(contact.name)][idx][0])
+        dissipated = data[S.contact_dissipated(contact.name)][idx]
+        friction_J = float(dissipated[-1] - dissipated[0])
         damping_J = float(data["damping_dissipated_J"][idx][-1] - data["damping_dissipated_J"][idx][0])
         stored = sum(data[k][idx] for k in ("kinetic_energy_J", "strain_energy_J", "rigid_kinetic_energy_J",
                                             "contact_energy_J"))
