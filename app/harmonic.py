@@ -264,6 +264,19 @@ def balanced_wave(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: flo
     return point, wave
 
 
+def _sweep(solver, grid, comm) -> list:
+    """The sweep's solves, with progress lines (a bar in a terminal, a line every 10 % otherwise)."""
+    from app.progress import Progress
+
+    progress = Progress(len(grid), "harmonic", "frequencies", rank=comm.rank, value_format="{:.0f}")
+    points = []
+    for f in grid:
+        points.append(solver.solve(f))
+        progress.update(1)
+    progress.close()
+    return points
+
+
 def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float | None, log,
                  wave_writer=None, wave_frequency_Hz: float | None = None) -> HarmonicResult:
     """Sweep, |Y| extrema, target amplitude and travelling-wave measures. The wave is evaluated at
@@ -274,7 +287,7 @@ def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float |
     solver = HarmonicSolver(model, ops, cfg.voltage_V)
     try:
         grid = frequency_grid(model, f_r, f_a)
-        points = [solver.solve(f) for f in grid]
+        points = _sweep(solver, grid, model.comm)
         result = HarmonicResult(points)
         magnitude = np.array([abs(p.admittance_S) for p in points])
         i_max = int(np.argmax(magnitude))

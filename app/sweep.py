@@ -216,6 +216,9 @@ def run_sweep(case_path, params, out_dir, sets=None, comm=None, progress=True) -
     title = (points[0]["case"].title if points else "") or Path(case_path).name
     headline = scene_columns(points[0]["case"]) if points else []
     write_table(rows, [k for k, _ in params], out_dir, case_path, title, headline)
+    if progress:                  # the table as the terminal shows it (not with --quiet)
+        for line in table_lines(rows, [k for k, _ in params], headline):
+            print(line, flush=True)
     return rows
 
 
@@ -251,7 +254,8 @@ def write_table(rows: list[dict], keys: list[str], out_dir: Path, case_path: str
         for row in rows:
             writer.writerow([_csv(row.get(c, "")) for c in columns])
     write_json_atomic(out_dir / "sweep.json", {"case": case_path, "title": title, "parameters": keys,
-                                               "columns": columns, "rows": rows}, indent=1)
+                                               "columns": columns, "headline": headline or [], "rows": rows},
+                      indent=1)
     ok = [r for r in rows if "_failed" not in r]
     if ok:
         write_sweep_plots(ok, keys, out_dir, title, headline)
@@ -362,6 +366,28 @@ def write_sweep_plots(rows: list[dict], keys: list[str], out_dir: Path, title: s
         plt.close(fig)
         files.append(name)
     return files
+
+
+def table_lines(rows: list[dict], keys: list[str], headline: list[str] | None = None) -> list[str]:
+    """The sweep as a terminal table: each point's swept values and its headline results, with units."""
+    from app.plots import quantity_label
+
+    columns = plot_columns([r for r in rows if "_failed" not in r], headline) if rows else []
+    heads, cells = ["point"], [[str(r["point"])] for r in rows]
+    for key in [*keys, *columns]:
+        label, scale = quantity_label(key)
+        heads.append(label)
+        for cell, r in zip(cells, rows):
+            value = r.get(key)
+            if _is_number(value):
+                cell.append(f"{value * scale:.5g}")
+            elif isinstance(value, list):
+                cell.append("[" + ", ".join(f"{v * scale:.4g}" if _is_number(v) else str(v) for v in value) + "]")
+            else:
+                cell.append("failed" if "_failed" in r else str(value if value is not None else "-"))
+    widths = [max(len(h), *(len(c[i]) for c in cells)) if cells else len(h) for i, h in enumerate(heads)]
+    line = "  ".join(h.rjust(w) for h, w in zip(heads, widths))
+    return [line, "-" * len(line)] + ["  ".join(c.rjust(w) for c, w in zip(cell, widths)) for cell in cells]
 
 
 EPILOG = """\

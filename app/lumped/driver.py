@@ -83,8 +83,7 @@ def run(section: LumpedSection, out_dir: Path, comm=None, log: Callable[[str], N
                 results["outputs"] += results["plots"]
         s = results["statistics"]
         log(
-            f"lumped: {result.counters['events']} contact events, largest transducer rise "
-            f"{s['transducer']['max_rise_m'] * 1e3:.3f} mm, "
+            f"lumped: {result.counters['events']} contact events, "
             f"rock power {s['stem_rock_foundation']['mean_power_W']:.3g} W, "
             f"ledger closure {results['energy_ledger']['closure_relative']:.1e}, "
             f"{results['wall_s_per_simulated_ms'] * 1e3:.3f} ms wall per simulated ms"

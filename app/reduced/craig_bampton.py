@@ -175,6 +175,9 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
     unit_sets = [(owned, np.ones(owned.size)) for owned in unit_sets]
     unit_sets += [(electrode_owned[name], np.ones(electrode_owned[name].size)) for name in electrodes]
     unit_sets += [pattern_owned[name] for name in patterns]
+    from app.progress import Progress
+
+    progress = Progress(len(unit_sets), "reduction: static modes", "solves", rank=comm.rank, value_format="{:.0f}")
     for owned, values in unit_sets:
         boundary_values.set(0.0)
         boundary_values.setValues(owned, values)
@@ -189,6 +192,8 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
             raise NumericalFailure(f"Craig-Bampton static mode: LU solve failed "
                                    f"(KSP reason {ksp.getConvergedReason()})")
         columns.append(x)
+        progress.update(1)
+    progress.close()
     # the interior: what the boundary (interface, inputs, supports) leaves free; none (a strip whose every node
     # is interface or prescribed), no fixed-interface modes
     interior = comm.allreduce((hi - lo) - held.size, op=MPI.SUM)
