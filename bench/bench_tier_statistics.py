@@ -71,7 +71,7 @@ def batch_statistics(h5_path: Path, force_N: float, batches: int, skip_s: float)
     for lo, hi in zip(edges[:-1], edges[1:]):
         rows = (t > lo) & (t <= hi)
         window = {name: array[rows] for name, array in data.items()}
-        s = run_statistics(window, cfg, case.scene)
+        s = run_statistics(window, cfg)
         for key, get in KEYS.items():
             values[key].append(get(s))
         dt = window[S.STEP]
