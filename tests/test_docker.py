@@ -78,7 +78,9 @@ def test_dockerignore_keeps_host_state_out():
                 if ln.strip() and not ln.startswith("#")}
     for needed in (".venv", "results", ".git", "**/__pycache__"):
         assert needed in patterns, needed
-    for kept in ("app", "cases", "pyproject.toml", ".ci", "forms", "geometry"):
+    # the Dockerfiles too: the test image's run of this file reads them
+    for kept in ("app", "cases", "pyproject.toml", ".ci", "forms", "geometry", "tests", "Dockerfile",
+                 "Dockerfile.test"):
         assert kept not in patterns
 
 
