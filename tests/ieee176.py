@@ -52,3 +52,27 @@ def strip_plane_strain_antiresonance(c, e, eps, density, length):
     sD = voigt.open_circuit_compliance(c, e, eps)
     s_eff = sD[2, 2] - sD[1, 2] ** 2 / sD[1, 1]
     return 1.0 / (2 * length * math.sqrt(density * s_eff))
+
+
+def bar_33_capacitances(c, e, eps, density, length, area):
+    """Capacitances [F] of the 33 bar's one-dimensional admittance (IEEE Std 176):
+    Y = i omega C_LC / (1 - k33^2 tan(x) / x), x = omega L / (2 v^D), C_LC = eps33^T (1 - k33^2) A / L
+    (longitudinally clamped). Returns (C_LC, C_1, C_0): C_1 the motional capacitance of the
+    fundamental, from the residue of Y at f_r (Y ~ i omega C_1 omega_r^2 / (omega_r^2 - omega^2)), and
+    C_0 = C_1 omega_r^2 / (omega_a^2 - omega_r^2) the shunt capacitance of the Butterworth-Van Dyke
+    circuit that has the bar's f_r and f_a. C_0 is not C_LC: the higher modes' motional capacitances
+    (n = 3, 5, ...) sit in parallel with C_LC near the fundamental, ~10 % for PZT-4."""
+    f_r, f_a, k33 = bar_33(c, e, eps, density, length)
+    _, _, epsT = voigt.e_form_to_d_form(c, e, eps)
+    c_lc = epsT[2, 2] * (1 - k33**2) * area / length
+    x_r, x_a = (math.pi / 2) * f_r / f_a, math.pi / 2
+    # d/dx (1 - k^2 tan x / x) at x_r; C_1 = -2 C_LC / (x_r D'(x_r)) from the residue
+    slope = -k33**2 * (1 / (math.cos(x_r) ** 2 * x_r) - math.tan(x_r) / x_r**2)
+    c_1 = -2 * c_lc / (x_r * slope)
+    return c_lc, c_1, c_1 * x_r**2 / (x_a**2 - x_r**2)
+
+
+def rayleigh_love_factor(poisson, radius, length, order=1):
+    """Frequency factor of a thin rod's lateral inertia (Rayleigh-Love): f = f_1D (1 - (nu n pi r_g / L)^2 / 2)
+    with r_g^2 = r^2 / 2 the polar radius of gyration of a round section; error O((nu k r)^4)."""
+    return 1.0 - 0.5 * (poisson * order * math.pi * radius / length) ** 2 / 2

@@ -20,9 +20,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _instructions() -> list[tuple[str, str]]:
+def _instructions(name: str = "Dockerfile") -> list[tuple[str, str]]:
     """Dockerfile instructions as (KEYWORD, arguments), continuation lines joined, comments dropped."""
-    text = (ROOT / "Dockerfile").read_text()
+    text = (ROOT / name).read_text()
     lines = [ln for ln in text.splitlines() if not ln.lstrip().startswith("#")]
     joined = re.sub(r"\\\n", " ", "\n".join(lines))
     out = []
@@ -78,7 +78,9 @@ def test_dockerignore_keeps_host_state_out():
                 if ln.strip() and not ln.startswith("#")}
     for needed in (".venv", "results", ".git", "**/__pycache__"):
         assert needed in patterns, needed
-    for kept in ("app", "cases", "pyproject.toml", ".ci", "forms", "geometry"):
+    # the Dockerfiles too: the test image's run of this file reads them
+    for kept in ("app", "cases", "pyproject.toml", ".ci", "forms", "geometry", "tests", "Dockerfile",
+                 "Dockerfile.test"):
         assert kept not in patterns
 
 
@@ -92,6 +94,20 @@ def test_one_install_script_with_two_phases():
                             timeout=120)
         assert ok.returncode == 0, ok.stderr
         assert "piezodyn" not in ok.stdout  # the project phase did not run
+
+
+def test_test_image_runs_the_suite_with_paraview():
+    """Dockerfile.test: the runtime image plus the test extras the runtime image leaves out (ParaView,
+    Xvfb), running .ci/test.sh, which requires the ParaView checks (they fail, not skip, without it)."""
+    steps = _instructions("Dockerfile.test")
+    assert steps[0][0] == "ARG" and steps[0][1] == "BASE=piezodyn" and steps[1] == ("FROM", "${BASE}")
+    runs = [args for keyword, args in steps if keyword == "RUN"]
+    assert any(".ci/install.sh packages" in r and "PIEZODYN_NO_TEST_EXTRAS" not in r for r in runs), runs
+    assert ("ENTRYPOINT", '["bash", ".ci/test.sh"]') in steps
+    install = (ROOT / ".ci/install.sh").read_text()
+    assert "PACKAGES+=(paraview python3-paraview xvfb xauth)" in install
+    assert 'PIEZODYN_NO_TEST_EXTRAS=1 bash .ci/install.sh packages' in (ROOT / "Dockerfile").read_text()
+    assert 'export PIEZODYN_REQUIRE_PARAVIEW="${PIEZODYN_REQUIRE_PARAVIEW:-1}"' in (ROOT / ".ci/test.sh").read_text()
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root to drop to another user")

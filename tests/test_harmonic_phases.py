@@ -1,14 +1,17 @@
-"""Two-phase harmonic drive of the wedge-wave stator (coarse mesh): superposition of the A and B
-phases to solver tolerance, reversal of the wave when B's phase is flipped, the travelling-wave
-quality at F(1,4), and the sensor (floating electrode) voltage.
+"""Two-phase harmonic drive of the wedge-wave stator: superposition of the A and B phases, the
+floating sensors (equipotential, no net charge, the wave's direction in their phase), reversal of the
+wave when B's phase is flipped, the balance trim, and the standing wave of one phase.
 
-The stator tests are marked slow (~1.5 min on the coarse mesh: 9 block-LU solves of the 2x2 real
-system; the case-mesh test ~2 min and ~6 GB). With the nominal drive (B 200 V at exactly 90 deg) min/max of the normal
-amplitude is 0.79 on this mesh: the pair split and the single phases' spatial offset leave a
-backward n = 4 part of ~12 % (docs/motor-stator.md, diagnosis). The case balances B
-(harmonic.wave.balance = "B", as a two-phase driver does) and the issue's >= 0.9 is asserted for
-that drive; the nominal drive keeps a regression bound."""
+Each check runs on two meshes: ``coarse`` (4 mm, the CI smoke run's mesh, ~36k DOFs; 6 block-LU
+solves) in CI, serially and on 2 ranks, and ``fine`` (2.5 mm) as a slow test. The tolerances are the
+physics' own and hold on both: linearity (solver precision), the electrode conditions, and bounds
+computed from the mesh's own modal split delta f and damping zeta (the two-mode model of a split pair
+driven at its centre: each mode lags by atan(delta f / (2 zeta f)) on either side). What the coarse
+mesh changes is the split (12.8 Hz at 4 mm against ~2 Hz at the case's 1.2 mm) and with it the
+nominal drive's min/max (0.79 at 4 mm), so the issue's >= 0.9 is asserted on the balanced drive
+(harmonic.wave.balance = "B", as a two-phase driver trims B) and at the case mesh without trim (slow)."""
 
+import cmath
 import math
 
 import numpy as np
@@ -18,102 +21,196 @@ from mpi4py import MPI
 
 from app.case.schema import load_case
 
-COARSE = ["geometry.parameters.mesh_size_m=0.0025", "geometry.parameters.tip_mesh_size_m=0.0012"]
+# the coarse faceted cylinder sags ~0.15 mm at 4 mm: sample further inside (as tests/test_cases.py's run)
+COARSE = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
+          "modal.identify.line_radius_m=0.0133", "modal.identify.circle_radius_m=0.01305",
+          "harmonic.wave.circle_radius_m=0.01305"]
+FINE = ["geometry.parameters.mesh_size_m=0.0025", "geometry.parameters.tip_mesh_size_m=0.0012"]
+MESHES = {"coarse": COARSE, "fine": FINE}
+SOLVER_RTOL = 1e-9       # MUMPS on the 2x2 real block system: backward error ~1e-15, condition ~1e5 near resonance
+NOMINAL = {"A": 200.0 + 0j, "B": 200j}
+SENSORS = ("sensor", "sensor2")
 
 
-@pytest.fixture(scope="module")
-def stator():
-    from app.fe.model import build_model
-    from app.fe.operators import add_damping, assemble_operators
-    from app.modal import run_modal
+class Stator:
+    """The stator on one mesh: model, operators, modal result; harmonic solutions at the F(1,4) pair
+    centre by drive (cached: each test reads the solves it needs)."""
 
-    case = load_case(CASES / "wwusm-stator.toml", COARSE)
-    model = build_model(case, MPI.COMM_WORLD)
-    ops = assemble_operators(model)
-    modal = run_modal(model, ops)
-    add_damping(ops, model, modal.working_mode.frequency_Hz)
-    yield model, ops, modal
-    ops.destroy()
+    def __init__(self, overrides):
+        from app.fe.model import build_model
+        from app.fe.operators import add_damping, assemble_operators
+        from app.modal import run_modal
+        from app.runner import pair_centre_Hz
+
+        self.case = load_case(CASES / "wwusm-stator.toml", overrides)
+        self.model = build_model(self.case, MPI.COMM_WORLD)
+        self.ops = assemble_operators(self.model)
+        self.modal = run_modal(self.model, self.ops)
+        add_damping(self.ops, self.model, self.modal.working_mode.frequency_Hz)
+        self.frequency_Hz = pair_centre_Hz(self.modal)
+        self.cache = {}
+
+    @property
+    def zeta(self) -> float:
+        """Damping ratio of the working mode from the case's stiffness-proportional beta."""
+        return math.pi * self.modal.working_mode.frequency_Hz * self.case.damping.beta_s
+
+    def split_lag_rad(self) -> float:
+        """Phase difference of the pair's two modes driven at the pair centre: 2 atan(delta f / (2 zeta f))."""
+        split = abs(self.modal.orders[self.modal.working].split_Hz)
+        return 2 * math.atan(split / (2 * self.zeta * self.modal.working_mode.frequency_Hz))
+
+    def solve(self, phasors: dict) -> dict:
+        key = tuple(sorted(phasors.items()))
+        if key not in self.cache:
+            from app.fe.operators import charge, indicator
+            from app.harmonic import HarmonicSolver, wave_measures
+
+            solver = HarmonicSolver(self.model, self.ops, 200.0, prefix="test_phases_", phasors=phasors)
+            try:
+                point = solver.solve(self.frequency_Hz)
+                x_re, x_im = (v.copy() for v in solver.full_solution())
+                wave = wave_measures(self.model, solver, self.case.harmonic.wave, self.frequency_Hz)
+            finally:
+                solver.destroy()
+            sensors = {}
+            n_owned = self.model.W.dofmap.index_map.size_local
+            for name in SENSORS:
+                chi = indicator(self.model, [name])
+                net = complex(charge(self.ops.K, x_re, chi), charge(self.ops.K, x_im, chi))
+                chi.destroy()
+                dofs = self.model.electrode_dofs[name]
+                owned = dofs[dofs < n_owned]
+                values = x_re.array_r[owned] + 1j * x_im.array_r[owned]
+                spread = MPI.COMM_WORLD.allreduce(float(np.max(np.abs(values - point.floating_voltage_V[name])))
+                                                  if owned.size else 0.0, op=MPI.MAX)
+                count = MPI.COMM_WORLD.allreduce(owned.size)
+                sensors[name] = {"net_charge_C": net, "potential_spread_V": spread, "dofs": count}
+            self.cache[key] = {"point": point, "x": (x_re, x_im), "wave": wave, "sensors": sensors}
+        return self.cache[key]
+
+    def destroy(self):
+        for solution in self.cache.values():
+            for v in solution["x"]:
+                v.destroy()
+        self.ops.destroy()
 
 
-def _solve(stator, phasors, frequency_Hz=None):
-    from app.harmonic import HarmonicSolver, wave_measures
-    from app.runner import pair_centre_Hz
-
-    model, ops, modal = stator
-    f = frequency_Hz or pair_centre_Hz(modal)
-    solver = HarmonicSolver(model, ops, 200.0, prefix="test_phases_", phasors=phasors)
-    try:
-        point = solver.solve(f)
-        x_re, x_im = (v.copy() for v in solver.full_solution())
-        wave = wave_measures(model, solver, model.case.harmonic.wave, f)
-    finally:
-        solver.destroy()
-    return point, x_re, x_im, wave
+_STATORS: dict = {}
 
 
-@pytest.mark.slow
+@pytest.fixture(scope="module", params=["coarse", pytest.param("fine", marks=pytest.mark.slow)])
+def stator(request):
+    """One Stator per mesh for the module (built when a test first needs it)."""
+    if request.param not in _STATORS:
+        _STATORS[request.param] = Stator(MESHES[request.param])
+    yield _STATORS[request.param]
+
+
+def teardown_module(module):
+    for built in _STATORS.values():
+        built.destroy()
+    _STATORS.clear()
+
+
+def _sensor_phase_deg(point) -> float:
+    """Phase of the second sensor's voltage relative to the first's [deg]."""
+    return math.degrees(cmath.phase(point.floating_voltage_V[SENSORS[1]] / point.floating_voltage_V[SENSORS[0]]))
+
+
 @pytest.mark.mpi
 def test_working_mode_is_the_n4_pair(stator):
-    _, _, modal = stator
+    """F(1,4) and its partner are identified as (m, n) = (1, 4); the fourfold electrode layout keeps
+    them a pair: split below zeta f (half the half-power bandwidth; 73 Hz), else no two-phase drive at
+    the pair centre could make a travelling wave (measured 12.8 Hz at 4 mm)."""
+    modal = stator.modal
     order = modal.orders[modal.working]
     assert (order.m, order.n) == (1, 4)
     partner = modal.orders[order.partner]
     assert (partner.m, partner.n) == (1, 4)
-    # four-fold electrodes keep the pair nearly degenerate
-    assert abs(order.split_Hz) < 2e-3 * modal.working_mode.frequency_Hz
+    assert abs(order.split_Hz) < stator.zeta * modal.working_mode.frequency_Hz
 
 
-@pytest.mark.slow
 @pytest.mark.mpi
 def test_phases_superpose(stator):
-    a = _solve(stator, {"A": 200.0 + 0j, "B": 0j})
-    b = _solve(stator, {"A": 0j, "B": 200j})
-    ab = _solve(stator, {"A": 200.0 + 0j, "B": 200j})
-    for k in (1, 2):
-        total = a[k].copy()
-        total.axpy(1.0, b[k])
-        total.axpy(-1.0, ab[k])
-        assert total.norm() < 1e-9 * ab[k].norm()
-    sensor = ab[0].floating_voltage_V["sensor"]
-    assert abs(a[0].floating_voltage_V["sensor"] + b[0].floating_voltage_V["sensor"] - sensor) < 1e-9 * abs(sensor)
-    assert abs(sensor) > 0
+    """Linearity: the solutions of (A + B) and (A - B) add to twice that of A alone, in the whole
+    u-phi field, the floating sensors' voltages and the driven electrodes' charges, to solver precision."""
+    a = stator.solve({"A": 200.0 + 0j, "B": 0j})
+    plus = stator.solve(NOMINAL)
+    minus = stator.solve({"A": 200.0 + 0j, "B": -200j})
+    for k in (0, 1):
+        total = plus["x"][k].copy()
+        total.axpy(1.0, minus["x"][k])
+        total.axpy(-2.0, a["x"][k])
+        assert total.norm() < SOLVER_RTOL * plus["x"][k].norm()
+        total.destroy()
+    for name in SENSORS:
+        v = [s["point"].floating_voltage_V[name] for s in (plus, minus, a)]
+        assert abs(v[0] + v[1] - 2 * v[2]) < SOLVER_RTOL * abs(v[0])
+        assert abs(v[0]) > 0
     for name in ("A", "B"):
-        q = ab[0].electrode_charge_C[name]
-        assert abs(a[0].electrode_charge_C[name] + b[0].electrode_charge_C[name] - q) < 1e-9 * abs(q)
+        q = [s["point"].electrode_charge_C[name] for s in (plus, minus, a)]
+        assert abs(q[0] + q[1] - 2 * q[2]) < SOLVER_RTOL * abs(q[0])
 
 
-@pytest.mark.slow
+@pytest.mark.mpi
+def test_floating_sensors_are_equipotential_without_net_charge(stator):
+    """The floating electrode's two conditions, in the solved field and independent of how they are
+    imposed: every potential DOF of each sensor equals its reported voltage (spread 0 to round-off),
+    and its net charge Q = -chi^T K x (the reaction on its potential DOFs) is zero to solver precision
+    against the charge on a driven electrode. A sensor that shorted to ground would carry charge; a
+    bare face would not be equipotential."""
+    solution = stator.solve(NOMINAL)
+    q_drive = abs(solution["point"].electrode_charge_C["A"])
+    for name, sensor in solution["sensors"].items():
+        voltage = abs(solution["point"].floating_voltage_V[name])
+        assert sensor["dofs"] > 10, name
+        assert sensor["potential_spread_V"] <= 1e-12 * voltage, name
+        assert abs(sensor["net_charge_C"]) < SOLVER_RTOL * q_drive, name
+
+
 @pytest.mark.mpi
 def test_both_phases_travel_and_flipping_b_reverses(stator):
-    forward = _solve(stator, {"A": 200.0 + 0j, "B": 200j})[3]
-    backward = _solve(stator, {"A": 200.0 + 0j, "B": -200j})[3]
-    assert forward["travelling_wave_ratio"] >= 0.75
-    assert backward["travelling_wave_ratio"] >= 0.75
-    assert {forward["direction"], backward["direction"]} == {"+theta", "-theta"}
-    assert forward["forward_fraction"] > 0.85 or forward["forward_fraction"] < 0.15
-    # a travelling wave: the contact point's tangential and normal motions are in quadrature
-    assert abs(abs(forward["ellipse_phase_deg"]) - 90.0) < 15.0
-    assert forward["wave_speed_m_per_s"] == pytest.approx(
-        2 * math.pi * forward["frequency_Hz"] * 0.01294 / 4, rel=1e-12)
+    """B at +90 deg and at -90 deg drive waves in opposite directions, each a travelling wave: its
+    forward part outweighs the backward one three times over (min/max > 0.5; a standing wave has 0).
+    Not sharper: the two-mode model of the split pair alone leaves a backward part tan(phi / 2) of the
+    forward one (min/max 0.84 at 4 mm), and the layout's asymmetry (sensors in place of the first
+    quarter's guards) takes the nominal drive to 0.79; the issue's >= 0.9 is asserted on the balanced
+    drive, and at the case mesh without trim (slow). The contact point's tangential and normal
+    motions are in quadrature, up to the standing part's tilt asin((1 - r) / (1 + r)) for min/max r
+    (measured within 0.2 deg). The sensors, a quarter wavelength apart (22.5 deg for n = 4), read
+    the direction: the second lags the first (phase < 0) for a wave towards +theta, leads it
+    towards -theta (measured 88 and -68 deg: each sensor also hears its driven neighbour)."""
+    forward = stator.solve(NOMINAL)
+    backward = stator.solve({"A": 200.0 + 0j, "B": -200j})
+    assert {forward["wave"]["direction"], backward["wave"]["direction"]} == {"+theta", "-theta"}
+    parameters = stator.case.geometry.parameters
+    assert 4 * (parameters["sensor2_centre_deg"] - parameters["sensor_centre_deg"]) == pytest.approx(90.0)
+    for solution in (forward, backward):
+        wave = solution["wave"]
+        ratio = wave["travelling_wave_ratio"]
+        assert ratio > 0.5
+        assert min(wave["forward_fraction"], 1 - wave["forward_fraction"]) < 0.25
+        tilt = math.degrees(math.asin((1 - ratio) / (1 + ratio)))
+        assert abs(abs(wave["ellipse_phase_deg"]) - 90.0) <= tilt
+        sign = -1.0 if wave["direction"] == "+theta" else 1.0
+        assert sign * _sensor_phase_deg(solution["point"]) > 0
 
 
-@pytest.mark.slow
 @pytest.mark.mpi
 def test_balanced_two_phase_drive_travels_with_ratio_09(stator):
     """Both phases driven, B trimmed by the case's balance: min/max >= 0.9 (issue 10) at the F(1,4)
-    pair centre; the trim nulls the backward n = 4 part to solver precision and stays a trim (the
-    driver changes B by less than 30 deg and 20 % from the nominal 90 deg, 200 V)."""
+    pair centre; the trim nulls the backward n = 4 part to solver precision (linearity: one extra solve
+    gives the trim) and stays a trim of the split's lag (phase within 30 deg, measured 13 deg at 4 mm
+    for a lag of 10 deg; amplitude within 20 %). The other orders (n = 0 breathing, n = 8, ...) stay
+    below 2 % of the wave: 1 - min/max is theirs. The sensors read the trimmed wave's direction."""
     from app.harmonic import HarmonicSolver, balanced_wave
-    from app.runner import pair_centre_Hz
 
-    model, ops, modal = stator
-    cfg = model.case.harmonic.wave
+    cfg = stator.case.harmonic.wave
     assert cfg.balance == "B"
-    f = pair_centre_Hz(modal)
-    solver = HarmonicSolver(model, ops, 200.0, prefix="test_balance_")
+    solver = HarmonicSolver(stator.model, stator.ops, 200.0, prefix="test_balance_")
     try:
-        point, wave = balanced_wave(model, solver, cfg, f)
+        point, wave = balanced_wave(stator.model, solver, cfg, stator.frequency_Hz)
     finally:
         solver.destroy()
     assert wave["travelling_wave_ratio"] >= 0.9
@@ -125,11 +222,20 @@ def test_balanced_two_phase_drive_travels_with_ratio_09(stator):
     assert balance["electrode"] == "B" and balance["nominal_phase_deg"] == pytest.approx(90.0)
     assert abs(balance["phase_deg"] - 90.0) < 30.0
     assert abs(balance["amplitude_V"] / 200.0 - 1.0) < 0.2
-    # the other orders (n = 0 breathing, n = 8, ...) stay below 2 % of the wave: 1 - ratio is theirs
     others = [a + b for n, a, b in zip(orders["n"], orders["towards_plus_theta_m"], orders["towards_minus_theta_m"])
               if n != 4]
     assert sum(others) < 0.02 * max(forward, backward)
-    assert abs(point.floating_voltage_V["sensor"]) > 0
+    sign = -1.0 if wave["direction"] == "+theta" else 1.0
+    assert sign * _sensor_phase_deg(point) > 0
+
+
+@pytest.mark.mpi
+def test_one_phase_is_a_standing_wave(stator):
+    """A alone drives both modes of the split pair, lagging each other by phi: a standing wave with
+    a travelling part of at most sin(phi) / 2 (two-mode model; equal shares is the worst case), plus
+    the 2 % of other orders: min/max <= sin(phi) / 2 + 0.02 (0.11 at 4 mm; measured 0.04)."""
+    wave = stator.solve({"A": 200.0 + 0j, "B": 0j})["wave"]
+    assert wave["travelling_wave_ratio"] <= math.sin(stator.split_lag_rad()) / 2 + 0.02
 
 
 @pytest.mark.slow
@@ -164,13 +270,6 @@ def test_guarded_layout_travels_at_the_case_mesh_without_trim():
     finally:
         ops.destroy()
     assert wave["travelling_wave_ratio"] >= 0.9
-
-
-@pytest.mark.slow
-@pytest.mark.mpi
-def test_one_phase_is_a_standing_wave(stator):
-    wave = _solve(stator, {"A": 200.0 + 0j, "B": 0j})[3]
-    assert wave["travelling_wave_ratio"] < 0.5
 
 
 def test_fourier_identification_of_a_synthetic_field():

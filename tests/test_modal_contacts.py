@@ -355,4 +355,4 @@ def test_lumped_areas_are_positive_and_sum_to_the_area():
     # the last (P2) areas: the face's corner vertex lies in one or two of its 8 triangles (area 1/8,
     # by the diagonal's direction) and gets 6 / 114 of each
     corner = np.flatnonzero(np.all(np.isclose(nodes.coordinates_m[:, :2], 0.0), axis=1))[0]
-    assert np.isclose(nodes.area_m2[corner], [0.125 * 6 / 114, 0.25 * 6 / 114], rtol=1e-12).any()
+    assert np.isclose(nodes.area_m2[corner], [0.125 * 6 / 114, 0.25 * 6 / 114], rtol=1e-12, atol=0).any()

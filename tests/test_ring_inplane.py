@@ -32,6 +32,10 @@ def test_ring_inplane_bending_against_closed_form(shared_tmp):
         pair = inplane[n]
         assert len(pair) == 2, f"n = {n}: expected a degenerate pair, got {len(pair)}"
         f_fe = 0.5 * (pair[0]["resonance_Hz"] + pair[1]["resonance_Hz"])
-        assert f_fe == pytest.approx(closed_form_Hz(n), rel=0.02)
+        # The thin-ring formula leaves out shear and rotary inertia: Timoshenko's terms lower f by
+        # ~ (k r_g)^2 (1 + E / (kappa G)) / 2 = 0.17 (n T / R)^2 (k = n / R, r_g^2 = T^2 / 12). Measured
+        # at the case's 0.6 mm: +5.5e-5, -3.3e-4, -8.8e-4 for n = 2, 3, 4 (at 0.9 / 0.45 mm: -7.6e-4 /
+        # -1.03e-3 for n = 4: the one-element-thick P2 mesh is still a little stiff). Bound 0.3 (n T / R)^2.
+        assert f_fe == pytest.approx(closed_form_Hz(n), rel=0.3 * (n * T / R) ** 2)
         # the partners find each other and their split is small (an axisymmetric body)
         assert abs(pair[0]["partner_split_Hz"]) < 2e-3 * f_fe

@@ -114,19 +114,51 @@ def test_serial_checkpoint_resumes_on_two_ranks(one_go, tmp_path):
 
 
 def test_summary_reports_impact_statistics(one_go):
-    """The drill run's summary carries the tier-comparable statistics (app/transient/impacts.py)."""
-    _, summary = one_go
-    stats = summary["results"]["transient"]["statistics"]
+    """The drill run's summary statistics (app/transient/impacts.py) against the momentum balance of the
+    ball and the stem, the bodies between the tip and the rock: the rock's impulse (mean force x run
+    length) + the tip's impulse on the ball - their weight x run length = the change of their momentum
+    (from rest), with the end velocities from transient.h5.
+
+    Tolerance: the scheme's own momentum defect. Generalized-alpha advances a rigid body by
+    m (v_n+1 - v_n) = dt ((1 - gamma) m a_n + gamma m a_n+1) while the recorded force is the
+    generalised mid-point one, m ((1 - alpha_m) a_n+1 + alpha_m a_n) = F_n; per step they differ by
+    (alpha_f - 1/2) dt m (a_n+1 - a_n). Summed, |defect| <= |alpha_f - 1/2| / (1 - alpha_m - |alpha_m|)
+    sum dt |F_n - F_n-1| over the external contact forces, computed here from the series: 1.0 % of
+    the rock impulse in this run (1/6 at rho_inf = 0.5; measured defect 3e-5 of it: the step size is
+    constant while the forces change, so the differences telescope). With the trapezoidal rule the
+    bound is 0: momentum is conserved exactly."""
+    from forms.newmark import TimeScheme
+
+    out, summary = one_go
+    results = summary["results"]["transient"]
+    stats = results["statistics"]
+    case = summary["case"]["transient"]
     assert set(stats["impact_rate_per_s"]) == {"tip_ball", "ball_stem", "stem_rock"}
-    contacts = summary["results"]["transient"]["contacts"]
+    contacts = results["contacts"]
     for name, count in stats["impact_count"].items():
         assert count == contacts[name]["impacts"]          # closed at the first step is no impact
-    rock = stats["stem_rock_foundation"]
-    assert rock["mean_force_N"] > 0 and rock["peak_force_N"] >= rock["mean_force_N"]
-    assert rock["mean_force_N"] * stats["simulated_time_s"] == pytest.approx(
-        contacts["stem_rock"]["impulse_N_s"], rel=1e-9)
     assert {"max_rise_m", "flight_count"} <= set(stats["transducer"])
     assert set(stats["bodies"]) == {"ball", "stem"}
+    # the run starts at t = 0 (the first row of the series is after the first step)
+    assert stats["simulated_time_s"] == pytest.approx(END_S, rel=1e-12)
+    if MPI.COMM_WORLD.rank != 0:
+        return
+    series = read_series(out / "transient.h5")
+    masses = {b["name"]: b["mass_kg"] for b in case["bodies"] if not b["fixed"]}
+    assert set(masses) == {"ball", "stem"}
+    gravity = case["loads"]["gravity_m_per_s2"][-1]
+    momentum = sum(m * series[f"{name}_velocity_m_per_s"][-1, -1] for name, m in masses.items())   # from rest
+    rock_impulse = stats["stem_rock_foundation"]["mean_force_N"] * END_S           # upwards on the stem
+    tip_impulse = -contacts["tip_ball"]["impulse_N_s"]                             # downwards on the ball
+    defect = rock_impulse + tip_impulse + sum(masses.values()) * gravity * END_S - momentum
+    scheme = case["scheme"]
+    ts = (TimeScheme.generalized_alpha(scheme["rho_inf"]) if scheme["kind"] == "generalized_alpha"
+          else TimeScheme.newmark())
+    external = series["stem_rock_force_N"][:, -1] + series["tip_ball_force_N"][:, -1]
+    variation = np.sum(series["dt_s"] * np.abs(np.diff(external, prepend=0.0)))
+    bound = abs(ts.alpha_f - 0.5) / (1 - ts.alpha_m - abs(ts.alpha_m)) * variation
+    assert abs(defect) <= bound + 1e-9 * rock_impulse, (defect, bound, rock_impulse)
+    assert bound < 0.02 * rock_impulse          # the check is as tight as the issue's ~1 %
 
 
 def test_resume_of_a_different_case_is_refused(one_go, tmp_path):

@@ -21,7 +21,9 @@ def run_rod(rod: RodImpact, comm=MPI.COMM_WORLD, scheme=None, **kwargs):
 
 def test_rod_impact_matches_saint_venant():
     """Generalized-alpha (rho_inf = 0.5) removes the step-to-step chatter of the contact node, so
-    the force plateau itself is checked tightly."""
+    the force plateau itself is checked tightly (1 %: measured 2e-6 at 40 elements). At 40 elements
+    the dispersed wave front makes the pulse 1.6 % long and its impulse 1.1 % short (see the
+    convergence test below), so the duration gets 3 % and the impulse-mean force (2.6 % low) 5 %."""
     rod = RodImpact(elements_along=40)
     records, _, stepper = run_rod(rod, scheme=TimeScheme.generalized_alpha(0.5))
     duration, mean_force, median_force, peak = contact_pulse(records)
@@ -68,16 +70,60 @@ def test_rod_impact_trapezoidal_rule_pulse():
     assert median_force == pytest.approx(rod.contact_force_N, rel=0.05)
 
 
-@pytest.mark.slow
-def test_rod_impact_converges_under_refinement():
-    errors = []
-    for elements in (20, 40, 80, 160):
-        rod = RodImpact(elements_along=elements)
+def _pulse_errors(elements: tuple[int, ...]):
+    """Per mesh: (relative error of the contact duration against 2L/c, of the wall's impulse against
+    the momentum 2 m v0 of an elastic rebound, of the median force against rho c A v0)."""
+    duration_err, impulse_err, force_err = [], [], []
+    for n in elements:
+        rod = RodImpact(elements_along=n)
         records, _, _ = run_rod(rod, scheme=TimeScheme.generalized_alpha(0.5))
         duration, mean_force, median_force, _ = contact_pulse(records)
-        errors.append(abs(duration / rod.contact_duration_s - 1) + abs(median_force / rod.contact_force_N - 1))
-    assert errors[-1] < errors[0]
-    assert errors[-1] < 0.02
+        momentum = rod.density_kg_per_m3 * rod.length_m * rod.height_m * rod.speed_m_per_s
+        duration_err.append(abs(duration / rod.contact_duration_s - 1))
+        impulse_err.append(abs(mean_force * duration / (2 * momentum) - 1))
+        force_err.append(abs(median_force / rod.contact_force_N - 1))
+    return np.array(duration_err), np.array(impulse_err), np.array(force_err)
+
+
+# Penalty contact under mesh refinement (dt = the element transit time, the penalty 10x an element's
+# axial stiffness, so both refine with h). The pulse is a step wave: a second-order scheme's
+# dispersion spreads its front like an Airy function over (h^2 L)^(1/3), so the contact's end (the
+# returning front) and the impulse it lets through converge like h^(2/3), not h: measured orders 0.60
+# (10-80 elements), 0.65 (20-160), 0.68 (40-320) for the duration; 0.49, 0.55, 0.59 for the impulse.
+# The force plateau is resolved exactly once the front is a few elements wide (1e-6 at 40 elements).
+AIRY_ORDER = 2.0 / 3.0
+
+
+@pytest.mark.mpi
+def test_rod_impact_converges_under_refinement():
+    """Coarse (CI): 10, 20, 40, 80 elements, pre-asymptotic: the duration's observed order within
+    0.15 of 2/3, the impulse's above 0.4, all errors falling, the plateau to 0.2 % from 20 elements."""
+    from ieee176 import observed_order
+
+    elements = (10, 20, 40, 80)
+    duration, impulse, force = _pulse_errors(elements)
+    h = [1.0 / n for n in elements]
+    assert np.all(np.diff(duration) < 0) and np.all(np.diff(impulse) < 0)
+    assert abs(observed_order(h, duration) - AIRY_ORDER) < 0.15, duration
+    assert observed_order(h, impulse) > 0.4, impulse
+    assert np.all(force[1:] < 2e-3), force
+    assert duration[-1] < 0.015 and impulse[-1] < 0.01
+
+
+@pytest.mark.slow
+def test_rod_impact_converges_under_refinement_fine():
+    """Fine: 40 to 320 elements, near the asymptote: the duration's order within 0.05 of 2/3, the
+    impulse's above 0.5, the duration to 0.4 % and the impulse to 0.35 % at 320 elements."""
+    from ieee176 import observed_order
+
+    elements = (40, 80, 160, 320)
+    duration, impulse, force = _pulse_errors(elements)
+    h = [1.0 / n for n in elements]
+    assert np.all(np.diff(duration) < 0) and np.all(np.diff(impulse) < 0)
+    assert abs(observed_order(h, duration) - AIRY_ORDER) < 0.05, duration
+    assert observed_order(h, impulse) > 0.5, impulse
+    assert np.all(force < 1e-5), force
+    assert duration[-1] < 0.004 and impulse[-1] < 0.0035
 
 
 @pytest.mark.mpi

@@ -73,7 +73,9 @@ def run_statistics(data: dict[str, np.ndarray], cfg) -> dict:
         return {}
     t = data[S.TIME]
     dt = data[S.STEP] if S.STEP in data else np.diff(t, prepend=t[0])
-    duration = float(t[-1] - t[0])
+    # the first row is the state after the first step dt[0]: the run spans t[0] - dt[0] .. t[-1], the
+    # span the sums of f dt cover
+    duration = float(t[-1] - t[0] + dt[0])
     stats: dict = {"simulated_time_s": duration}
     fixed = {b.name for b in cfg.bodies if b.fixed}
     counts, rates = {}, {}
