@@ -204,9 +204,10 @@ def frequency_grid(model: FEModel, f_r: float | None, f_a: float | None) -> np.n
     return np.unique(np.concatenate([grid, extra]))
 
 
-def circle_phasors(model: FEModel, solver: HarmonicSolver, cfg) -> tuple[np.ndarray, np.ndarray]:
-    """(u_cyl phasors (n_points, 3) [m], theta) of the solver's last solution round harmonic.wave's circle."""
-    from app.modeid import PointSet, circle_points, cylindrical
+def wave_circle(model: FEModel, cfg):
+    """(PointSet, theta) of harmonic.wave's circle; CaseError if a point of it lies outside the mesh (so
+    ``validate`` refuses it without solving: app.runner.check_case). Collective."""
+    from app.modeid import PointSet, circle_points
 
     points, theta = circle_points(cfg.circle_radius_m, cfg.circle_height_m, cfg.n_points)
     probe = PointSet(model.mesh, points)
@@ -214,6 +215,14 @@ def circle_phasors(model: FEModel, solver: HarmonicSolver, cfg) -> tuple[np.ndar
         from app.errors import CaseError
 
         raise CaseError(model.case.source, "harmonic.wave.circle_radius_m", "the circle leaves the mesh")
+    return probe, theta
+
+
+def circle_phasors(model: FEModel, solver: HarmonicSolver, cfg) -> tuple[np.ndarray, np.ndarray]:
+    """(u_cyl phasors (n_points, 3) [m], theta) of the solver's last solution round harmonic.wave's circle."""
+    from app.modeid import cylindrical
+
+    probe, theta = wave_circle(model, cfg)
     x_re, x_im = solver.full_solution()
     u_re = cylindrical(probe(model.displacement(x_re)), theta)
     u_im = cylindrical(probe(model.displacement(x_im)), theta)

@@ -142,16 +142,24 @@ def run_modal(model: FEModel, ops: Operators) -> ModalResult:
     return ModalResult(short, opened, pairs, working, orders)
 
 
-def identify_modes(model: FEModel, modes: list[Mode]) -> list:
-    """Circumferential and axial orders and degenerate partners (app.modeid) of ``modes``."""
+def mode_identifier(model: FEModel):
+    """The modal.identify sampler (app.modeid.ModeIdentifier); CaseError if its circle or generatrix leaves
+    the mesh (so ``validate`` refuses it without solving: app.runner.check_case). Collective."""
     from app.errors import CaseError
-    from app.modeid import ModeIdentifier, pair_partners
+    from app.modeid import ModeIdentifier
 
     try:
-        identifier = ModeIdentifier(model.mesh, model.case.modal.identify)
+        return ModeIdentifier(model.mesh, model.case.modal.identify)
     except ValueError as exc:
         raise CaseError(model.case.source, f"modal.identify.{exc}_radius_m",
                         "the identification points do not all lie inside the mesh") from None
+
+
+def identify_modes(model: FEModel, modes: list[Mode]) -> list:
+    """Circumferential and axial orders and degenerate partners (app.modeid) of ``modes``."""
+    from app.modeid import pair_partners
+
+    identifier = mode_identifier(model)
     orders = [identifier.order(model.displacement(mode.vector)) for mode in modes]
     pair_partners([m.frequency_Hz for m in modes], orders)
     return orders

@@ -91,10 +91,31 @@ def check_case(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, log=None) -> None:
         return
     if "transient" in case.analyses:
         engine_class(case.tier).check(case, comm, log or (lambda *a: None))
-    else:
-        from app.fe.model import build_model
+        if not _probes_frequency_domain(case):
+            return
+    # the FE model (a case that also runs a transient builds it a second time here: a rare combination)
+    from app.fe.model import build_model
 
-        build_model(case, comm)
+    check_frequency_domain(case, build_model(case, comm))
+
+
+def _probes_frequency_domain(case: Case) -> bool:
+    """Whether a frequency-domain analysis of ``case`` samples the mesh at points of its own."""
+    return ("modal" in case.analyses and case.modal.identify is not None
+            or "harmonic" in case.analyses and case.harmonic.wave is not None)
+
+
+def check_frequency_domain(case: Case, model) -> None:
+    """The frequency-domain analyses' checks that need the mesh, without solving: the sample points of
+    modal.identify and harmonic.wave lie inside it. Collective."""
+    if "modal" in case.analyses and case.modal.identify is not None:
+        from app.modal import mode_identifier
+
+        mode_identifier(model)
+    if "harmonic" in case.analyses and case.harmonic.wave is not None:
+        from app.harmonic import wave_circle
+
+        wave_circle(model, case.harmonic.wave)
 
 
 ENGINES = {"fe": "app.transient.engine:FEEngine", "modal": "app.reduced.engine:ModalEngine"}

@@ -104,10 +104,23 @@ def build_points(case_path: str | Path, params: list[tuple[str, list]], sets: li
     for index, combo in enumerate(itertools.product(*[v for _, v in params])):
         values = dict(zip(keys, combo))
         overrides = list(sets or []) + [f"{k}={toml_value(v)}" for k, v in values.items()]
-        case = load_for_run(case_path, overrides)
+        try:
+            case = load_for_run(case_path, overrides)
+        except CaseError as exc:
+            raise _swept(exc, values) from None
         _check_geometry_parameters(case)
         points.append({"index": index, "values": values, "overrides": overrides, "case": case})
     return points
+
+
+def _swept(exc: CaseError, values: dict) -> CaseError:
+    """``exc`` saying which --param value it comes from, when its key is a swept key or lies in or above
+    one (a swept key that makes a section the case's tier does not read is named by that section)."""
+    key = str(exc.key or "")
+    for name, value in values.items():
+        if key and (name == key or name.startswith((key + ".", key + "[")) or key.startswith((name + ".", name + "["))):
+            return CaseError(exc.file, exc.key, f"{exc.message} (from --param {name}={toml_value(value)})")
+    return exc
 
 
 def _check_geometry_parameters(case) -> None:

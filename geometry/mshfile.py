@@ -21,13 +21,16 @@ def read_msh(comm: MPI.Comm, path: Path, gdim: int, file: str | None = None) -> 
             try:
                 if not path.is_file():
                     raise OSError("no such file")
+                with open(path, "rb") as f:     # else gmsh parses it as a script, its message depends on its state
+                    if not f.read(64).lstrip().startswith(b"$"):
+                        raise OSError("not a gmsh .msh file (it does not start with $MeshFormat)")
                 gmsh.merge(str(path))
                 tdim = gmsh.model.getDimension()
                 if tdim < gdim or not gmsh.model.getPhysicalGroups(tdim):
                     raise OSError(f"no {gdim}D physical groups (cells need a physical group)")
                 ok = ""
             except Exception as exc:  # gmsh raises bare Exception on parse errors
-                ok = str(exc) or type(exc).__name__
+                ok = "".join(c for c in str(exc) if c.isprintable()) or type(exc).__name__
         ok = comm.bcast(ok, root=0)
         if ok:
             raise CaseError(file, "geometry.mesh_file", f"cannot read mesh {str(path)!r}: {ok}")

@@ -91,6 +91,22 @@ class StatorParameters:
             raise CaseError(file, f"{prefix}.contact_depth_m", "the contact band must lie on the inclined face")
         if 2 * self.electrode_margin_m >= self.tube_height_m:
             raise CaseError(file, f"{prefix}.electrode_margin_m", "leaves no room for the outer strips")
+        self._check_strips_apart(file, prefix)
+
+    def _check_strips_apart(self, file, prefix) -> None:
+        """Each outer strip is its own facet group: two strips on the same wall area would leave one group
+        empty (a facet carries one tag). The key named is the one that places the later strip."""
+        from app.errors import CaseError
+
+        strips = list(self.strips().items())
+        for i, (name, arc) in enumerate(strips):
+            for other, other_arc in strips[:i]:
+                if _arcs_overlap(arc, other_arc):
+                    key = ("sensor2_centre_deg" if name == "sensor2" else "sensor_centre_deg" if name == "sensor"
+                           else "phase_shift_deg")
+                    raise CaseError(file, f"{prefix}.{key}",
+                                    f"the {name!r} strip ({arc[0]:g} to {arc[1]:g} deg) overlaps the {other!r} strip "
+                                    f"({other_arc[0]:g} to {other_arc[1]:g} deg): move it or narrow the strips")
 
     def strips(self) -> dict[str, tuple[float, float]]:
         """Angular extent [deg] of each outer strip, in [0, 360)."""

@@ -46,12 +46,26 @@ TIERS: dict[str, Tier] = {
         "lumped", "lumped-parameter drill model (transducer modes + rigid bodies)",
         analyses=("lumped",), default_analyses=("lumped",),
         requires=("lumped",),
-        foreign=("geometry", "transient")),
+        foreign=("geometry", "materials", "regions", "electrodes", "supports", "points", "damping", "modal",
+                 "harmonic", "circuit", "reduction", "output", "transient")),
 }
 
 
-def check_tier(case, file: str) -> None:
-    """Tier-level input checks of a loaded case (one CaseError naming the key)."""
+def foreign_section(tier_name, section: str, file: str) -> CaseError | None:
+    """The error for a section the case file gives that tier ``tier_name`` does not read (None if it reads
+    it, or the tier is unknown)."""
+    tier = TIERS.get(tier_name) if isinstance(tier_name, str) else None
+    if tier is None or section not in tier.foreign:
+        return None
+    owners = [t.name for t in TIERS.values() if section not in t.foreign]
+    return CaseError(file, section, f"not a section of tier {tier.name!r} (it belongs to tier "
+                                    f"{' or '.join(map(repr, owners))})")
+
+
+def check_tier(case, file: str, written=None) -> None:
+    """Tier-level input checks of a loaded case (one CaseError naming the key); ``written``: the top-level
+    keys the case file (with its overrides) gives, the sections checked against the tier's foreign ones
+    (default: the sections that are set)."""
     tier = TIERS.get(case.tier)
     if tier is None:
         raise CaseError(file, "tier", f"unknown tier {case.tier!r} (tiers: {', '.join(TIERS)})")
@@ -67,8 +81,5 @@ def check_tier(case, file: str) -> None:
             if getattr(case, section) is None:
                 raise CaseError(file, section, f"section required by analysis {analysis!r}")
     for section in tier.foreign:
-        if getattr(case, section) is not None:
-            owners = [t.name for t in TIERS.values() if section in t.requires or
-                      any(section in s for s in t.analysis_sections.values())]
-            raise CaseError(file, section, f"belongs to tier {' or '.join(map(repr, owners))}, "
-                                           f"not {tier.name!r}")
+        if (section in written) if written is not None else getattr(case, section) is not None:
+            raise foreign_section(tier.name, section, file)

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from app.case.loader import apply_overrides, read_toml
-from app.case.validate import from_dict, param
+from app.case.validate import from_dict, param, refuse_repeats
 from app.errors import CaseError
 from app.materials import Material, resolve
 
@@ -46,7 +46,9 @@ class Region:
 
 @dataclass(frozen=True)
 class Electrode:
-    facets: list[TagRef] = param(doc="facet group names or tags")
+    facets: list[TagRef] = param(
+        doc="facet group names or tags, each in one electrode; electrodes meeting at an edge (sharing nodes) "
+            "must both be ground (an electrode is an equipotential surface)")
     kind: Literal["ground", "voltage", "floating"] = param(doc="0 V, driven, or equipotential with zero charge")
     amplitude_V: float | None = param(
         None, ge=0, unit="V", doc="drive amplitude of this electrode (kind 'voltage'); default: the analysis' "
@@ -56,6 +58,7 @@ class Electrode:
                              "phasor A exp(i phase)")
 
     def check(self, file, prefix):
+        refuse_repeats(self.facets, file, lambda j: f"{prefix}.facets[{j}]", "facet group")
         if self.kind != "voltage":
             for key, unset in (("amplitude_V", self.amplitude_V is None), ("phase_deg", self.phase_deg == 0.0)):
                 if not unset:
@@ -67,6 +70,10 @@ class Electrode:
 class Support:
     facets: list[TagRef] = param()
     components: list[Literal["x", "y", "z", "r"]] = param(doc="displacement components held at 0")
+
+    def check(self, file, prefix):
+        refuse_repeats(self.facets, file, lambda j: f"{prefix}.facets[{j}]", "facet group")
+        refuse_repeats(self.components, file, lambda j: f"{prefix}.components[{j}]", "component")
 
 
 @dataclass(frozen=True)
@@ -242,6 +249,9 @@ class Case:
                                     f"unknown material {region.material!r}; defined: {', '.join(self.materials)}")
                 if isinstance(region.poling, list) and (len(region.poling) != 3 or not any(region.poling)):
                     raise CaseError(file, f"regions[{i}].poling", "a poling vector needs 3 non-zero-norm entries")
+            refuse_repeats([r.cells for r in self.regions], file, lambda i: f"regions[{i}].cells", "cell group")
+        self._check_electrode_facets(file)
+        self._check_support_facets(file)
         from app.case.options import TIERS
 
         runnable = TIERS[self.tier].analyses
@@ -280,6 +290,31 @@ class Case:
         if self.circuit and self.circuit.point not in self.points:
             raise CaseError(file, "circuit.point", f"unknown point {self.circuit.point!r}")
 
+    def _check_electrode_facets(self, file) -> None:
+        """An electrode is an equipotential surface: a facet group belongs to one electrode at most (by name
+        here; by tag and by shared potential DOFs where the mesh tells, app.fe.model)."""
+        owner = {}
+        for name, electrode in self.electrodes.items():
+            for j, ref in enumerate(electrode.facets):
+                other = owner.setdefault(repr(ref), name)
+                if other != name:
+                    raise CaseError(file, f"electrodes.{name}.facets[{j}]",
+                                    f"facet group {ref!r} is also in electrode {other!r} (a facet belongs to one "
+                                    "electrode at most)")
+
+    def _check_support_facets(self, file) -> None:
+        """A displacement component of a facet group is held by one support (two supports may hold different
+        components of the same facets)."""
+        held = {}
+        for i, support in enumerate(self.supports):
+            for j, ref in enumerate(support.facets):
+                for component in support.components:
+                    other = held.setdefault((repr(ref), component), i)
+                    if other != i:
+                        raise CaseError(file, f"supports[{i}].facets[{j}]",
+                                        f"component {component!r} of facet group {ref!r} is already held by "
+                                        f"supports[{other}]")
+
 
 def _section_types():
     """The sections with a module of their own in app/case/ (typed ``Any`` in :class:`Case`)."""
@@ -289,24 +324,47 @@ def _section_types():
     return {"lumped": LumpedSection, "transient": TransientSection}
 
 
+def _explained(exc: CaseError, in_file: dict, written: set, tier) -> CaseError:
+    """A section's error that points the wrong way, pointed right: a section the case's tier does not read
+    is named as such (not by a key missing from it), and a key missing from a section that only the --set
+    overrides made says so."""
+    from app.case.options import foreign_section
+
+    section = str(exc.key or "").split(".")[0].split("[")[0]
+    if section not in written:
+        return exc
+    foreign = foreign_section(tier, section, exc.file)
+    if foreign is not None:
+        return foreign
+    if section not in in_file and exc.message == "required key is missing":
+        return CaseError(exc.file, exc.key, f"required key is missing (the case file has no [{section}] section: "
+                                            "the overrides made one)")
+    return exc
+
+
 def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
     """Read, override and validate a case file into a :class:`Case`."""
     path = Path(path)
     file = str(path)
-    raw = apply_overrides(read_toml(path), overrides)
+    in_file = read_toml(path)
+    raw = apply_overrides(in_file, overrides)
+    written = set(raw)
     if "source" in raw:
         raise CaseError(file, "source", "is set by piezodyn, not by the case file")
     sections = _section_types()
     extra = {}
-    for name, cls in sections.items():
-        if name in raw:
-            extra[name] = from_dict(cls, raw.pop(name), file, name)
-    case = from_dict(Case, raw, file)
+    try:
+        for name, cls in sections.items():
+            if name in raw:
+                extra[name] = from_dict(cls, raw.pop(name), file, name)
+        case = from_dict(Case, raw, file)
+    except CaseError as exc:
+        raise _explained(exc, in_file, written, raw.get("tier", Case.tier)) from None
     materials = {name: resolve(m, file, f"materials.{name}") for name, m in case.materials.items()}
     from app.case.options import TIERS, check_tier
 
     default = list(TIERS[case.tier].default_analyses) if case.tier in TIERS else []
     analyses = case.analyses if case.analyses is not None else default
     case = replace(case, materials=materials, analyses=analyses, source=str(path.resolve()), **extra)
-    check_tier(case, file)
+    check_tier(case, file, written)
     return case

@@ -8,10 +8,10 @@ Checks that need the mesh (a contact naming a facet group that is not in the mes
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
-from app.case.validate import param
+from app.case.validate import param, refuse_repeats
 from app.errors import CaseError
 
 TagRef = str | int
@@ -231,6 +231,10 @@ class PointContactSection:
                                  "friction")
     friction: LinkFrictionSection | None = param(None, doc="Coulomb friction (none: frictionless)")
 
+    def check(self, file, prefix):
+        if self.lower == self.upper:
+            raise CaseError(file, f"{prefix}.upper", f"a body does not touch itself: lower is {self.lower!r} too")
+
     def bodies(self) -> list[tuple[str, str]]:
         return [("lower", self.lower), ("upper", self.upper)]
 
@@ -246,7 +250,9 @@ class TravellingWaveMotionSection:
 
     name: str = param(doc="motion name")
     kind: Literal["travelling_wave"] = param(doc="travelling wave along `direction` (a stator surface)")
-    facets: TagRef = param(doc="facet group whose displacement is prescribed (all components)")
+    facets: TagRef = param(
+        doc="facet group whose displacement is prescribed (all components); the facet groups of two motions may not "
+            "share nodes")
     normal_amplitude_m: float = param(ge=0, unit="m", doc="W: displacement amplitude along `normal`")
     tangential_amplitude_m: float = param(
         ge=0, unit="m", doc="U_t: amplitude along `direction`, a quarter period after the normal one (a crest "
@@ -317,11 +323,16 @@ class TransientSection:
             raise CaseError(file, f"{prefix}.steps.{key}",
                             f"dt = {largest} s is larger than output_interval_s = {self.output_interval_s} s")
         if self.output_interval_s > self.end_time_s:
-            raise CaseError(file, f"{prefix}.output_interval_s", "must not exceed end_time_s")
+            period = 1.0 / self.drive.frequency_Hz
+            drive = (f"one drive period ({period:.6g} s at {self.drive.frequency_Hz:g} Hz) and than "
+                     if self.end_time_s < period else "")
+            raise CaseError(file, f"{prefix}.end_time_s", f"{self.end_time_s:g} s is shorter than {drive}"
+                                                          f"output_interval_s = {self.output_interval_s:g} s")
         names = [b.name for b in self.bodies]
         for i, name in enumerate(names):
             if name in names[:i]:
                 raise CaseError(file, f"{prefix}.bodies[{i}].name", f"duplicate rigid body name {name!r}")
+        self._check_repeats(file, prefix)
         dims = {len(b.position_m) for b in self.bodies}
         if len(dims) > 1:
             raise CaseError(file, f"{prefix}.bodies", "all bodies need the same number of coordinates")
@@ -348,6 +359,22 @@ class TransientSection:
         for i, name in enumerate(contact_names):
             if name in contact_names[:i]:
                 raise CaseError(file, f"{prefix}.contacts[{i}].name", f"duplicate contact name {name!r}")
+
+    def _check_repeats(self, file, prefix) -> None:
+        """Each base motion's name and facet group once (two motions of one facet group prescribe its DOFs
+        twice; overlaps only the mesh shows: app.transient.motions), and no contact twice (the same contact
+        under another name presses twice)."""
+        motions = self.base_motions
+        refuse_repeats([m.name for m in motions], file, lambda i: f"{prefix}.base_motions[{i}].name",
+                       "base motion name")
+        refuse_repeats([m.facets for m in motions], file, lambda i: f"{prefix}.base_motions[{i}].facets",
+                       "prescribed facet group")
+        unnamed = [replace(c, name="") for c in self.contacts]
+        for i, contact in enumerate(unnamed):
+            if contact in unnamed[:i]:
+                j = unnamed.index(contact)
+                raise CaseError(file, f"{prefix}.contacts[{i}]", f"the same contact as contacts[{j}] "
+                                                                 f"({self.contacts[j].name!r}) under another name")
 
     def _check_seat(self, file, key, body) -> None:
         contact = next((c for c in self.contacts if c.name == body.seat_on), None)

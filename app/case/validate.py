@@ -211,6 +211,17 @@ def from_dict(cls: type, data: dict, file: str | None = None, prefix: str = "") 
     return obj
 
 
+def refuse_repeats(items, file: str | None, key_of, what: str) -> None:
+    """CaseError naming ``key_of(i)`` at the first entry ``i`` of ``items`` that repeats an earlier one
+    (compared by value; unhashable entries by their repr): a list of names, facets or electrodes
+    says each once."""
+    first: dict = {}
+    for i, item in enumerate(items):
+        seen = first.setdefault(repr(item), i)
+        if seen != i:
+            raise CaseError(file, key_of(i), f"{what} {item!r} is listed twice (also at {key_of(seen)})")
+
+
 def to_dict(obj: Any) -> Any:
     """Dataclass tree to plain TOML/JSON-able data (the 'resolved case')."""
     if dataclasses.is_dataclass(obj):

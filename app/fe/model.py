@@ -165,6 +165,22 @@ def _material_tensors(case: Case, region_cfg, index: int, mesh, kind: str):
             fem.Constant(mesh, voigt.rotate_permittivity(eps, frame)))
 
 
+def _check_electrodes_apart(case: Case, electrode_dofs: dict[str, np.ndarray], comm: MPI.Comm) -> None:
+    """An electrode is an equipotential surface with its own potential (driven, floating) or charge: two
+    electrodes may share a potential DOF (facet groups meeting at an edge) only if both are ground, held at
+    the same 0 V. Two driven electrodes would each prescribe the shared DOFs, two floating ones would be one
+    equipotential, and a shared DOF's charge would be counted for both. Collective."""
+    names = list(electrode_dofs)
+    for a_i, a in enumerate(names):
+        for b in names[a_i + 1:]:
+            kinds = (case.electrodes[a].kind, case.electrodes[b].kind)
+            if kinds != ("ground", "ground") and comm.allreduce(
+                    np.intersect1d(electrode_dofs[a], electrode_dofs[b]).size) > 0:
+                raise CaseError(case.source, f"electrodes.{b}.facets",
+                                f"shares potential DOFs with electrode {a!r} (kinds {kinds[1]!r} and {kinds[0]!r}): "
+                                "only ground electrodes may touch; merge them into one electrode or part them")
+
+
 def build_model(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, mesh_data: MeshData | None = None) -> FEModel:
     file = case.source
     kind = case.geometry.model
@@ -211,36 +227,48 @@ def build_model(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, mesh_data: MeshData
     cells = np.concatenate(grounded_cells) if grounded_cells else np.zeros(0, dtype=np.int32)
     grounded = fem.locate_dofs_topological(W1, tdim, cells)
     electrode_dofs = {}
+    tag_owner = {}
     for name, electrode in case.electrodes.items():
         facets = []
         for j, ref in enumerate(electrode.facets):
-            tag = _tag(md.facet_names, ref, file, f"electrodes.{name}.facets[{j}]", "facet")
+            key = f"electrodes.{name}.facets[{j}]"
+            tag = _tag(md.facet_names, ref, file, key, "facet")
+            owner = tag_owner.setdefault(tag, (name, ref))
+            if owner != (name, ref):        # the same group by name and by tag
+                raise CaseError(file, key, f"facet group {ref!r} is the group {owner[1]!r} of electrode {owner[0]!r} "
+                                           "(a facet belongs to one electrode at most)")
             facets.append(md.facet_tags.indices[md.facet_tags.values == tag])
         dofs = fem.locate_dofs_topological(W1, fdim, np.concatenate(facets))
         if electrode.kind != "ground" and comm.allreduce(np.intersect1d(dofs, grounded).size) > 0:
             raise CaseError(file, f"electrodes.{name}.facets",
                             "touches a non-piezoelectric region, whose potential is held at 0 V")
         if comm.allreduce(dofs.size) == 0:
-            raise CaseError(file, f"electrodes.{name}.facets", "selects no potential DOFs")
+            groups = ", ".join(map(repr, electrode.facets))
+            raise CaseError(file, f"electrodes.{name}.facets", f"selects no potential DOFs (facet group(s) {groups} "
+                                                                "hold no facet of the mesh)")
         electrode_dofs[name] = dofs
-    names = list(electrode_dofs)
-    for a_i, a in enumerate(names):
-        for b in names[a_i + 1:]:
-            if case.electrodes[a].kind != case.electrodes[b].kind and comm.allreduce(
-                    np.intersect1d(electrode_dofs[a], electrode_dofs[b]).size) > 0:
-                raise CaseError(file, f"electrodes.{b}.facets", f"shares DOFs with electrode {a!r}")
+    _check_electrodes_apart(case, electrode_dofs, comm)
 
     supports = [np.zeros(0, dtype=np.int32)]
     comp = COMPONENTS[kind]
+    held = {}
     for i, support in enumerate(case.supports):
-        facets = []
+        facets, tags = [], []
         for j, ref in enumerate(support.facets):
             tag = _tag(md.facet_names, ref, file, f"supports[{i}].facets[{j}]", "facet")
+            tags.append((j, ref, tag))
             facets.append(md.facet_tags.indices[md.facet_tags.values == tag])
         for j, name in enumerate(support.components):
             if name not in comp:
                 raise CaseError(file, f"supports[{i}].components[{j}]",
                                 f"{name!r} is not a component of a {kind} model ({', '.join(comp)})")
+            for k, ref, tag in tags:        # by tag and component index ('r' and 'x' are one component here)
+                if (tag, comp[name]) in held:
+                    other, other_ref, other_name = held[tag, comp[name]]
+                    key = f"components[{j}]" if (other, repr(other_ref)) == (i, repr(ref)) else f"facets[{k}]"
+                    raise CaseError(file, f"supports[{i}].{key}", f"component {name!r} of facet group {ref!r} is "
+                                    f"already held by supports[{other}] (as {other_name!r} of {other_ref!r})")
+                held[tag, comp[name]] = (i, ref, name)
             supports.append(fem.locate_dofs_topological(W.sub(0).sub(comp[name]), fdim, np.concatenate(facets)))
     if kind == "axisymmetric":
         axis = dmesh.locate_entities_boundary(mesh, fdim, lambda x: np.isclose(x[0], 0.0, atol=1e-12))

@@ -131,7 +131,13 @@ def build_motions(case, model) -> list:
     ctx = MotionContext(case, model, case.source)
     motions = []
     for i, section in enumerate(case.transient.base_motions):
-        motions.append(BASE_MOTIONS[section.kind](section, f"transient.base_motions[{i}]", ctx))
+        motion = BASE_MOTIONS[section.kind](section, f"transient.base_motions[{i}]", ctx)
+        for j, other in enumerate(motions):     # facet groups meeting at an edge: each prescribes the shared DOFs
+            if model.comm.allreduce(np.intersect1d(motion.dofs, other.dofs).size) > 0:
+                raise CaseError(ctx.file, f"transient.base_motions[{i}].facets",
+                                f"shares displacement DOFs with base_motions[{j}] ({other.name!r}): a DOF follows "
+                                "one prescribed motion")
+        motions.append(motion)
     return motions
 
 
