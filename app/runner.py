@@ -66,9 +66,9 @@ def load_for_run(case_path: str | Path, overrides: list[str] | None, resume: boo
     """Load and check a case for ``run`` (and ``validate``): the schema, and the CLI rules."""
     case = load_case(case_path, overrides)
     check_scene(case)
-    if resume and "transient" not in case.analyses:
-        raise CaseError(str(case_path), "--resume", f"only a transient analysis can be resumed; this case runs "
-                                                    f"{', '.join(case.analyses)}")
+    if resume and "transient" not in case.analyses and case.tier != "lumped":
+        raise CaseError(str(case_path), "--resume", f"only a transient analysis or a lumped run can be resumed; "
+                                                    f"this case runs {', '.join(case.analyses)}")
     return case
 
 
@@ -87,9 +87,7 @@ def check_case(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, log=None) -> None:
     """Every input check that ``run`` makes, including those that need the mesh, without solving:
     the FE model (groups, electrodes, points) and the transient model (drive point, contacts,
     loads). Collective."""
-    if case.tier not in ("fe", "modal"):
-        return
-    if "transient" in case.analyses:
+    if case.tier == "lumped" or "transient" in case.analyses:
         engine_class(case.tier).check(case, comm, log or (lambda *a: None))
         if not _probes_frequency_domain(case):
             return
@@ -118,7 +116,8 @@ def check_frequency_domain(case: Case, model) -> None:
         wave_circle(model, case.harmonic.wave)
 
 
-ENGINES = {"fe": "app.transient.engine:FEEngine", "modal": "app.reduced.engine:ModalEngine"}
+ENGINES = {"fe": "app.transient.engine:FEEngine", "modal": "app.reduced.engine:ModalEngine",
+           "lumped": "app.lumped.engine:LumpedEngine"}
 
 
 def engine_class(tier: str):
@@ -151,12 +150,34 @@ def run_case(case_path: str | Path, overrides: list[str] | None = None, out_dir:
 
 
 def run_lumped(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, resume: bool) -> None:
-    from app.lumped import driver
+    """The lumped tier through the one run loop (app/loop/loop.py, app/lumped/engine.py), then the scene's
+    statistics and plots from the written series. ``lumped.output.write_time_series = false``: the series is
+    removed at the end (the statistics are taken first) and no plots are drawn."""
+    import dataclasses
 
+    from app.loop.loop import run_transient
+    from app.lumped.outputs import describe_series, plot_spec
+
+    section = case.lumped
+    cls = engine_class(case.tier)
     with timer.phase("lumped"):
-        results = summary["results"]["lumped"] = driver.run(case.lumped, out, comm, log, Path(case.source).stem)
+        results = summary["results"]["lumped"] = run_transient(lambda found: cls(case, comm, log, found), case, out,
+                                                               comm, log, resume)
         results["scene"] = case.scene
-        add_scene_results(results, case, out, comm)
+        results["plot"] = plot_spec(section.downforce_N, Path(case.source).stem)
+        series = out / results["time_series"]
+        if comm.rank == 0:
+            describe_series(series)
+        keep = section.output.write_time_series
+        plots = keep and section.output.plots and case.output.plots
+        add_scene_results(results, dataclasses.replace(case, output=dataclasses.replace(case.output, plots=plots)),
+                          out, comm)
+        if not keep:
+            if comm.rank == 0:
+                series.unlink(missing_ok=True)
+            comm.barrier()
+            results.pop("time_series")
+            results["outputs"].remove(series.name)
     summary["outputs"] += results.pop("outputs", [])
     print_table(result_rows(summary["results"], scene_of(case)), log)
 

@@ -375,7 +375,9 @@ def test_resume_errors_are_one_line(capsys, tmp_path, a_file, finished_fe_run):
     assert_one_line(*cli_main(capsys, "run", FE, "--resume", tmp_path / "empty", *sets), "--resume", "no checkpoint")
     # a case without a transient analysis
     assert_one_line(*cli_main(capsys, "run", BAR, "--resume", finished_fe_run), BAR.name, "--resume")
-    assert_one_line(*cli_main(capsys, "run", LUMPED, "--resume", finished_fe_run), LUMPED.name, "--resume")
+    # a lumped case (resumable) on an FE run's checkpoint: another case, named by its first differing key
+    assert_one_line(*cli_main(capsys, "run", LUMPED, "--resume", finished_fe_run), LUMPED.name,
+                    "differs from the checkpointed run")
     # an end time before the checkpoint's time: nothing rewritten
     before = (finished_fe_run / "summary.json").read_bytes()
     assert_one_line(*cli_main(capsys, "run", FE, "--resume", finished_fe_run, *sets, "--set",

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from app.case.loader import apply_overrides, read_toml
+from app.case.loader import read_toml
 from app.case.lumped import CIRCUIT_KEYS, LumpedSection
 from app.case.validate import from_dict
 from app.errors import CaseError
-from app.lumped.driver import compute, run
+from app.lumped.driver import compute
 from app.lumped.parameters import derive_parameters
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
@@ -132,22 +132,25 @@ def test_statistics_on_a_short_drill_run(tmp_path):
     the mean force and the static load (0.9 % of it in this 50 ms run), so "mean force = supported
     weight" alone would need a tolerance of the end effect and could not see a wrong impulse below it."""
     import h5py
+    from conftest import run_case_quiet
 
-    raw = apply_overrides(read_toml(CASES / "usdc-lumped-9N.toml"), ["lumped.duration_s=0.05"])
-    sec = section(raw["lumped"])
-    results = run(sec, tmp_path, None, lambda msg: None)
+    summary = run_case_quiet("usdc-lumped-9N.toml", tmp_path, "lumped.duration_s=0.05")
+    results = summary["results"]["lumped"]
     rock = results["statistics"]["stem_rock_foundation"]
     p = results["parameters"]
     masses = {"transducer": p["transducer_mass_kg"], "ball": p["free_mass_kg"], "stem": p["stem_mass_kg"]}
+    interval = summary["case"]["lumped"]["output"]["output_interval_s"]
     with h5py.File(tmp_path / "transient.h5") as f:
         duration = float(f["time_s"][-1] - f["time_s"][0])
         momentum_change = sum(m * float(f[f"{body}_velocity_m_per_s"][-1, -1] - f[f"{body}_velocity_m_per_s"][0, -1])
                               for body, m in masses.items())
         for name in ("time_s", "tip_displacement_m", "ball_position_m", "stem_position_m", "stem_rock_force_N",
                      "tip_ball_force_N", "ball_stem_force_N", "tip_ball_closed"):
-            assert name in f and "units" in f[name].attrs
+            assert name in f and "units" in f[name].attrs and "description" in f[name].attrs
         assert f["stem_rock_force_N"].attrs["units"] == "N"
-        assert len(f["time_s"]) == round(0.05 / sec.output.output_interval_s) + 1
+        assert len(f["time_s"]) == round(0.05 / interval) + 1
+        assert f["events"].attrs["columns"].split(",")[0] == "time_s" and f["events"].shape[0] > 10
+        assert f.attrs["model"].startswith("piezodyn lumped")
     assert duration == pytest.approx(0.05, rel=1e-12)
     weight = sum(masses.values()) * p["gravity_m_per_s2"] + p["downforce_N"]
     assert rock["static_load_N"] == pytest.approx(weight, rel=1e-12)
@@ -155,7 +158,23 @@ def test_statistics_on_a_short_drill_run(tmp_path):
     assert abs(momentum_change) > 1e-3 * weight * duration       # the end term is there, and resolved
     assert results["statistics"]["impact_rate_per_s"]["stem_rock"] > 0
     assert results["energy_ledger"]["closure_relative"] < 1e-10
+    for name, count in results["statistics"]["impact_count"].items():
+        assert results["contacts"][name]["impacts"] == count
     assert (tmp_path / "transient.h5").exists() and (tmp_path / "transient_motion.png").exists()
+
+
+def test_without_time_series_the_file_goes_and_the_statistics_stay(tmp_path):
+    """``lumped.output.write_time_series = false``: no transient.h5 and no plots are left, the statistics (the
+    scene's too, taken from the series before it is removed) are those of the run that keeps them."""
+    from conftest import run_case_quiet
+
+    kept = run_case_quiet("usdc-lumped.toml", tmp_path / "kept", "lumped.duration_s=0.01", "lumped.output.plots=false")
+    gone = run_case_quiet("usdc-lumped.toml", tmp_path / "gone", "lumped.duration_s=0.01",
+                          "lumped.output.write_time_series=false")
+    assert not (tmp_path / "gone" / "transient.h5").exists() and not list((tmp_path / "gone").glob("*.png"))
+    assert "transient.h5" not in gone["outputs"] and "time_series" not in gone["results"]["lumped"]
+    assert gone["results"]["lumped"]["statistics"] == kept["results"]["lumped"]["statistics"]
+    assert "transducer" in gone["results"]["lumped"]["statistics"]
 
 
 def test_compute_is_deterministic():

@@ -158,7 +158,12 @@ class SolverSection:
 @dataclass(frozen=True)
 class LumpedOutputSection:
     output_interval_s: float = param(1e-5, gt=0, unit="s", doc="time-series sample interval")
-    write_time_series: bool = param(True, doc="write the time series transient.h5 (and its plots)")
+    write_time_series: bool = param(
+        True, doc="keep the time series transient.h5 and draw its plots (false: the run writes it while it "
+                  "needs it, for --resume and the statistics, and removes it at the end)")
+    checkpoint_interval_steps: int = param(
+        5000, ge=0, doc="checkpoint (for `piezodyn run --resume DIR`) every N output intervals (time-series "
+                        "rows) and at the end; 0: end only")
     plots: bool = param(True, doc="write PNG plots (Fig. 12 and Fig. 5 style)")
     min_flight_rise_m: float = param(
         50e-6,
