@@ -19,7 +19,9 @@ active set is read from the tangent's structure, not from a gap test, so the res
 Newton's step to round-off. On the motor 86-89 % of the contact points are open at any instant.
 
 K_AA is sparse (facet-local coupling, ~30-60 entries per row): K_AA G_AA is formed as a sparse times
-dense product. ``active_only=False`` keeps all s DOFs (the previous dense step, the tests' reference).
+dense product. ``active_only=False`` keeps all s DOFs (the previous dense step, the tests' reference), and so
+does a system of at most ``DENSE_MAX`` contact DOFs (the drill's one or two), where the bookkeeping would cost
+more than it saves.
 """
 
 from __future__ import annotations
@@ -29,29 +31,47 @@ import scipy.linalg
 import scipy.sparse
 from numba import njit
 
+#: up to this many contact DOFs the Newton matrices stay dense (scipy.sparse's overhead per call, ~0.1 ms,
+#: is then more than the dense arithmetic: the drill has 1-2 contact DOFs)
+DENSE_MAX = 64
+
 
 class ContactTangent:
     """Kss = d rc_S / d u_S summed over the interactions (the ``Kss`` of the Interaction protocol,
     :mod:`app.transient.interactions`): each adds its block with ``Kss += block`` (scipy sparse, or a
-    dense s x s array); ``tocsr()`` gives the sum."""
+    dense s x s array). Held dense for s <= DENSE_MAX, sparse above; ``matrix()`` gives the sum."""
 
     def __init__(self, s_count: int):
         self.shape = (s_count, s_count)
-        self._sum = None
+        self.dense = s_count <= DENSE_MAX
+        self._sum = np.zeros(self.shape) if self.dense else None
 
     def __iadd__(self, block):
+        if self.dense:
+            self._sum += block.toarray() if scipy.sparse.issparse(block) else block
+            return self
         block = block.tocsr() if scipy.sparse.issparse(block) else scipy.sparse.csr_matrix(np.asarray(block))
         self._sum = block if self._sum is None else self._sum + block
         return self
 
-    def tocsr(self) -> scipy.sparse.csr_matrix:
-        return self._sum if self._sum is not None else scipy.sparse.csr_matrix(self.shape)
+    @property
+    def empty(self) -> bool:
+        """No interaction added a nonzero entry."""
+        if self.dense:
+            return not self._sum.any()
+        return self._sum is None or self._sum.count_nonzero() == 0
+
+    def matrix(self):
+        """The sum: a dense array (s <= DENSE_MAX) or a CSR matrix."""
+        if self._sum is None:
+            return scipy.sparse.csr_matrix(self.shape)
+        return self._sum
 
     def toarray(self) -> np.ndarray:
-        return self.tocsr().toarray()
+        return self._sum if self.dense else self.matrix().toarray()
 
     def __matmul__(self, other):
-        return self.tocsr() @ other
+        return self.matrix() @ other
 
 
 class CondensedJacobian:
@@ -63,47 +83,35 @@ class CondensedJacobian:
         s_count, m = G.shape[0], Kzz.shape[0]
         self.s_count, self.m = s_count, m
         if isinstance(Kss, ContactTangent):
-            Kss = Kss.tocsr()
-        if not active_only and scipy.sparse.issparse(Kss):
-            Kss = Kss.toarray()             # the reference: the dense products of the all-DOF step
-        sparse = scipy.sparse.issparse(Kss)
-        if active_only:
-            if sparse:
-                K = Kss.tocsr()
-                K.eliminate_zeros()
-                rows = np.diff(K.indptr) > 0
-                cols = np.zeros(s_count, dtype=bool)
-                cols[K.indices] = True
-            else:
-                nonzero = Kss != 0.0
-                rows, cols = nonzero.any(axis=1), nonzero.any(axis=0)
-            active = rows | cols | (B != 0.0).any(axis=1) | (L != 0.0).any(axis=0)
-            self.active = np.flatnonzero(active)
-            self.inactive = np.flatnonzero(~active)
-        else:
+            Kss = Kss.matrix()
+        # the all-DOF dense step: the reference, and the cheapest for a few contact DOFs
+        self.reference = not active_only or s_count <= DENSE_MAX
+        if self.reference:
+            if scipy.sparse.issparse(Kss):
+                Kss = Kss.toarray()
             self.active = np.arange(s_count)
             self.inactive = np.zeros(0, dtype=int)
-        A = self.active
-        all_active = A.size == s_count
-        if sparse:
-            K_AA = Kss.tocsr()[A][:, A] if not all_active else Kss.tocsr()
-        else:
-            K_AA = Kss[np.ix_(A, A)] if not all_active else Kss
-        self.G_A = G[A] if not all_active else G                  # |A| x s: rows of the active DOFs
-        G_AA = self.G_A[:, A] if not all_active else G
-        self.reference = not active_only
-        if active_only and not sparse and A.size > 64:
-            density = np.count_nonzero(K_AA) / K_AA.size
-            if density < 0.25:
-                K_AA = scipy.sparse.csr_matrix(K_AA)
-                sparse = True
+            self.Z = np.block([[-(np.eye(s_count) + Kss @ G), B], [-L @ G, Kzz]])
+            self._lu = scipy.linalg.lu_factor(self.Z, check_finite=True) if self.Z.size else None
+            return
+        K = Kss.tocsr() if scipy.sparse.issparse(Kss) else scipy.sparse.csr_matrix(Kss)
+        K.eliminate_zeros()
+        rows = np.diff(K.indptr) > 0
+        cols = np.zeros(s_count, dtype=bool)
+        cols[K.indices] = True
+        active = rows | cols | (B != 0.0).any(axis=1) | (L != 0.0).any(axis=0)
+        A = self.active = np.flatnonzero(active)
+        self.inactive = np.flatnonzero(~active)
+        K_AA = K[A][:, A]
+        self.G_A = G[A]                                 # |A| x s: the active DOFs' rows
+        G_AA = self.G_A[:, A]
+        if K_AA.nnz > 0.25 * A.size * A.size:
+            K_AA = K_AA.toarray()
         self.K_AA = K_AA
         self.B_A = B[A]
         self.L_A = L[:, A]
-        KG = K_AA @ G_AA
-        KG = np.asarray(KG)
         Z = np.empty((A.size + m, A.size + m))
-        Z[:A.size, :A.size] = -KG
+        Z[:A.size, :A.size] = -np.asarray(K_AA @ G_AA)
         Z[np.arange(A.size), np.arange(A.size)] -= 1.0
         Z[:A.size, A.size:] = self.B_A
         Z[A.size:, :A.size] = -(self.L_A @ G_AA)
@@ -125,7 +133,7 @@ class CondensedJacobian:
     def solve(self, x: np.ndarray) -> np.ndarray:
         """y = J^-1 x (x = (x_g, x_z))."""
         if self.reference:
-            return scipy.linalg.lu_solve(self._lu, x) if self._lu is not None else np.array(x)
+            return scipy.linalg.lu_solve(self._lu, x, check_finite=False) if self._lu is not None else np.array(x)
         A, I, s_count = self.active, self.inactive, self.s_count
         y = np.empty_like(x)
         x_g, x_z = x[:s_count], x[s_count:]
@@ -135,7 +143,7 @@ class CondensedJacobian:
         if coupling is not None:
             rhs[:A.size] -= self.K_AA @ coupling
             rhs[A.size:] -= self.L_A @ coupling
-        sol = scipy.linalg.lu_solve(self._lu, rhs) if self._lu is not None else rhs
+        sol = scipy.linalg.lu_solve(self._lu, rhs, check_finite=False) if self._lu is not None else rhs
         y[A] = sol[:A.size]
         y[s_count:] = sol[A.size:]
         return y
@@ -153,6 +161,29 @@ class CondensedJacobian:
         y[A] = -x_g[A] - np.asarray(self.K_AA @ t).reshape(-1) + self.B_A @ x_z
         y[s_count:] = -(self.L_A @ t) + self.Z[A.size:, A.size:] @ x_z
         return y
+
+
+class RigidJacobian:
+    """The Newton matrix of a step without FE contact force: every contact DOF open, J = [[-I, 0], [0, Kzz]]."""
+
+    def __init__(self, s_count: int, Kzz: np.ndarray):
+        self.s_count = s_count
+        self.active = np.zeros(0, dtype=int)
+        self.inactive = np.arange(s_count)
+        self.Kzz = Kzz
+        self._lu = scipy.linalg.lu_factor(Kzz, check_finite=True) if Kzz.size else None
+
+    active_count = 0
+
+    def solve(self, x: np.ndarray) -> np.ndarray:
+        y = np.empty_like(x)
+        y[:self.s_count] = -x[:self.s_count]
+        if self._lu is not None:
+            y[self.s_count:] = scipy.linalg.lu_solve(self._lu, x[self.s_count:], check_finite=False)
+        return y
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        return np.concatenate([-x[:self.s_count], self.Kzz @ x[self.s_count:]])
 
 
 @njit(cache=True)

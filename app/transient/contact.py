@@ -24,6 +24,7 @@ from petsc4py import PETSc
 
 from app import series as S
 from app.compat import is_mixed
+from app.transient.active_set import DENSE_MAX
 from app.transient.fe import LinearFE, displacement_of
 from app.transient.interactions import ForceColumns, friction_force, pad3, velocity_map
 from forms import contact as cf
@@ -906,8 +907,13 @@ class NodeContact(ForceColumns):
         return float(power)
 
 
-def _sparse_block(positions: np.ndarray, values: np.ndarray, s_count: int) -> scipy.sparse.csr_matrix:
-    """The s x s sparse matrix holding ``values`` at rows and columns ``positions`` (contact DOFs)."""
+def _sparse_block(positions: np.ndarray, values: np.ndarray, s_count: int):
+    """The s x s matrix holding ``values`` at rows and columns ``positions`` (contact DOFs): sparse, or dense
+    for a few contact DOFs (app.transient.active_set.DENSE_MAX)."""
+    if s_count <= DENSE_MAX:
+        block = np.zeros((s_count, s_count))
+        block[np.ix_(positions, positions)] = values
+        return block
     rows = np.repeat(positions, positions.size)
     cols = np.tile(positions, positions.size)
     values = np.asarray(values, dtype=float).reshape(-1)

@@ -41,7 +41,7 @@ from petsc4py import PETSc
 
 from app.blas import limit_blas_threads
 from app.compat import petsc_vector
-from app.transient.active_set import CondensedJacobian, ContactTangent, subtract_rows
+from app.transient.active_set import CondensedJacobian, ContactTangent, RigidJacobian, subtract_rows
 from app.transient.fe import EffectiveOperatorCache, InterfaceRows, LinearFE
 from app.transient.rigid import RigidSet
 from app.transient.state import TransientState
@@ -327,24 +327,47 @@ class CoupledSystem:
 
     def _predictor_residual(self, state: TransientState, dt: float) -> float:
         """u_pred and r0 = residual of the FE equations at u_pred (three mat-vecs, module doc);
-        returns the squared force scale |M a| ^2 + |C v| ^2 + |K u| ^2 + |F| ^2 of the tolerance."""
+        returns the squared force scale |M a| ^2 + |C v| ^2 + |K u| ^2 + |F| ^2 of the tolerance.
+        The Dirichlet change delta is zero off the constrained DOFs, so the mat-vec arguments are
+        formed there without it (the same numbers, fewer passes over the arrays)."""
         s, fe, n = self.scheme, self.fe, self.n_fe
         u0, v0, a0 = state.u[:n], state.v[:n], state.a[:n]
-        taylor = u0 + dt * v0 + 0.5 * dt * dt * a0
+        bc = fe.bc_local_owned
         predictor = self._u_pred
-        predictor.array_w[:] = taylor
+        taylor = predictor.array_w
+        np.multiply(v0, dt, out=taylor)
+        taylor += u0
+        taylor += (0.5 * dt * dt) * a0
+        taylor_bc = taylor[bc].copy()
         fe.apply_dirichlet(self.t1, predictor)
-        delta = predictor.array_r - taylor
+        pred = predictor.array_r
+        delta_bc = pred[bc] - taylor_bc
         r0, x, y = self._r0, self._tmp, self._tmp2
         fe.load_N(self.t_mid, r0)
         scale_sq = r0.norm() ** 2
         r0.scale(-1.0)
-        terms = [(fe.M, a0 + (1 - s.alpha_m) * self.c_acc * delta),
-                 (fe.K, u0 + (1 - s.alpha_f) * (predictor.array_r - u0))]
+        one_minus_af = 1 - s.alpha_f
+
+        def mass_term(out):
+            out[:] = a0
+            out[bc] += (1 - s.alpha_m) * self.c_acc * delta_bc
+
+        def stiffness_term(out):
+            np.subtract(pred, u0, out=out)
+            out *= one_minus_af
+            out += u0
+
+        def damping_term(out):
+            np.multiply(a0, dt, out=out)
+            out[bc] += self.c_vel * delta_bc
+            out *= one_minus_af
+            out += v0
+
+        terms = [(fe.M, mass_term), (fe.K, stiffness_term)]
         if fe.C is not None:
-            terms.append((fe.C, v0 + (1 - s.alpha_f) * (dt * a0 + self.c_vel * delta)))
-        for matrix, vector in terms:
-            x.array_w[:] = vector
+            terms.append((fe.C, damping_term))
+        for matrix, fill in terms:
+            fill(x.array_w)
             matrix.mult(x, y)
             scale_sq += y.norm() ** 2
             r0.axpy(1.0, y)
@@ -361,8 +384,12 @@ class CoupledSystem:
         u1.array_w[:] = self._u_pred.array_r + self._w.array_r
         self._u1.x.scatter_forward()
         self._u1_free = self._u1.x.array.copy()
-        # the fields at g = 0 on every DOF: the contact iterates then update the evaluation DOFs only
-        self._fe_fields(None)
+        # the fields at g = 0 where the contact forms read them; the accepted iterate is formed on every
+        # DOF (_evaluate_everywhere), so nothing reads the others before
+        if self._rows_layout is None or getattr(self, "a1", None) is None:
+            self._fe_fields(None)
+        else:
+            self._fe_fields(self._rows_layout.local)
         self._fe_key = np.zeros(self.contact_global.size).tobytes()
 
     def _contact_block(self) -> np.ndarray:
@@ -604,6 +631,9 @@ class CoupledSystem:
         """Factorise the condensed Newton matrix on the DOFs its tangents make active
         (:class:`app.transient.active_set.CondensedJacobian`), on rank 0, which holds the unknown."""
         if self.comm.rank != 0:
+            return
+        if isinstance(Kss, ContactTangent) and Kss.empty and not B.any() and not L.any():
+            self._jacobian = RigidJacobian(self.contact_global.size, Kzz)     # no FE contact carries force
             return
         previous = self._jacobian
         self._jacobian = CondensedJacobian(self._contact_block(), Kss, B, L, Kzz, active_only=self.active_set)
