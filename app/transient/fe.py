@@ -186,8 +186,29 @@ class EffectiveOperator:
         Abc = A.copy()
         Abc.zeroRowsColumns(fe.bc_global, 1.0)
         self.constrained = Abc
+        self._work = Abc.createVecRight()
+        self.comm = fe.comm
+        self.contact_global = np.asarray(contact_global_dofs)
+        self.rows_layout = rows
+        self.columns_t = None           # all owned rows of G, transposed (s x n_owned), or None
+        self.rows = None                # G at rows.local (len(rows.local) x s)
+        self.contact_block = None       # G_SS (s x s, every rank)
+        self.column_solves = 0          # right-hand sides solved for G
         self.ksp = self.solver_type = None
-        for solver_type in _solver_types(fe.comm):
+        keep_all_rows = keep_all_rows or rows is None
+        candidates = _solver_types(fe.comm)
+        built = False
+        if self.contact_global.size >= BLOCK_MIN_COLUMNS and candidates[0] != "mumps":
+            # G first, through a MUMPS factorisation freed before the per-step one is made: the two
+            # factorisations never coexist (3D: ~2 GB each at 130 k DOFs)
+            mumps = self._factorise(fe.comm, Abc, "mumps", prefix=COLUMNS_PREFIX)
+            if mumps is not None:
+                try:
+                    self._build_columns(keep_all_rows, mumps.getPC().getFactorMatrix())
+                    built = True
+                finally:
+                    mumps.destroy()
+        for solver_type in candidates:
             self.ksp = self._factorise(fe.comm, Abc, solver_type)
             if self.ksp is None:
                 continue
@@ -198,15 +219,9 @@ class EffectiveOperator:
             self.ksp = None
         if self.ksp is None:
             raise FloatingPointError(f"K_eff at dt = {dt:.3e} s could not be factorised")
-        self._work = Abc.createVecRight()
-        self.comm = fe.comm
-        self.contact_global = np.asarray(contact_global_dofs)
-        self.rows_layout = rows
-        self.columns_t = None           # all owned rows of G, transposed (s x n_owned), or None
-        self.rows = None                # G at rows.local (len(rows.local) x s)
-        self.contact_block = None       # G_SS (s x s, every rank)
-        self.column_solves = 0          # right-hand sides solved for G
-        self._build_columns(keep_all_rows or rows is None)
+        if not built:
+            blocked = self.solver_type == "mumps" and self.contact_global.size >= BLOCK_MIN_COLUMNS
+            self._build_columns(keep_all_rows, self.ksp.getPC().getFactorMatrix() if blocked else None)
 
     @property
     def columns(self) -> np.ndarray:
@@ -270,7 +285,9 @@ class EffectiveOperator:
             raise FloatingPointError(f"K_eff solve failed (KSP reason {reason})")
 
     # ------------------------------------------------------------------ G = K_eff^-1 E
-    def _build_columns(self, keep_all_rows: bool) -> None:
+    def _build_columns(self, keep_all_rows: bool, factor: PETSc.Mat | None) -> None:
+        """G with multiple right-hand sides through the MUMPS ``factor``, or (None) one back-substitution
+        with the per-step factorisation per column."""
         contact = self.contact_global
         s_count = contact.size
         n_local = self._work.getLocalSize()
@@ -279,7 +296,9 @@ class EffectiveOperator:
             self.columns_t = np.empty((s_count, n_local))
         owned_rows = layout.owned_rows if layout is not None else np.zeros(0, dtype=np.int64)
         interface_t = np.empty((s_count, owned_rows.size))
-        for start, block in self._column_blocks(contact):
+        blocks = (self._multiple_columns(factor, contact) if factor is not None
+                  else self._single_columns(contact)) if s_count else ()
+        for start, block in blocks:
             stop = start + block.shape[1]
             if self.columns_t is not None:
                 self.columns_t[start:stop] = block.T
@@ -296,29 +315,6 @@ class EffectiveOperator:
         mine = self.contact_global[(self.contact_global >= lo) & (self.contact_global < hi)] - lo
         rows = self.columns_t[:, mine].T
         return rows if self.comm.size == 1 else np.vstack(self.comm.allgather(rows))
-
-    def _column_blocks(self, contact):
-        """(first column, n_owned x k block of G) for consecutive blocks of the contact DOFs."""
-        s_count = contact.size
-        if s_count == 0:
-            return
-        mumps = None
-        if s_count >= BLOCK_MIN_COLUMNS:
-            if self.solver_type == "mumps":
-                factor = self.ksp.getPC().getFactorMatrix()
-            else:
-                mumps = self._factorise(self.comm, self.constrained, "mumps", prefix=COLUMNS_PREFIX)
-                factor = mumps.getPC().getFactorMatrix() if mumps is not None else None
-        else:
-            factor = None
-        try:
-            if factor is None:
-                yield from self._single_columns(contact)
-            else:
-                yield from self._multiple_columns(factor, contact)
-        finally:
-            if mumps is not None:
-                mumps.destroy()
 
     def _single_columns(self, contact):
         rhs = self._work.duplicate()
