@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse
 import ufl
 from dolfinx import fem
 from dolfinx.fem.petsc import assemble_matrix, assemble_vector, create_matrix, create_vector
@@ -23,6 +24,7 @@ from petsc4py import PETSc
 
 from app import series as S
 from app.compat import is_mixed
+from app.transient.active_set import DENSE_MAX
 from app.transient.fe import LinearFE, displacement_of
 from app.transient.forces import ForceColumns, friction_force, pad3, velocity_map
 from forms import contact as cf
@@ -430,13 +432,16 @@ class SurfaceContact(ForceColumns):
         return self.fe.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
 
     def _vector_at_S(self, system, form) -> np.ndarray:
-        vec = create_vector(form)
+        vectors = self.__dict__.setdefault("_form_vectors", {})
+        vec = vectors.get(id(form))
+        if vec is None:
+            vec = vectors[id(form)] = create_vector(form)    # one per form, reused (a full-size vector)
+        with vec.localForm() as local:
+            local.set(0.0)
         assemble_vector(vec, form)
         vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.fe.zero_constrained(vec)
-        out = system._gather_S(vec.array_r)
-        vec.destroy()
-        return out
+        return system._gather_S(vec.array_r)
 
     def torque_N_m(self) -> np.ndarray:
         """Torque of the contact on the body about its rotation axes [N m] (current fields)."""
@@ -474,10 +479,7 @@ class SurfaceContact(ForceColumns):
         return out
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:
-        s_count = system.contact_global.size
-        owned_rows = (system.contact_local + system.fe.first_global).astype(PETSc.IntType)
-        A = self.assemble_tangent()
-        block = system._gather_rows(A.getValues(owned_rows, system.contact_global).reshape(owned_rows.size, s_count))
+        block = system.contact_tangent_block(self.assemble_tangent())      # sparse, s x s
         T = system.translation_S
         Kss += block
         sl = system.rigid.dofs(self.body)
@@ -857,16 +859,15 @@ class NodeContact(ForceColumns):
             _, _, J = self._friction_terms(system, tangent=True)
             node, S = self._S_axes, self._S                 # node components held as contact DOFs
             body = np.arange(system.rigid.size)[system.rigid.all_dofs(self.body)]
-            Kss[np.ix_(S, S)] += J[np.ix_(node, node)]
+            Kss += _sparse_block(S, J[np.ix_(node, node)], system.contact_global.size)
             B[np.ix_(S, body)] += J[np.ix_(node, gdim + np.arange(body.size))]
             L[np.ix_(body, S)] += J[np.ix_(gdim + np.arange(body.size), node)]
             Kzz[np.ix_(body, body)] += J[gdim:, gdim:]
             return
         _, k_f, c_f = self._force_at_iterate(system)
-        s_count = system.contact_global.size
-        block = np.zeros((s_count, s_count))
         n_S = self.normal[self._S_axes]
-        block[np.ix_(self._S, self._S)] = (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * np.outer(n_S, n_S)
+        block = _sparse_block(self._S, (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * np.outer(n_S, n_S),
+                              system.contact_global.size)
         T = system.translation_S
         Kss += block
         sl = system.rigid.dofs(self.body)
@@ -897,3 +898,16 @@ class NodeContact(ForceColumns):
             slip = (np.eye(3) - np.outer(n3, n3)) @ (P @ rates)
             power -= float(friction_force(slip, f, self.friction)[0] @ slip)
         return float(power)
+
+
+def _sparse_block(positions: np.ndarray, values: np.ndarray, s_count: int):
+    """The s x s matrix holding ``values`` at rows and columns ``positions`` (contact DOFs): sparse, or dense
+    for a few contact DOFs (app.transient.active_set.DENSE_MAX)."""
+    if s_count <= DENSE_MAX:
+        block = np.zeros((s_count, s_count))
+        block[np.ix_(positions, positions)] = values
+        return block
+    rows = np.repeat(positions, positions.size)
+    cols = np.tile(positions, positions.size)
+    values = np.asarray(values, dtype=float).reshape(-1)
+    return scipy.sparse.csr_matrix((values, (rows, cols)), shape=(s_count, s_count))

@@ -35,13 +35,14 @@ is three mat-vecs of physical-size vectors, free of cancellation.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
+import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from app.blas import limit_blas_threads
 from app.compat import petsc_vector
-from app.transient.fe import EffectiveOperatorCache, LinearFE
+from app.transient.active_set import CondensedJacobian, ContactTangent, RigidJacobian, subtract_rows
+from app.transient.fe import EffectiveOperatorCache, InterfaceRows, LinearFE
 from app.transient.rigid import RigidSet
 from app.transient.state import TransientState
 from forms.newmark import (
@@ -77,8 +78,10 @@ class CoupledSystem:
     """Residual, Jacobian and condensed solve of one generalized-alpha step."""
 
     def __init__(self, comm, scheme: TimeScheme, fe: LinearFE | None, rigid: RigidSet, interactions=(),
-                 relative_force_tolerance: float = 1e-10):
-        """``interactions``: objects of the :class:`app.transient.interactions.Interaction` protocol."""
+                 relative_force_tolerance: float = 1e-10, active_set: bool = True):
+        """``interactions``: objects of the :class:`app.transient.interactions.Interaction` protocol.
+        ``active_set=False`` solves the dense Newton system on all contact DOFs in every iteration and
+        evaluates every FE DOF at every iterate (the previous step; the tests' reference)."""
         limit_blas_threads()    # MPI ranks are the parallelism (see app.blas)
         self.comm, self.scheme, self.fe, self.rigid = comm, scheme, fe, rigid
         self.interactions = list(interactions)
@@ -89,10 +92,15 @@ class CoupledSystem:
         self.n_fe = fe.n_owned if fe is not None else 0
         self.m = rigid.size
         self.m_local = self.m if comm.rank == 0 else 0
+        self.active_set = active_set
         self._setup_contact_dofs()
         for c in self.interactions:
             c.bind(self)
-        self.cache = EffectiveOperatorCache(fe, scheme, self.contact_global) if fe is not None else None
+        # the FE DOFs the contact forms read: evaluated at every contact iterate, the rest once per step
+        evaluation = self._evaluation_dofs() if fe is not None and active_set else None
+        self._rows_layout = InterfaceRows(fe, evaluation, self.contact_global) if evaluation is not None else None
+        self.cache = (EffectiveOperatorCache(fe, scheme, self.contact_global, rows=self._rows_layout)
+                      if fe is not None else None)
         self.fields = list({id(c.fields): c.fields for c in self.interactions if hasattr(c, "fields")}.values())
         if fe is not None:
             from dolfinx import fem
@@ -110,7 +118,14 @@ class CoupledSystem:
         self.last_iterations = 0
         self.total_iterations = 0
         self.linear_steps = 0           # steps solved without SNES (no FE contact force)
+        self.active_dofs = 0            # contact DOFs in the Newton systems solved (sum over Jacobians)
+        self.jacobians = 0
+        self.active_set_changes = 0     # Jacobians whose active set differs from the step's previous one
+        self.opened_updates = 0         # Newton updates that took DOFs carrying force off the active set
         self._evaluated = self._fe_key = None
+        self._fe_full = False           # the FE fields hold every DOF of the evaluated iterate
+        self._jacobian = None
+        self._step_count = self._jacobian_step = 0
 
     # ----------------------------------------------------------------- setup
     def _setup_contact_dofs(self) -> None:
@@ -136,6 +151,45 @@ class CoupledSystem:
         self._S_offset = sum(g.size for g in gathered[: self.comm.rank])
         # global DOF -> position among the contact DOFs
         self.contact_position = {int(g): i for i, g in enumerate(self.contact_global)}
+
+    def _evaluation_dofs(self) -> np.ndarray | None:
+        """Local DOFs (owned and ghost) whose values the FE-coupled interactions read while Newton
+        iterates: the DOFs of every cell of an exterior-facet integral of their forms, and a node
+        contact's own DOFs. None (evaluate everything) for an interaction that reads anything else."""
+        from dolfinx import fem
+
+        fe = self.fe
+        dofmap = fe.space.dofmap
+        bs = dofmap.index_map_bs
+        cell_dofs = dofmap.list.array.reshape(-1, dofmap.dof_layout.num_dofs)
+        found = []
+        for c in self.interactions:
+            if not c.fe_coupled:
+                continue
+            forms = []
+            for value in vars(c).values():
+                items = value if isinstance(value, (list, tuple)) else [value]
+                for item in items:
+                    for sub in (item if isinstance(item, (list, tuple)) else [item]):
+                        if isinstance(sub, fem.FormMetaClass):
+                            forms.append(sub)
+            if forms:
+                cells = []
+                for form in forms:
+                    for kind in form.integral_types:
+                        if kind != fem.IntegralType.exterior_facet:
+                            return None
+                        for i in form.integral_ids(kind):
+                            cells.append(np.asarray(form.domains(kind, i)).reshape(-1, 2)[:, 0])
+                cells = np.unique(np.concatenate(cells)) if cells else np.zeros(0, dtype=np.int32)
+                blocks = cell_dofs[cells].reshape(-1)
+                found.append((blocks[:, None] * bs + np.arange(bs)).reshape(-1))
+            elif c.kind == "node":
+                found.append(np.asarray(c.local_dofs))
+            else:
+                return None
+        local = np.concatenate(found) if found else np.zeros(0, dtype=np.int64)
+        return np.unique(np.concatenate([local, self.contact_local])).astype(np.int64)
 
     def _unknowns_local(self) -> int:
         """Local size of the SNES unknown: (g, dz), held by rank 0."""
@@ -186,6 +240,7 @@ class CoupledSystem:
         if reason <= 0:
             return reason, None
         self._evaluate(self.X)
+        self._evaluate_everywhere()
         # Forces now, at the converged mid-point fields: other users of the shared fields (the
         # contact monitor, energy account) overwrite them with end-of-step values afterwards.
         self.last_forces_N = self.contact_forces_N()
@@ -229,7 +284,7 @@ class CoupledSystem:
         when no FE contact is active."""
         s_count, m = self.contact_global.size, self.m
         Kzz = self._rigid_block(np.diag(self._rigid_diagonal()))
-        self._set_jacobian(np.zeros((s_count, s_count)), np.zeros((s_count, m)), np.zeros((m, s_count)), Kzz)
+        self._set_jacobian(ContactTangent(s_count), np.zeros((s_count, m)), np.zeros((m, s_count)), Kzz)
 
     def _rigid_diagonal(self) -> np.ndarray:
         """d r_z / d z_{n+1} of the bodies alone: inertia (1 - alpha_m) c_acc m and brake
@@ -241,6 +296,7 @@ class CoupledSystem:
     def _begin_step(self, state: TransientState, dt: float) -> None:
         s, fe, rigid = self.scheme, self.fe, self.rigid
         self.state0, self.dt = state, dt
+        self._step_count += 1
         self._evaluated = self._fe_key = None
         self.t1 = state.t + dt
         self.t_mid = midpoint(self.t1, state.t, s.alpha_f)
@@ -271,24 +327,47 @@ class CoupledSystem:
 
     def _predictor_residual(self, state: TransientState, dt: float) -> float:
         """u_pred and r0 = residual of the FE equations at u_pred (three mat-vecs, module doc);
-        returns the squared force scale |M a| ^2 + |C v| ^2 + |K u| ^2 + |F| ^2 of the tolerance."""
+        returns the squared force scale |M a| ^2 + |C v| ^2 + |K u| ^2 + |F| ^2 of the tolerance.
+        The Dirichlet change delta is zero off the constrained DOFs, so the mat-vec arguments are
+        formed there without it (the same numbers, fewer passes over the arrays)."""
         s, fe, n = self.scheme, self.fe, self.n_fe
         u0, v0, a0 = state.u[:n], state.v[:n], state.a[:n]
-        taylor = u0 + dt * v0 + 0.5 * dt * dt * a0
+        bc = fe.bc_local_owned
         predictor = self._u_pred
-        predictor.array_w[:] = taylor
+        taylor = predictor.array_w
+        np.multiply(v0, dt, out=taylor)
+        taylor += u0
+        taylor += (0.5 * dt * dt) * a0
+        taylor_bc = taylor[bc].copy()
         fe.apply_dirichlet(self.t1, predictor)
-        delta = predictor.array_r - taylor
+        pred = predictor.array_r
+        delta_bc = pred[bc] - taylor_bc
         r0, x, y = self._r0, self._tmp, self._tmp2
         fe.load_N(self.t_mid, r0)
         scale_sq = r0.norm() ** 2
         r0.scale(-1.0)
-        terms = [(fe.M, a0 + (1 - s.alpha_m) * self.c_acc * delta),
-                 (fe.K, u0 + (1 - s.alpha_f) * (predictor.array_r - u0))]
+        one_minus_af = 1 - s.alpha_f
+
+        def mass_term(out):
+            out[:] = a0
+            out[bc] += (1 - s.alpha_m) * self.c_acc * delta_bc
+
+        def stiffness_term(out):
+            np.subtract(pred, u0, out=out)
+            out *= one_minus_af
+            out += u0
+
+        def damping_term(out):
+            np.multiply(a0, dt, out=out)
+            out[bc] += self.c_vel * delta_bc
+            out *= one_minus_af
+            out += v0
+
+        terms = [(fe.M, mass_term), (fe.K, stiffness_term)]
         if fe.C is not None:
-            terms.append((fe.C, v0 + (1 - s.alpha_f) * (dt * a0 + self.c_vel * delta)))
-        for matrix, vector in terms:
-            x.array_w[:] = vector
+            terms.append((fe.C, damping_term))
+        for matrix, fill in terms:
+            fill(x.array_w)
             matrix.mult(x, y)
             scale_sq += y.norm() ** 2
             r0.axpy(1.0, y)
@@ -296,16 +375,27 @@ class CoupledSystem:
         return scale_sq
 
     def _condense(self) -> None:
-        """w = -K_eff^-1 r0: the FE solution without contact forces."""
+        """w = -K_eff^-1 r0: the FE solution without contact forces, and u_pred + w on every local DOF
+        (owned and ghost): the end-of-step displacement at g = 0, from which the contact iterates
+        differ by -G g."""
         self.op.solve(self._r0, self._w)
         self._w.scale(-1.0)
+        u1 = petsc_vector(self._u1)
+        u1.array_w[:] = self._u_pred.array_r + self._w.array_r
+        self._u1.x.scatter_forward()
+        self._u1_free = self._u1.x.array.copy()
+        # the fields at g = 0 where the contact forms read them; the accepted iterate is formed on every
+        # DOF (_evaluate_everywhere), so nothing reads the others before
+        if self._rows_layout is None or getattr(self, "a1", None) is None:
+            self._fe_fields(None)
+        else:
+            self._fe_fields(self._rows_layout.local)
+        self._fe_key = np.zeros(self.contact_global.size).tobytes()
 
     def _contact_block(self) -> np.ndarray:
         """G_SS = E^T K_eff^-1 E of the current operator (s x s, every rank), formed once per dt."""
         if self.fe is None:
             return np.zeros((0, 0))
-        if not hasattr(self.op, "contact_block"):
-            self.op.contact_block = self._gather_rows(self.op.columns[self.contact_local])
         return self.op.contact_block
 
     def _initial_guess(self, dz: np.ndarray) -> None:
@@ -318,46 +408,44 @@ class CoupledSystem:
             X[self.contact_global.size:] = dz
 
     def _split(self, x: np.ndarray):
-        """(du owned entries or None without FE, dz on every rank, a key equal for equal du or
-        None) of the iterate ``x`` (local array of the unknown (g, dz))."""
+        """(du owned entries, or None: the condensed iterate, du = w - G g with g in ``self._g``; dz
+        on every rank; a key equal for equal du or None) of the iterate ``x`` (local array of the
+        unknown (g, dz))."""
         self._unknown = unknown = self._replicated(x)
         s_count = self.contact_global.size
-        du = None
-        g = unknown[:s_count]
-        if self.fe is not None:
-            du = self._w.array_r - self.op.columns @ g if g.any() else self._w.array_r
-        return du, unknown[s_count:], g.tobytes()
+        self._g = g = unknown[:s_count]
+        return None, unknown[s_count:], g.tobytes()
 
-    def _evaluate(self, X: PETSc.Vec) -> None:
+    def _evaluate(self, X: PETSc.Vec, everywhere: bool = False) -> None:
         """Set u_{n+1}, z_{n+1} and every derived (mid-point) quantity from the iterate X.
 
         SNES asks for the Jacobian at the point whose residual it has just evaluated, and the
         accepted state is the last evaluated point: skip the re-evaluation then (the decision is
-        global, since the evaluation is collective)."""
+        global, since the evaluation is collective). While Newton iterates, the FE fields are
+        updated at the DOFs the contact forms read only (``_evaluation_dofs``); ``everywhere`` (the
+        accepted iterate, diagnostics) updates every DOF."""
         x = X.array_r
         same = self._evaluated is not None and self._evaluated.shape == x.shape and np.array_equal(self._evaluated, x)
         if self.comm.size > 1:
             same = self.comm.allreduce(same, op=MPI.LAND)
         if same:
+            if everywhere:
+                self._evaluate_everywhere()
             return
         self._evaluated = np.array(x)
         du, dz, fe_key = self._split(x)
         s, st, dt = self.scheme, self.state0, self.dt
         # Iterates that differ only in the rigid increments (the contact-free path) share the FE
         # fields: keep them (the key is replicated, so every rank decides alike).
-        same_fe = fe_key is not None and fe_key == self._fe_key
+        same_fe = fe_key is not None and fe_key == self._fe_key and (self._fe_full or not everywhere)
         self._fe_key = fe_key
         if self.fe is not None and not same_fe:
-            petsc_vector(self._u1).array_w[:] = self._u_pred.array_r + du
-            self._u1.x.scatter_forward()
-            u1 = self._u1.x.array
-            self.a1 = acceleration(u1, st.u, st.v, st.a, dt, s)
-            self.v1 = velocity(self.a1, st.v, st.a, dt, s)
-            self.u_mid = midpoint(u1, st.u, s.alpha_f)
-            self.v_mid = midpoint(self.v1, st.v, s.alpha_f)
-            for f in self.fields:
-                f.u_mid.x.array[:] = self.u_mid
-                f.v_mid.x.array[:] = self.v_mid
+            if du is None:
+                self._condensed_fields(self._g, everywhere)
+            else:
+                petsc_vector(self._u1).array_w[:] = self._u_pred.array_r + du
+                self._u1.x.scatter_forward()
+                self._fe_fields(None)
         z1 = st.z + dz
         self.z1 = z1
         self.zdd1 = acceleration(dz, 0.0, st.zd, st.zdd, dt, s)
@@ -366,6 +454,67 @@ class CoupledSystem:
         self.zd_mid = midpoint(self.zd1, st.zd, s.alpha_f)
         for c in self.interactions:
             c.move_to_iterate(self)
+
+    def _evaluate_everywhere(self) -> None:
+        """The last evaluated iterate (the accepted one) on every FE DOF: the new state, the probes and
+        the field output read it."""
+        if self.fe is not None and not self._fe_full:
+            self._condensed_fields(self._g, everywhere=True)
+
+    def _condensed_fields(self, g: np.ndarray, everywhere: bool) -> None:
+        """u_{n+1} = u_pred + w - G g and the derived fields: at the evaluation DOFs only while Newton
+        iterates (their rows of G), at every DOF for the accepted iterate."""
+        nonzero = np.flatnonzero(g)
+        rows = self.op.rows
+        if everywhere or rows is None:
+            u1 = petsc_vector(self._u1)
+            if not nonzero.size:
+                self._u1.x.array[:] = self._u1_free
+            else:
+                values = u1.array_w
+                values[:] = self._u1_free[:self.n_fe]
+                if self.op.columns_t is not None:
+                    subtract_rows(values, self.op.columns_t, nonzero, g[nonzero])
+                else:
+                    self._tmp.set(0.0)
+                    local = slice(self._S_offset, self._S_offset + self.contact_local.size)
+                    self._tmp.array_w[self.contact_local] = g[local]
+                    self.op.solve(self._tmp, self._tmp2)
+                    values -= self._tmp2.array_r
+                self._u1.x.scatter_forward()
+            self._fe_fields(None)
+            return
+        at = self._rows_layout.local
+        u1 = self._u1.x.array
+        u1[at] = self._u1_free[at]
+        if nonzero.size:
+            u1[at] -= rows[:, nonzero] @ g[nonzero]
+        self._fe_fields(at)
+
+    def _fe_fields(self, at: np.ndarray | None) -> None:
+        """a_{n+1}, v_{n+1} and the mid-point fields from u_{n+1} (in ``_u1``), at the local DOFs
+        ``at`` or (None) at every DOF."""
+        s, st, dt = self.scheme, self.state0, self.dt
+        u1 = self._u1.x.array
+        if at is None:
+            self.a1 = acceleration(u1, st.u, st.v, st.a, dt, s)
+            self.v1 = velocity(self.a1, st.v, st.a, dt, s)
+            self.u_mid = midpoint(u1, st.u, s.alpha_f)
+            self.v_mid = midpoint(self.v1, st.v, s.alpha_f)
+            for f in self.fields:
+                f.u_mid.x.array[:] = self.u_mid
+                f.v_mid.x.array[:] = self.v_mid
+            self._fe_full = True
+            return
+        u0, v0, a0 = st.u[at], st.v[at], st.a[at]
+        a1 = acceleration(u1[at], u0, v0, a0, dt, s)
+        v1 = velocity(a1, v0, a0, dt, s)
+        u_mid, v_mid = midpoint(u1[at], u0, s.alpha_f), midpoint(v1, v0, s.alpha_f)
+        self.a1[at], self.v1[at], self.u_mid[at], self.v_mid[at] = a1, v1, u_mid, v_mid
+        for f in self.fields:
+            f.u_mid.x.array[at] = u_mid
+            f.v_mid.x.array[at] = v_mid
+        self._fe_full = False
 
     def _new_state(self) -> TransientState:
         if self.fe is not None:
@@ -437,10 +586,10 @@ class CoupledSystem:
 
     # ------------------------------------------------------------- Jacobian
     def _contact_tangents(self):
-        """(Kss, B, L, Kzz) at the evaluated iterate: d rc_S / d u_S, d rc_S / d z, d r_z / d u_S,
-        d r_z / d z (prescribed rigid axes eliminated)."""
+        """(Kss, B, L, Kzz) at the evaluated iterate: d rc_S / d u_S (sparse, :class:`ContactTangent`),
+        d rc_S / d z, d r_z / d u_S, d r_z / d z (prescribed rigid axes eliminated)."""
         s_count, m = self.contact_global.size, self.m
-        Kss = np.zeros((s_count, s_count))
+        Kss = ContactTangent(s_count)
         B = np.zeros((s_count, m))
         L = np.zeros((m, s_count))
         Kzz = np.diag(self._rigid_diagonal())
@@ -453,26 +602,59 @@ class CoupledSystem:
         B[:, fixed] = 0.0
         return Kss, B, L, Kzz
 
+    def contact_tangent_block(self, A: PETSc.Mat) -> scipy.sparse.csr_matrix:
+        """The rows and columns of the contact DOFs of an FE matrix ``A`` (an interaction's tangent,
+        whose sparsity pattern does not change) as a sparse s x s matrix on every rank, in
+        contact_global order (PETSc's submatrix extraction, its storage reused)."""
+        s_count = self.contact_global.size
+        subs = self.__dict__.setdefault("_tangent_submatrices", {})
+        key = A.handle
+        if key not in subs:
+            owned = (self.contact_local + self.fe.first_global).astype(PETSc.IntType)
+            index = PETSc.IS().createGeneral(owned, comm=self.comm)
+            subs[key] = (index, A.createSubMatrix(index, index))
+        else:
+            index, sub = subs[key]
+            A.createSubMatrix(index, index, submat=sub)
+        indptr, indices, values = subs[key][1].getValuesCSR()
+        if self.comm.size == 1:
+            return scipy.sparse.csr_matrix((values, indices, indptr), shape=(s_count, s_count))
+        parts = self.comm.allgather((indptr, indices, values))
+        return scipy.sparse.vstack([scipy.sparse.csr_matrix((v, i, p), shape=(p.size - 1, s_count))
+                                    for p, i, v in parts], format="csr")
+
     def _jacobian_callback(self, snes, X, J, P) -> None:
         self._evaluate(X)
         self._set_jacobian(*self._contact_tangents())
 
     def _set_jacobian(self, Kss, B, L, Kzz) -> None:
-        s_count = self.contact_global.size
-        G_SS = self._contact_block()
-        Z = np.block([[-(np.eye(s_count) + Kss @ G_SS), B], [-L @ G_SS, Kzz]])
-        self._Z = Z
-        self._Z_lu = scipy.linalg.lu_factor(Z, check_finite=True) if Z.size else None
+        """Factorise the condensed Newton matrix on the DOFs its tangents make active
+        (:class:`app.transient.active_set.CondensedJacobian`), on rank 0, which holds the unknown."""
+        if self.comm.rank != 0:
+            return
+        if isinstance(Kss, ContactTangent) and Kss.empty and not B.any() and not L.any():
+            self._jacobian = RigidJacobian(self.contact_global.size, Kzz)     # no FE contact carries force
+            return
+        previous = self._jacobian
+        self._jacobian = CondensedJacobian(self._contact_block(), Kss, B, L, Kzz, active_only=self.active_set)
+        self.jacobians += 1
+        self.active_dofs += self._jacobian.active_count
+        if previous is not None and self._jacobian_step == self._step_count and not np.array_equal(
+                previous.active, self._jacobian.active):
+            self.active_set_changes += 1
+        self._jacobian_step = self._step_count
 
     def apply_inverse(self, x: np.ndarray, y: np.ndarray) -> None:
         """y = J^-1 x for local arrays of the unknown (rank 0 holds it all)."""
         if x.size:
-            y[:] = scipy.linalg.lu_solve(self._Z_lu, x)
+            y[:] = self._jacobian.solve(x)
+            if self._jacobian.inactive.size and np.any(x[self._jacobian.inactive]):
+                self.opened_updates += 1
 
     def apply_jacobian(self, x: np.ndarray, y: np.ndarray) -> None:
         """y = J x for local arrays of the unknown."""
         if x.size:
-            y[:] = self._Z @ x
+            y[:] = self._jacobian.apply(x)
 
     def consistent_rigid_acceleration(self, state: TransientState) -> TransientState:
         """``state`` with the free rigid accelerations in equilibrium with the external loads and the
@@ -496,7 +678,7 @@ class CoupledSystem:
         """|r0 + A du + E rc| of the FE equations plus the rigid residual at the evaluated iterate:
         the residual of the uncondensed system (one extra mat-vec; for tests and diagnostics)."""
         self._evaluated = self._fe_key = None   # the shared mid-point fields may hold other values by now
-        self._evaluate(self.X)
+        self._evaluate(self.X, everywhere=True)
         r = self._r
         self._du.array_w[:] = petsc_vector(self._u1).array_r - self._u_pred.array_r
         self.op.full.mult(self._du, r)
@@ -537,6 +719,9 @@ class CoupledSystem:
     def destroy(self) -> None:
         if self.cache is not None:
             self.cache.destroy()
+        for index, sub in getattr(self, "_tangent_submatrices", {}).values():
+            index.destroy()
+            sub.destroy()
         for obj in (self.snes, self.J, self.X, self.R, self._step_vector):
             obj.destroy()
 

@@ -10,6 +10,7 @@ can switch between its few step sizes without refactorising.
 
 from __future__ import annotations
 
+import os
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 
@@ -17,12 +18,16 @@ import numpy as np
 import ufl
 from dolfinx import fem
 from dolfinx.fem.petsc import assemble_matrix, assemble_vector, set_bc
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from app.compat import is_mixed, petsc_vector
 from forms.newmark import TimeScheme, effective_weights
 
 KEFF_PREFIX = "transient_keff_"
+COLUMNS_PREFIX = "transient_columns_"   # the MUMPS factorisation that forms G on one rank
+COLUMN_BLOCK = 128                      # right-hand sides per multiple-RHS solve of G
+BLOCK_MIN_COLUMNS = 48                  # fewer contact DOFs: one back-substitution per column of G
 
 
 class LinearFE:
@@ -131,12 +136,45 @@ class LinearFE:
         return out
 
 
+class InterfaceRows:
+    """Where the condensed step needs rows of G = K_eff^-1 E besides its own (owned) ones: the local
+    DOFs (owned and ghost) that the contact forms read (``local``), and the contact DOFs. Each rank
+    keeps the rows of its ``local`` DOFs; rows owned elsewhere are exchanged once per G. Built once
+    per model (collective)."""
+
+    def __init__(self, fe: LinearFE, local: np.ndarray, contact_global: np.ndarray):
+        comm = fe.comm
+        self.local = np.asarray(local, dtype=np.int64)
+        index_map = fe.space.dofmap.index_map
+        bs = fe.block_size
+        blocks = index_map.local_to_global((self.local // bs).astype(np.int32)).astype(np.int64)
+        mine = blocks * bs + self.local % bs
+        union = np.unique(np.concatenate(comm.allgather(mine) + [np.asarray(contact_global, dtype=np.int64)]))
+        lo = fe.first_global
+        owned = (union >= lo) & (union < lo + fe.n_owned)
+        #: local indices of this rank's owned rows of the union (contiguous in the union: ranks own
+        #: increasing global ranges)
+        self.owned_rows = (union[owned] - lo).astype(np.int64)
+        self.union_size = union.size
+        self.position = np.searchsorted(union, mine)                  # of ``local`` in the union
+        self.contact_position = np.searchsorted(union, np.asarray(contact_global, dtype=np.int64))
+        self.comm = comm
+
+
 class EffectiveOperator:
     """K_eff for one dt: the unconstrained matrix (for residuals) and an LU factorisation of the
-    constrained one, plus K_eff^-1 applied to the unit vectors of the contact DOFs (the columns
-    the condensed contact system needs), computed once per dt."""
+    constrained one, plus G = K_eff^-1 E, E the unit vectors of the s contact DOFs (the columns the
+    condensed contact system needs), computed once per dt.
 
-    def __init__(self, fe: LinearFE, dt: float, scheme: TimeScheme, contact_global_dofs: np.ndarray):
+    G is formed with multiple right-hand sides (MUMPS, dense blocks of ``COLUMN_BLOCK`` unit vectors)
+    when s >= ``BLOCK_MIN_COLUMNS``: on one rank with a MUMPS factorisation made for it (PETSc's own LU,
+    faster for one back-substitution, solves one right-hand side at a time); below that, one
+    back-substitution per column. Kept: G_SS (s x s, every rank), the rows at ``rows.local``
+    (:class:`InterfaceRows`) and, if ``keep_all_rows``, all owned rows (transposed, s x n_owned) for the
+    end-of-step update du = w - G g; without them that update is one more back-substitution."""
+
+    def __init__(self, fe: LinearFE, dt: float, scheme: TimeScheme, contact_global_dofs: np.ndarray,
+                 rows: InterfaceRows | None = None, keep_all_rows: bool = True):
         self.dt = dt
         w_m, w_c, w_k = effective_weights(dt, scheme)
         A = fe.K.copy()
@@ -148,8 +186,29 @@ class EffectiveOperator:
         Abc = A.copy()
         Abc.zeroRowsColumns(fe.bc_global, 1.0)
         self.constrained = Abc
+        self._work = Abc.createVecRight()
+        self.comm = fe.comm
+        self.contact_global = np.asarray(contact_global_dofs)
+        self.rows_layout = rows
+        self.columns_t = None           # all owned rows of G, transposed (s x n_owned), or None
+        self.rows = None                # G at rows.local (len(rows.local) x s)
+        self.contact_block = None       # G_SS (s x s, every rank)
+        self.column_solves = 0          # right-hand sides solved for G
         self.ksp = self.solver_type = None
-        for solver_type in _solver_types(fe.comm):
+        keep_all_rows = keep_all_rows or rows is None
+        candidates = _solver_types(fe.comm)
+        built = False
+        if self.contact_global.size >= BLOCK_MIN_COLUMNS and candidates[0] != "mumps":
+            # G first, through a MUMPS factorisation freed before the per-step one is made: the two
+            # factorisations never coexist (3D: ~2 GB each at 130 k DOFs)
+            mumps = self._factorise(fe.comm, Abc, "mumps", prefix=COLUMNS_PREFIX)
+            if mumps is not None:
+                try:
+                    self._build_columns(keep_all_rows, mumps.getPC().getFactorMatrix())
+                    built = True
+                finally:
+                    mumps.destroy()
+        for solver_type in candidates:
             self.ksp = self._factorise(fe.comm, Abc, solver_type)
             if self.ksp is None:
                 continue
@@ -160,13 +219,26 @@ class EffectiveOperator:
             self.ksp = None
         if self.ksp is None:
             raise FloatingPointError(f"K_eff at dt = {dt:.3e} s could not be factorised")
-        self._work = Abc.createVecRight()
-        self.columns = self._contact_columns(contact_global_dofs)
+        if not built:
+            blocked = self.solver_type == "mumps" and self.contact_global.size >= BLOCK_MIN_COLUMNS
+            self._build_columns(keep_all_rows, self.ksp.getPC().getFactorMatrix() if blocked else None)
+
+    @property
+    def columns(self) -> np.ndarray:
+        """Owned rows of G = K_eff^-1 E (n_owned x s, a view)."""
+        if self.columns_t is None:
+            raise RuntimeError("this operator keeps G only at the interface rows")
+        return self.columns_t.T
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the dense parts of G."""
+        return sum(a.nbytes for a in (self.columns_t, self.rows, self.contact_block) if a is not None)
 
     @staticmethod
-    def _factorise(comm, A: PETSc.Mat, solver_type: str) -> PETSc.KSP | None:
+    def _factorise(comm, A: PETSc.Mat, solver_type: str, prefix: str = KEFF_PREFIX) -> PETSc.KSP | None:
         ksp = PETSc.KSP().create(comm)
-        ksp.setOptionsPrefix(KEFF_PREFIX)
+        ksp.setOptionsPrefix(prefix)
         ksp.setOperators(A)
         ksp.setType("preonly")
         pc = ksp.getPC()
@@ -212,24 +284,79 @@ class EffectiveOperator:
         if reason < 0:
             raise FloatingPointError(f"K_eff solve failed (KSP reason {reason})")
 
-    def _contact_columns(self, contact_global_dofs: np.ndarray) -> np.ndarray:
-        """Local rows of K_eff^-1 E, E = unit columns at the contact DOFs (n_owned x s)."""
+    # ------------------------------------------------------------------ G = K_eff^-1 E
+    def _build_columns(self, keep_all_rows: bool, factor: PETSc.Mat | None) -> None:
+        """G with multiple right-hand sides through the MUMPS ``factor``, or (None) one back-substitution
+        with the per-step factorisation per column."""
+        contact = self.contact_global
+        s_count = contact.size
         n_local = self._work.getLocalSize()
-        cols = np.zeros((n_local, len(contact_global_dofs)))
+        layout = self.rows_layout
+        if keep_all_rows:
+            self.columns_t = np.empty((s_count, n_local))
+        owned_rows = layout.owned_rows if layout is not None else np.zeros(0, dtype=np.int64)
+        interface_t = np.empty((s_count, owned_rows.size))
+        blocks = (self._multiple_columns(factor, contact) if factor is not None
+                  else self._single_columns(contact)) if s_count else ()
+        for start, block in blocks:
+            stop = start + block.shape[1]
+            if self.columns_t is not None:
+                self.columns_t[start:stop] = block.T
+            interface_t[start:stop] = block[owned_rows].T
+        if layout is None:
+            self.contact_block = self._gather_contact_rows()
+            return
+        union_t = interface_t if self.comm.size == 1 else np.hstack(self.comm.allgather(interface_t))
+        self.rows = np.ascontiguousarray(union_t[:, layout.position].T)
+        self.contact_block = np.ascontiguousarray(union_t[:, layout.contact_position].T)
+
+    def _gather_contact_rows(self) -> np.ndarray:
+        lo, hi = self._work.getOwnershipRange()
+        mine = self.contact_global[(self.contact_global >= lo) & (self.contact_global < hi)] - lo
+        rows = self.columns_t[:, mine].T
+        return rows if self.comm.size == 1 else np.vstack(self.comm.allgather(rows))
+
+    def _single_columns(self, contact):
         rhs = self._work.duplicate()
         lo, hi = rhs.getOwnershipRange()
-        for j, g in enumerate(contact_global_dofs):
-            rhs.set(0.0)
-            if lo <= g < hi:
-                rhs.array_w[g - lo] = 1.0
-            self.solve(rhs, self._work)
-            cols[:, j] = self._work.array_r
-        rhs.destroy()
-        return cols
+        try:
+            for j, g in enumerate(contact):
+                rhs.set(0.0)
+                if lo <= g < hi:
+                    rhs.array_w[g - lo] = 1.0
+                self.solve(rhs, self._work)
+                self.column_solves += 1
+                yield j, self._work.array_r.reshape(-1, 1)
+        finally:
+            rhs.destroy()
+
+    def _multiple_columns(self, factor: PETSc.Mat, contact):
+        n_local = self._work.getLocalSize()
+        n_global = self._work.getSize()
+        lo, hi = self._work.getOwnershipRange()
+        for start in range(0, contact.size, COLUMN_BLOCK):
+            cols = contact[start:start + COLUMN_BLOCK]
+            k = cols.size
+            B = PETSc.Mat().createDense(((n_local, n_global), (PETSc.DECIDE, k)), comm=self.comm)
+            B.setUp()
+            values = B.getDenseArray()
+            values[:] = 0.0
+            mine = (cols >= lo) & (cols < hi)
+            values[cols[mine] - lo, np.flatnonzero(mine)] = 1.0
+            B.assemble()
+            X = B.duplicate()
+            try:
+                factor.matSolve(B, X)
+                self.column_solves += k
+                yield start, np.array(X.getDenseArray(readonly=True))
+            finally:
+                B.destroy()
+                X.destroy()
 
     def destroy(self) -> None:
         for obj in (self.ksp, self.full, self.constrained, self._work):
             obj.destroy()
+        self.columns_t = self.rows = self.contact_block = None
 
 
 def _solver_types(comm) -> list[str]:
@@ -246,13 +373,23 @@ def _solver_types(comm) -> list[str]:
 
 
 class EffectiveOperatorCache:
-    """Least-recently-used cache of :class:`EffectiveOperator` keyed by dt (relative 1e-12)."""
+    """Least-recently-used cache of :class:`EffectiveOperator` keyed by dt (relative 1e-12).
 
-    def __init__(self, fe: LinearFE, scheme: TimeScheme, contact_global_dofs: np.ndarray, capacity: int = 8):
+    The dense G of an operator can be large (n_owned x s doubles per rank: 1.7 GB for the motor's
+    130 k DOFs and 1 632 contact DOFs), so all of its rows are kept only while the cache's share stays
+    within ``memory_budget_bytes`` per rank (default: a quarter of the machine's memory divided by
+    the ranks; ``PIEZODYN_COLUMNS_BUDGET_MB`` overrides); an operator beyond it keeps G at the
+    interface rows only. A step size the run returns to after a cut-back finds its operator here."""
+
+    def __init__(self, fe: LinearFE, scheme: TimeScheme, contact_global_dofs: np.ndarray, capacity: int = 8,
+                 rows: InterfaceRows | None = None, memory_budget_bytes: float | None = None):
         self.fe = fe
         self.scheme = scheme
         self.contact_global_dofs = contact_global_dofs
         self.capacity = capacity
+        self.rows = rows
+        self.memory_budget_bytes = (memory_budget_bytes if memory_budget_bytes is not None
+                                    else default_columns_budget_bytes(fe.comm))
         self._items: OrderedDict[float, EffectiveOperator] = OrderedDict()
         self.factorisations = 0
 
@@ -260,12 +397,16 @@ class EffectiveOperatorCache:
         key = float(f"{dt:.12e}")
         op = self._items.get(key)
         if op is None:
-            op = EffectiveOperator(self.fe, dt, self.scheme, self.contact_global_dofs)
-            self.factorisations += 1
-            self._items[key] = op
-            if len(self._items) > self.capacity:
+            if len(self._items) >= self.capacity:
                 _, old = self._items.popitem(last=False)
                 old.destroy()
+            held = sum(o.nbytes for o in self._items.values())
+            wanted = self.fe.n_owned * len(self.contact_global_dofs) * 8
+            keep_all = self.fe.comm.allreduce(held + wanted <= self.memory_budget_bytes, op=MPI.LAND)
+            op = EffectiveOperator(self.fe, dt, self.scheme, self.contact_global_dofs, rows=self.rows,
+                                   keep_all_rows=keep_all)
+            self.factorisations += 1
+            self._items[key] = op
         else:
             self._items.move_to_end(key)
         return op
@@ -274,6 +415,19 @@ class EffectiveOperatorCache:
         for op in self._items.values():
             op.destroy()
         self._items.clear()
+
+
+def default_columns_budget_bytes(comm) -> float:
+    """Bytes per rank for the cached operators' dense G: ``PIEZODYN_COLUMNS_BUDGET_MB``, else a quarter
+    of the physical memory shared by the ranks."""
+    value = os.environ.get("PIEZODYN_COLUMNS_BUDGET_MB")
+    if value:
+        return float(value) * 2**20
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        total = 8 * 2**30
+    return 0.25 * total / comm.size
 
 
 def displacement_of(function):

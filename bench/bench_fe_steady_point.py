@@ -1,0 +1,117 @@
+"""One steady operating point of the wedge-wave motor in the FE tier, and the modal tier at the same point.
+
+The point (issue 26): the pinned stator and mesh (``bench/cases/wwusm-motor-pinned.toml``, 130 168 DOFs in the FE
+tier), preload 0.98 N, a free rotor under a load torque of 12.929 mN m (half the modal tier's stall torque at 0.98 N,
+a point of its speed-torque curve, BENCHMARKS.md), started from the stator's harmonic steady state with the rotor
+seated on the highest crest, run until the case's steady-state rule holds (``[transient.steady_state]``: the
+cycle-mean speed within 0.5 % over 20 periods). A loaded free rotor rather than the held one: from the harmonic
+start a held rotor stays on the bouncing branch in the modal tier (docs/motor-rotor.md, "Two regimes"), and a held
+rotor's torque ripples by more than 0.5 %, so its run would end at ``end_time_s`` without a steady state.
+
+    # the FE tier (hours; resumes from DIR/checkpoint when it exists, same command again after a kill)
+    nice .venv/bin/python bench/bench_fe_steady_point.py fe --out /work/runs/fe_steady
+    # the modal tier at the same point (any piezodyn; the comparison reads its transient.h5)
+    piezodyn run bench/cases/wwusm-motor-pinned.toml --out MODAL \
+        --set 'transient.bodies[0].rotations[0].torque_N_m=-0.012929'
+    # the comparison: cycle means over each run's last window (20 periods)
+    .venv/bin/python bench/bench_fe_steady_point.py compare --fe /work/runs/fe_steady --modal MODAL
+
+``fe`` passes ``--set`` keys after ``--set`` to both the run and its resume (the case digest must match).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+CASE = ROOT / "bench" / "cases" / "wwusm-motor-pinned.toml"
+LOAD_N_M = 0.012929
+POINT = [f"transient.bodies[0].rotations[0].torque_N_m={-LOAD_N_M!r}"]
+FE = ['tier="fe"', "output.fields=false", "output.plots=false", "transient.checkpoint_interval_steps=200"]
+WINDOW = 20     # periods: the steady-state rule's window
+
+
+def run_fe(out: Path, sets: list[str]) -> dict:
+    from app.runner import run_case
+
+    resume = (out / "checkpoint").is_dir()
+    return run_case(CASE, POINT + FE + sets, out, resume=resume)
+
+
+def cycle_means(path: Path, frequency_Hz: float) -> dict[str, np.ndarray]:
+    """Per drive period [kT, (k+1)T): mean speed [rad/s], friction torque on the rotor [N m] and normal
+    force [N] (step-weighted means of each period's rows; the last, partial period left out)."""
+    with h5py.File(path, "r") as f:
+        t = f["time_s"][()]
+        dt = f["dt_s"][()]
+        series = {"speed_rad_per_s": f["rotor_angular_velocity_rad_per_s"][()].reshape(len(t), -1)[:, 0],
+                  "torque_N_m": f["stator_rotor_torque_N_m"][()].reshape(len(t), -1)[:, 0],
+                  "normal_force_N": f["stator_rotor_normal_force_N"][()].reshape(-1)}
+    period = np.floor((t - 0.5 * dt) * frequency_Hz + 1e-9).astype(int)
+    closed = np.arange(period.max())            # the last period may be partial
+    out = {"period": closed}
+    for key, values in series.items():
+        out[key] = np.array([np.average(values[period == k], weights=dt[period == k]) for k in closed])
+    return out
+
+
+def window_means(means: dict[str, np.ndarray], window: int) -> dict[str, float]:
+    return {k: float(np.mean(v[-window:])) for k, v in means.items() if k != "period"}
+
+
+def compare(fe_dir: Path, modal_dir: Path, frequency_Hz: float) -> dict:
+    rows = {}
+    for label, directory in (("fe", fe_dir), ("modal", modal_dir)):
+        means = cycle_means(directory / "transient.h5", frequency_Hz)
+        summary = json.loads((directory / "summary.json").read_text())["results"]["transient"]
+        steady = summary.get("steady_state") or {}
+        rows[label] = {"periods": int(means["period"].size), "steady": summary.get("steady", steady.get("steady")),
+                       "wall_time_s": summary.get("wall_time_s"), "steps": summary.get("steps"),
+                       **window_means(means, WINDOW)}
+    fe, modal = rows["fe"], rows["modal"]
+    rows["modal_vs_fe"] = {k: modal[k] / fe[k] - 1 for k in ("speed_rad_per_s", "torque_N_m", "normal_force_N")}
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    fe = sub.add_parser("fe", help="run or resume the FE-tier point")
+    fe.add_argument("--out", type=Path, required=True)
+    fe.add_argument("--set", nargs="*", default=[], help="further --set overrides (the same on every resume)")
+    cmp = sub.add_parser("compare", help="the FE and modal points' last-window cycle means")
+    cmp.add_argument("--fe", type=Path, required=True)
+    cmp.add_argument("--modal", type=Path, required=True)
+    args = parser.parse_args()
+    if args.command == "fe":
+        results = run_fe(args.out, args.set)["results"]["transient"]
+        print(json.dumps({k: results.get(k) for k in ("steps", "cutbacks", "newton_iterations", "wall_time_s",
+                                                       "simulated_time_s", "steady_state")}, indent=1, default=str))
+        return
+    from app.runner import load_for_run
+
+    frequency = load_for_run(CASE, POINT).transient.drive.frequency_Hz
+    rows = compare(args.fe, args.modal, frequency)
+    print(json.dumps(rows, indent=1))
+    print(f"| tier | periods | steady | speed [rpm] | friction torque [mN m] | normal force [N] | "
+          f"(means over the last {WINDOW} periods) |")
+    print("|---|---|---|---|---|---|---|")
+    for label in ("fe", "modal"):
+        r = rows[label]
+        print(f"| {label} | {r['periods']} | {r['steady']} | {r['speed_rad_per_s'] * 30 / np.pi:.3f} | "
+              f"{r['torque_N_m'] * 1e3:.4f} | {r['normal_force_N']:.4f} | |")
+    d = rows["modal_vs_fe"]
+    print(f"| modal / FE - 1 | | | {100 * d['speed_rad_per_s']:+.2f} % | {100 * d['torque_N_m']:+.2f} % | "
+          f"{100 * d['normal_force_N']:+.2f} % | |")
+
+
+if __name__ == "__main__":
+    main()
