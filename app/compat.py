@@ -12,16 +12,17 @@ def model_to_mesh(model, comm, rank: int, gdim: int):
     return gmshio.model_to_mesh(model, comm, rank, gdim=gdim)
 
 
-def mixed_space(mesh, degree: int):
-    """Vector Lagrange displacement x scalar Lagrange potential on one mesh."""
+def mixed_space(mesh, degree: int, displacement_dim: int | None = None):
+    """Vector Lagrange displacement (``displacement_dim`` components, default the mesh's geometric
+    dimension) x scalar Lagrange potential on one mesh."""
     cell = mesh.ufl_cell()
-    element = ufl.MixedElement([ufl.VectorElement("Lagrange", cell, degree),
+    element = ufl.MixedElement([ufl.VectorElement("Lagrange", cell, degree, dim=displacement_dim),
                                 ufl.FiniteElement("Lagrange", cell, degree)])
     return fem.FunctionSpace(mesh, element)
 
 
-def vector_space(mesh, family: str, degree: int):
-    return fem.VectorFunctionSpace(mesh, (family, degree))
+def vector_space(mesh, family: str, degree: int, dim: int | None = None):
+    return fem.VectorFunctionSpace(mesh, (family, degree), dim=dim)
 
 
 def scalar_space(mesh, family: str, degree: int):

@@ -47,14 +47,19 @@ class VertexFields:
         tdim = mesh.topology.dim
         self.gdim = gdim = mesh.geometry.dim
         cell_name = mesh.topology.cell_type.name
-        if cell_name not in _XDMF_CELLS or mesh.geometry.cmap.degree != 1:
+        if cell_name not in _XDMF_CELLS or mesh.geometry.cmap.degree > 2:
             raise NotImplementedError(f"field export of {cell_name} meshes of geometry degree "
                                       f"{mesh.geometry.cmap.degree}")
         self.topology_type, nodes_per_cell, permutation = _XDMF_CELLS[cell_name]
         n_owned = mesh.topology.index_map(tdim).size_local
         geometry = mesh.geometry
-        cell_nodes = np.asarray(cell_geometry_nodes(mesh), dtype=np.int64)[:n_owned]
-        self.V1 = vector_space(mesh, "Lagrange", 1)
+        # a curved (quadratic) cell is written as the straight cell of its vertices, its first nodes
+        cell_nodes = np.asarray(cell_geometry_nodes(mesh), dtype=np.int64)[:n_owned, :nodes_per_cell]
+        # a Fourier model's amplitudes (U_r, U_theta, U_z) on the (r, z) grid go out as (U_r, U_z, U_theta): Warp
+        # By Vector then moves the section as the mode does at theta = 0, the hoop amplitude out of its plane
+        self.n_u = model.W.sub(0).num_sub_spaces
+        self._u_order = [0, 2, 1] if model.kind == "fourier" else list(range(self.n_u))
+        self.V1 = vector_space(mesh, "Lagrange", 1, dim=self.n_u)
         self.S1 = scalar_space(mesh, "Lagrange", 1)
         self.u1 = fem.Function(self.V1)
         self.phi1 = fem.Function(self.S1)
@@ -109,7 +114,7 @@ class VertexFields:
         self._phi.x.scatter_forward()
         self.phi1.interpolate(self._phi)
         self.phi1.x.scatter_forward()
-        u_local = self.u1.x.array.reshape(-1, self.gdim)[self._u_dofs]
+        u_local = self.u1.x.array.reshape(-1, self.n_u)[self._u_dofs][:, self._u_order]
         phi_local = self.phi1.x.array[self._phi_dofs]
         parts = self.comm.gather((u_local, phi_local), root=0)
         if self.comm.rank != 0:
@@ -117,7 +122,7 @@ class VertexFields:
         u = np.zeros((self.n_nodes, 3))
         phi = np.zeros(self.n_nodes)
         for place, (u_part, phi_part) in zip(self._places, parts):
-            u[place, :self.gdim] = u_part
+            u[place, :self.n_u] = u_part
             phi[place] = phi_part
         return u, phi
 

@@ -249,11 +249,12 @@ def balanced_wave(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: flo
 
     nominal = dict(solver.phasors)
     name = cfg.balance
+    trimmed_set = [name, *cfg.balance_with]
     solver.solve(frequency_Hz)
     circle = circle_phasors(model, solver, cfg)
     nominal_wave = wave_measures(model, solver, cfg, frequency_Hz, circle)
     u_all = circle[0]
-    solver.set_phasors({k: (v if k == name else 0j) for k, v in nominal.items()})
+    solver.set_phasors({k: (v if k in trimmed_set else 0j) for k, v in nominal.items()})
     solver.solve(frequency_Hz)
     u_trimmed, _ = circle_phasors(model, solver, cfg)
     w_all, w_trimmed = (normal_component(u, tuple(cfg.normal_rz)) for u in (u_all, u_trimmed))
@@ -263,10 +264,11 @@ def balanced_wave(model: FEModel, solver: HarmonicSolver, cfg, frequency_Hz: flo
         raise NumericalFailure(f"harmonic.wave.balance: electrode {name!r} does not drive order {cfg.order} "
                                f"at {frequency_Hz} Hz") from None
     trimmed = nominal[name] * factor
-    solver.set_phasors({**nominal, name: trimmed})
+    solver.set_phasors({**nominal, **{k: nominal[k] * factor for k in trimmed_set}})
     point = solver.solve(frequency_Hz)
     wave = wave_measures(model, solver, cfg, frequency_Hz)
-    wave["balance"] = {"electrode": name, "amplitude_V": abs(trimmed), "phase_deg": math.degrees(np.angle(trimmed)),
+    wave["balance"] = {"electrode": name, "with": list(cfg.balance_with), "factor": [factor.real, factor.imag],
+                       "amplitude_V": abs(trimmed), "phase_deg": math.degrees(np.angle(trimmed)),
                        "nominal_amplitude_V": abs(nominal[name]),
                        "nominal_phase_deg": math.degrees(np.angle(nominal[name]))}
     wave["nominal"] = nominal_wave

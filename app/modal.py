@@ -89,6 +89,7 @@ class ModalResult:
     pairs: list[tuple[int, int | None, float | None]]  # (short index, open index, k_eff)
     working: int  # index into short
     orders: list | None = None  # app.modeid.ModeOrder per short mode, when the case asks
+    contact_force: dict | None = None  # modal.contact_force's measures (contact_force())
 
     @property
     def working_mode(self) -> Mode:
@@ -101,6 +102,13 @@ class ModalResult:
 
 def run_modal(model: FEModel, ops: Operators) -> ModalResult:
     cfg = model.case.modal
+    if cfg.cyclic is not None:
+        from app.fe.cyclic import cyclic_modes
+
+        modes = [Mode(f, x) for f, x in cyclic_modes(model, ops, cfg.cyclic, cfg.target_frequency_Hz, cfg.n_modes,
+                                                     cfg.rigid_cutoff_Hz)]
+        working = min(range(len(modes)), key=lambda i: abs(modes[i].frequency_Hz - cfg.target_frequency_Hz))
+        return ModalResult(modes, [], [(i, None, None) for i in range(len(modes))], working)
     has_drive = bool(model.electrodes_of("voltage"))
     states = {"short": ["short"], "open": ["open"], "both": ["short", "open"]}[cfg.electrical]
     if not has_drive:
@@ -139,16 +147,120 @@ def run_modal(model: FEModel, ops: Operators) -> ModalResult:
         working = max(candidates, key=lambda i: pairs[i][2] or 0.0)
     else:
         working = min(candidates, key=lambda i: abs(short[i].frequency_Hz - cfg.target_frequency_Hz))
-    return ModalResult(short, opened, pairs, working, orders)
+    result = ModalResult(short, opened, pairs, working, orders)
+    if cfg.contact_force is not None:
+        result.contact_force = contact_force(model, ops, result)
+    return result
+
+
+def contact_force(model: FEModel, ops: Operators, result: ModalResult) -> dict:
+    """The working mode's (and its degenerate partner's) modal force referred to a contact circle.
+
+    For a short-circuit mode x (mass-normalised) let W_x be the amplitude of order n of its normal
+    displacement w = u . n round the circle (w = W_x cos n(theta - theta_0) for a pure order): the modal
+    mass and stiffness referred to the contact normal are m_m = 1 / W_x^2, k_m = omega^2 m_m. A drive of
+    phasors V_e on electrodes e pushes the mode's coordinate with the generalised force f = sum_e Q_e(x) V_e,
+    Q_e(x) the charge the mode shape carries on electrode e with every electrode grounded (by reciprocity the
+    work of the drive on the mode: forms.piezo). Referred to the contact, that is a force F = |f| / W_x, and
+    at resonance the mode answers with the normal amplitude W = F / (2 zeta k_m), zeta = x^T C x / (2 omega)
+    its damping ratio: F_m = 2 zeta k_m W. For the two modes of a travelling wave F_m is the root mean square
+    of the pair's two forces (equal in a clean wave), and W the wave's amplitude. Per volt: over the largest
+    drive amplitude. ``two_mode_wave``: the wave the pair alone makes at its centre frequency under the case's
+    drive (its min/max: the travelling-wave ratio without the other modes' share). The preloads' normal force
+    N = P / |n_z| against F_m says whether the wave can carry the rotor on its crests (N / F_m of order 1 or
+    below; docs/motor-stator.md)."""
+    import numpy as np
+
+    from app.errors import CaseError
+    from app.fe.operators import charge, indicator
+    from app.harmonic import drive_phasors
+    from app.modeid import PointSet, circle_points, cylindrical, harmonics, normal_component
+
+    cfg = model.case.modal.contact_force
+    file = model.case.source
+    if model.kind == "fourier":
+        raise CaseError(file, "modal.contact_force", "needs a 3d model (a Fourier model's electrodes cannot carry "
+                                                     "a drive of order n)")
+    phasors = drive_phasors(model, cfg.voltage_V)
+    if not phasors:
+        raise CaseError(file, "modal.contact_force", "needs an electrode of kind 'voltage' (the drive)")
+    points, theta = circle_points(cfg.circle_radius_m, cfg.circle_height_m, cfg.n_points)
+    probe = PointSet(model.mesh, points)
+    if not probe.found.all():
+        raise CaseError(file, "modal.contact_force.circle_radius_m", "the circle leaves the mesh")
+    modes = [result.working]
+    partner = result.orders[result.working].partner if result.orders is not None else None
+    if partner is not None:
+        modes.append(partner)
+    f_ref = model.case.damping.reference_frequency_Hz or result.working_mode.frequency_Hz
+    damping = model.damping(f_ref)
+    C = None
+    if damping is not None:
+        from dolfinx import fem
+        from dolfinx.fem.petsc import assemble_matrix
+
+        C = assemble_matrix(fem.form(damping), bcs=[])
+        C.assemble()
+    chi = {name: indicator(model, [name]) for name in phasors}
+    rows, shapes, forces, omegas, zetas = [], [], [], [], []
+    for index in modes:
+        mode = result.short[index]
+        omega = 2 * math.pi * mode.frequency_Hz
+        w = normal_component(cylindrical(probe(model.displacement(mode.vector)), theta), tuple(cfg.normal_rz))
+        amplitude = 2 * abs(harmonics(w)[cfg.order])           # W_x [m per unit modal coordinate]
+        zeta = 0.0
+        if C is not None:
+            Cx = C.createVecLeft()
+            C.mult(mode.vector, Cx)
+            zeta = Cx.dot(mode.vector) / (2 * omega)
+            Cx.destroy()
+        q = {name: charge(ops.K, mode.vector, vec) for name, vec in chi.items()}
+        f = sum(q[name] * phasors[name] for name in phasors)
+        shapes.append(w)
+        forces.append(f)
+        omegas.append(omega)
+        zetas.append(zeta)
+        rows.append({"index": index, "frequency_Hz": mode.frequency_Hz, "modal_mass_kg": 1 / amplitude**2,
+                     "modal_stiffness_N_per_m": omega**2 / amplitude**2, "damping_ratio": zeta,
+                     "modal_force_N": abs(f) / amplitude,
+                     "electrode_force_factor_N_per_V": {name: abs(q[name]) / amplitude for name in q}})
+    for vec in chi.values():
+        vec.destroy()
+    if C is not None:
+        C.destroy()
+    volts = max(abs(v) for v in phasors.values())
+    # the wave of the pair alone at its centre: each mode's response f / (omega_j^2 - omega^2 + 2 i zeta_j omega_j
+    # omega) times its normal displacement round the circle
+    omega_c = float(np.mean(omegas))
+    wave = sum(f / (om**2 - omega_c**2 + 2j * z * om * omega_c) * w
+               for f, om, z, w in zip(forces, omegas, zetas, shapes))
+    amplitude = np.abs(wave)
+    force = math.sqrt(sum(r["modal_force_N"] ** 2 for r in rows) / len(rows))
+    k_m = sum(r["modal_stiffness_N_per_m"] for r in rows) / len(rows)
+    zeta = sum(r["damping_ratio"] for r in rows) / len(rows)
+    n_z = abs(cfg.normal_rz[1]) / math.hypot(*cfg.normal_rz)
+    out = {"order": cfg.order, "circle_radius_m": cfg.circle_radius_m, "circle_height_m": cfg.circle_height_m,
+           "modes": rows, "drive_amplitude_V": volts, "modal_force_N": force,
+           "modal_force_per_volt_N_per_V": force / volts, "modal_stiffness_N_per_m": k_m, "damping_ratio": zeta,
+           "free_normal_amplitude_m": force / (2 * zeta * k_m) if zeta > 0 else None,
+           "two_mode_wave": {"frequency_Hz": omega_c / (2 * math.pi),
+                             "travelling_wave_ratio": float(amplitude.min() / amplitude.max()),
+                             "normal_amplitude_mean_m": float(amplitude.mean())},
+           "preloads": [{"axial_preload_N": p, "normal_force_N": p / n_z,
+                         "normal_force_over_modal_force": p / n_z / force} for p in cfg.preloads_N]}
+    return out
 
 
 def mode_identifier(model: FEModel):
-    """The modal.identify sampler (app.modeid.ModeIdentifier); CaseError if its circle or generatrix leaves
-    the mesh (so ``validate`` refuses it without solving: app.runner.check_case). Collective."""
+    """The modal.identify sampler (app.modeid.ModeIdentifier, or FourierModeIdentifier for a Fourier model);
+    CaseError if its circle or generatrix leaves the mesh (so ``validate`` refuses it without solving:
+    app.runner.check_case). Collective."""
     from app.errors import CaseError
-    from app.modeid import ModeIdentifier
+    from app.modeid import FourierModeIdentifier, ModeIdentifier
 
     try:
+        if model.kind == "fourier":
+            return FourierModeIdentifier(model.mesh, model.case.modal.identify, model.circumferential_order)
         return ModeIdentifier(model.mesh, model.case.modal.identify)
     except ValueError as exc:
         raise CaseError(model.case.source, f"modal.identify.{exc}_radius_m",
@@ -161,7 +273,8 @@ def identify_modes(model: FEModel, modes: list[Mode]) -> list:
 
     identifier = mode_identifier(model)
     orders = [identifier.order(model.displacement(mode.vector)) for mode in modes]
-    pair_partners([m.frequency_Hz for m in modes], orders)
+    if model.kind != "fourier":
+        pair_partners([m.frequency_Hz for m in modes], orders)
     return orders
 
 
@@ -203,6 +316,8 @@ def modal_summary(model: FEModel, result: ModalResult) -> dict:
         out.update({"working_m": o.m, "working_n": o.n, "working_partner_split_Hz": o.split_Hz})
         if o.split_Hz is not None:
             out["working_partner_split_relative"] = abs(o.split_Hz) / result.working_mode.frequency_Hz
+    if result.contact_force is not None:
+        out["contact_force"] = result.contact_force
     fa = result.antiresonance_Hz()
     if fa is not None:
         out["working_antiresonance_Hz"] = fa
@@ -221,3 +336,21 @@ def mode_table_lines(rows: list[dict], working: int) -> list[str]:
                      f"  {row.get('m') if row.get('m') is not None else '-':>2}  {row.get('n', '-'):>2}"
                      f"  {row.get('component', '-'):>5}  {'' if split is None else f'{split:+.2f}':>12}")
     return lines
+
+
+def contact_force_rows(modal: dict | None) -> list[tuple[str, str, str]]:
+    """End-of-run rows (label, value, unit) of modal.contact_force: F_m per volt, F_m at the drive, the
+    predicted free amplitude, and N / F_m per preload."""
+    cf = (modal or {}).get("contact_force")
+    if not cf:
+        return []
+    rows = [(f"modal force F_m at the contact (n = {cf['order']})", f"{cf['modal_force_N']:.4g}", "N"),
+            ("modal force per volt F_m / V", f"{cf['modal_force_per_volt_N_per_V'] * 1e3:.4g}", "mN/V"),
+            ("modal stiffness k_m at the contact", f"{cf['modal_stiffness_N_per_m'] * 1e-6:.4g}", "N/um")]
+    if cf["free_normal_amplitude_m"] is not None:
+        rows.append(("free normal amplitude W = F_m / (2 zeta k_m)", f"{cf['free_normal_amplitude_m'] * 1e6:.4g}",
+                     "um"))
+    for p in cf["preloads"]:
+        rows.append((f"N / F_m at preload {p['axial_preload_N']:.4g} N (N = {p['normal_force_N']:.4g} N)",
+                     f"{p['normal_force_over_modal_force']:.3g}", "-"))
+    return rows

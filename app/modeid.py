@@ -50,12 +50,19 @@ class PointSet:
         self.cells = first[mine]
 
     def _contains(self, cell: int, point: np.ndarray) -> bool:
-        """Barycentric test on the affine tetrahedron. dolfinx 0.5's compute_colliding_cells (GJK with an
-        absolute tolerance) misses interior points of millimetre-sized cells in SI units."""
-        nodes = self.mesh.geometry.x[self._cell_nodes[cell, :4]]
-        jacobian = (nodes[1:] - nodes[0]).T
-        lam = np.linalg.solve(jacobian, point - nodes[0])
-        return bool(lam.min() >= -1e-10 and lam.sum() <= 1 + 1e-10)
+        """Is ``point`` in ``cell``? Barycentric test on a simplex (a tetrahedron or a triangle of a 2D mesh; a
+        curved cell is tested by the straight-sided simplex of its vertices); for a quadrilateral or
+        hexahedron, the reference point of its multilinear map (Newton) must lie in [0, 1]^d. dolfinx 0.5's
+        compute_colliding_cells (GJK with an absolute tolerance) misses interior points of millimetre-sized
+        cells in SI units."""
+        tdim = self.mesh.topology.dim
+        vertices = 2**tdim if self.mesh.topology.cell_type.name in ("quadrilateral", "hexahedron") else tdim + 1
+        nodes = self.mesh.geometry.x[self._cell_nodes[cell, :vertices], :tdim]
+        if vertices == tdim + 1:
+            jacobian = (nodes[1:] - nodes[0]).T
+            lam = np.linalg.solve(jacobian, point[:tdim] - nodes[0])
+            return bool(lam.min() >= -1e-10 and lam.sum() <= 1 + 1e-10)
+        return _in_multilinear_cell(nodes, point[:tdim])
 
     def __call__(self, function) -> np.ndarray:
         """(n_points, value_size) array; points outside the mesh give NaN."""
@@ -68,6 +75,27 @@ class PointSet:
         self.mesh.comm.Allreduce(local, out, op=MPI.SUM)
         out[~self.found] = np.nan
         return out
+
+
+def _in_multilinear_cell(nodes: np.ndarray, point: np.ndarray, tol: float = 1e-9) -> bool:
+    """Point in a quadrilateral or hexahedron with dolfinx's vertex order (vertex k at the reference corner
+    whose coordinate i is bit i of k), by Newton on its multilinear map from [0, 1]^d."""
+    d = nodes.shape[1]
+    corners = np.array([[(k >> i) & 1 for i in range(d)] for k in range(2**d)], dtype=float)
+    xi = np.full(d, 0.5)
+    for _ in range(30):
+        weights = np.prod(np.where(corners == 1, xi, 1 - xi), axis=1)            # (2^d,)
+        grads = np.empty((2**d, d))
+        for i in range(d):
+            others = np.delete(np.arange(d), i)
+            grads[:, i] = np.where(corners[:, i] == 1, 1.0, -1.0) * np.prod(
+                np.where(corners[:, others] == 1, xi[others], 1 - xi[others]), axis=1)
+        residual = weights @ nodes - point
+        step = np.linalg.solve(nodes.T @ grads, residual)
+        xi = xi - step
+        if np.abs(step).max() < 1e-13:
+            break
+    return bool(xi.min() >= -tol and xi.max() <= 1 + tol)
 
 
 def circle_points(radius_m: float, height_m: float, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -151,6 +179,38 @@ class ModeIdentifier:
             u_r = np.cos(self.theta)[:, None] * values[..., 0] + np.sin(self.theta)[:, None] * values[..., 1]
             m = axial_order(u_r, n)
         return ModeOrder(n, m, component, purity)
+
+
+class FourierModeIdentifier:
+    """Mode orders of a Fourier-harmonic model of order n (geometry.model = 'fourier'): n is the model's; the
+    dominant component is the largest amplitude of (U_r, U_theta, U_z) at the identification circle's (r, z);
+    m = 1 + the sign changes of U_r along the generatrix (as ModeIdentifier). Each mode of order n >= 1 stands
+    for a pair of the body (cos and sin n theta), exactly degenerate: no partner, split 0."""
+
+    def __init__(self, mesh, cfg, order: int):
+        self.cfg, self.n = cfg, order
+        self.point = PointSet(mesh, np.array([[cfg.circle_radius_m, cfg.circle_height_m]]))
+        if not self.point.found.all():
+            raise ValueError("circle")
+        self.line = None
+        if cfg.line_radius_m is not None:
+            z = np.linspace(cfg.line_z_start_m, cfg.line_z_stop_m, cfg.n_line_points)
+            self.line = PointSet(mesh, np.column_stack([np.full(z.size, cfg.line_radius_m), z]))
+            if not self.line.found.all():
+                raise ValueError("line")
+
+    def order(self, u) -> ModeOrder:
+        amplitude = np.abs(self.point(u)[0])
+        component = ("r", "theta", "z")[int(np.argmax(amplitude))]
+        m = None
+        if self.line is not None and component != "theta":
+            u_r = self.line(u)[:, 0]
+            k = int(np.argmax(np.abs(u_r)))
+            m = 1
+            if abs(u_r[k]) > 0:
+                kept = u_r[np.abs(u_r) > SKIP_FRACTION * abs(u_r[k])]
+                m = 1 + int(np.count_nonzero(np.diff(np.sign(kept)) != 0))
+        return ModeOrder(self.n, m, component, 1.0, None, 0.0 if self.n else None)
 
 
 def pair_partners(frequencies_Hz: list[float], orders: list[ModeOrder]) -> None:

@@ -135,21 +135,21 @@ class RingParameters:
 
 
 def build_ring(comm: MPI.Comm, params: RingParameters, kind: str) -> MeshData:
-    """Ring: rectangle [r_i, r_o] x [0, h] in (r, z), or the 3D solid of revolution."""
+    """Ring: rectangle [r_i, r_o] x [0, h] in (r, z) (axisymmetric, fourier), or the 3D solid of revolution."""
     r_i = params.mean_radius_m - 0.5 * params.wall_thickness_m
     r_o = params.mean_radius_m + 0.5 * params.wall_thickness_m
     h = params.height_m
     with GmshSession(comm, "ring"):
         if comm.rank == 0:
             occ = gmsh.model.occ
-            if kind == "axisymmetric":
+            if kind in ("axisymmetric", "fourier"):
                 entity = (2, occ.addRectangle(r_i, 0, 0, params.wall_thickness_m, h))
             elif kind == "3d":
                 outer = occ.addCylinder(0, 0, 0, 0, 0, h, r_o)
                 inner = occ.addCylinder(0, 0, 0, 0, 0, h, r_i)
                 entity = occ.cut([(3, outer)], [(3, inner)])[0][0]
             else:
-                raise ValueError(f"ring builder supports axisymmetric and 3d, not {kind}")
+                raise ValueError(f"ring builder supports axisymmetric, fourier and 3d, not {kind}")
             occ.synchronize()
             dim = entity[0]
             faces = {"inner": [], "outer": [], "bottom": [], "top": []}
@@ -173,4 +173,4 @@ def build_ring(comm: MPI.Comm, params: RingParameters, kind: str) -> MeshData:
             gmsh.option.setNumber("Mesh.MeshSizeMax", params.mesh_size_m)
             gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * params.mesh_size_m)
             gmsh.model.mesh.generate(dim)
-        return from_gmsh_model(comm, 2 if kind == "axisymmetric" else 3)
+        return from_gmsh_model(comm, 3 if kind == "3d" else 2)

@@ -32,6 +32,7 @@ TINY = {
     "validation/pzt4-strip-plane-strain.toml": ["geometry.parameters.axial_divisions=8"],
     "validation/strip-friction-drive.toml": ["transient.end_time_s=2.5e-5", "transient.output_interval_s=2.5e-5"],
     "validation/ring-inplane-3d.toml": ["geometry.parameters.mesh_size_m=0.002", "modal.n_modes=4"],
+    "validation/ring-inplane-fourier.toml": ["geometry.parameters.mesh_size_m=0.0004"],
     "wwusm-motor.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
                          "reduction.ring_points=16", "transient.end_time_s=2.8e-4"],
     "wwusm-stator.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",

@@ -16,24 +16,37 @@ from app.case.validate import from_dict, param, refuse_repeats
 from app.errors import CaseError
 from app.materials import Material, resolve
 
-ModelKind = Literal["axisymmetric", "3d", "plane_strain"]
+ModelKind = Literal["axisymmetric", "3d", "plane_strain", "fourier"]
 Analysis = Literal["modal", "harmonic", "circuit", "transient", "lumped"]
 TagRef = str | int
 
 
 @dataclass(frozen=True)
 class GeometrySection:
-    model: ModelKind = param("axisymmetric", doc="axisymmetric (r, z), 3d (x, y, z) or plane_strain (x, z)")
+    model: ModelKind = param(
+        "axisymmetric", doc="axisymmetric (r, z), 3d (x, y, z), plane_strain (x, z), or fourier: a body of revolution "
+                            "about z meshed in (r, z) whose fields are one circumferential order n, exact in theta "
+                            "(u_r, u_z, phi ~ cos n theta, u_theta ~ sin n theta; modal only; docs/fourier.md)")
     builder: Literal["bar", "disc", "ring", "transducer", "stator", "thin_ring"] | None = param(
         None, doc="gmsh builder to use")
     parameters: dict[str, Any] = param(default_factory=dict, doc="builder parameters (see docs)")
     mesh_file: str | None = param(None, doc=".msh file, relative to the case file")
     degree: int = param(2, ge=1, le=3, doc="Lagrange degree of u and phi")
     thickness_m: float = param(1.0, gt=0, doc="out-of-plane thickness for plane_strain")
+    circumferential_order: int | None = param(
+        None, ge=0, le=1000, doc="the order n of a model = 'fourier' (required there, and only there)")
+    quadrature_degree: int | None = param(
+        None, ge=1, le=30, doc="quadrature degree of the volume forms; default: UFL's estimate, which for a "
+                               "radially poled 3D region (a rotation by x / r in every material tensor) is 22 on "
+                               "straight and 37 on curved cells, most of the assembly time (docs/motor-stator.md)")
 
     def check(self, file, prefix):
         if (self.builder is None) == (self.mesh_file is None):
             raise CaseError(file, f"{prefix}.builder", "give exactly one of builder or mesh_file")
+        if (self.model == "fourier") != (self.circumferential_order is not None):
+            raise CaseError(file, f"{prefix}.circumferential_order",
+                            "required for model = 'fourier'" if self.model == "fourier"
+                            else f"only for model = 'fourier', not {self.model!r}")
 
 
 @dataclass(frozen=True)
@@ -115,6 +128,45 @@ class ModeIdentification:
 
 
 @dataclass(frozen=True)
+class ContactForceSection:
+    """The working mode's modal force referred to a contact circle of a body of revolution (app.modal,
+    docs/motor-stator.md): F_m = 2 zeta k_m W, W the free normal amplitude there at resonance."""
+
+    circle_radius_m: float = param(gt=0, unit="m", doc="contact circle (inside the mesh)")
+    circle_height_m: float = param(unit="m", doc="z of that circle")
+    normal_rz: list[float] = param(doc="outward normal (n_r, n_z) of the contact surface there: the normal "
+                                       "displacement w = u . n, and N = P / |n_z| for an axial preload P")
+    order: int = param(ge=1, doc="circumferential order n of the wave")
+    n_points: int = param(64, ge=8)
+    preloads_N: list[float] = param(
+        default_factory=list, unit="N", doc="axial preloads P of a rotor on that surface: the summary gives the "
+                                            "normal force N = P / |n_z| each needs and the ratio N / F_m")
+    voltage_V: float = param(1.0, gt=0, unit="V", doc="amplitude of driven electrodes without amplitude_V")
+
+    def check(self, file, prefix):
+        if len(self.normal_rz) != 2 or not self.normal_rz[1]:
+            raise CaseError(file, f"{prefix}.normal_rz", "needs two numbers (n_r, n_z), n_z not zero")
+        if any(p <= 0 for p in self.preloads_N):
+            raise CaseError(file, f"{prefix}.preloads_N", "every preload must be > 0")
+
+
+@dataclass(frozen=True)
+class CyclicSection:
+    """Modes of one harmonic index of a cyclically symmetric body from the mesh of one sector (app/fe/cyclic.py)."""
+
+    sector_deg: float = param(gt=0, le=180, unit="deg", doc="the sector's angle (the mesh spans -sector/2 .. "
+                                                            "+sector/2 about z); 360 / sector_deg sectors")
+    order: int = param(ge=0, doc="harmonic index k: modes of circumferential orders k, N - k, N + k, ...")
+
+    def check(self, file, prefix):
+        sectors = 360.0 / self.sector_deg
+        if abs(sectors - round(sectors)) > 1e-9:
+            raise CaseError(file, f"{prefix}.sector_deg", "must divide 360 deg")
+        if self.order > round(sectors) // 2:
+            raise CaseError(file, f"{prefix}.order", f"must be at most {round(sectors) // 2} (half the sectors)")
+
+
+@dataclass(frozen=True)
 class ModalSection:
     target_frequency_Hz: float = param(gt=0, unit="Hz", doc="shift of the shift-invert transform")
     n_modes: int = param(6, ge=1, le=1000, doc="number of modes (SLEPc nev) per electrical state")
@@ -123,6 +175,18 @@ class ModalSection:
     working_mode: Literal["nearest", "coupling"] = param(
         "coupling", doc="nearest to target, or the most strongly coupled of the modes found")
     identify: ModeIdentification | None = param(None, doc="mode orders (m, n), partners and splits")
+    cyclic: CyclicSection | None = param(
+        None, doc="the mesh is one sector of a cyclically symmetric body: modes of one harmonic index (serial, "
+                  "short circuit)")
+    contact_force: ContactForceSection | None = param(
+        None, doc="F_m, the working mode's (and its partner's) modal force per volt at a contact circle, and "
+                  "N / F_m for given preloads")
+
+    def check(self, file, prefix):
+        if self.cyclic is not None:
+            for key in ("identify", "contact_force"):
+                if getattr(self, key) is not None:
+                    raise CaseError(file, f"{prefix}.{key}", "needs the whole body, not one sector (modal.cyclic)")
 
 
 @dataclass(frozen=True)
@@ -146,10 +210,15 @@ class TravellingWaveSection:
         None, doc="driven electrode whose amplitude and phase are trimmed so that the order-n part travelling "
                   "against the wave vanishes (a two-phase driver's balance); the measures, the exported wave and "
                   "the wave's admittances are then the balanced drive's, the nominal drive's measures are kept too")
+    balance_with: list[str] = param(
+        default_factory=list, doc="further driven electrodes trimmed by the same factor as balance: the other "
+                                  "segments of the trimmed phase (e.g. Bm, driven in antiphase with B)")
 
     def check(self, file, prefix):
         if len(self.normal_rz) != 2 or not any(self.normal_rz):
             raise CaseError(file, f"{prefix}.normal_rz", "needs two numbers, not both zero")
+        if self.balance_with and self.balance is None:
+            raise CaseError(file, f"{prefix}.balance_with", "needs balance (the electrode the others follow)")
 
 
 @dataclass(frozen=True)

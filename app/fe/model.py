@@ -22,7 +22,7 @@ from app.case.validate import from_dict
 from app.compat import mixed_space
 from app.errors import CaseError
 from forms import dynamics, piezo, voigt
-from forms.kinematics import volume_weight
+from forms.kinematics import displacement_components, kinematics, volume_weight
 from geometry.builders import BUILDERS
 from geometry.meshdata import MeshData
 from geometry.mshfile import read_msh
@@ -31,7 +31,13 @@ COMPONENTS = {
     "axisymmetric": {"r": 0, "x": 0, "z": 1},
     "plane_strain": {"x": 0, "z": 1},
     "3d": {"x": 0, "y": 1, "z": 2},
+    "fourier": {"r": 0, "x": 0, "y": 1, "z": 2},   # amplitudes (U_r, U_theta, U_z): y is the hoop axis
 }
+# what a Fourier-harmonic model runs: its modes (a drive would need an electrode whose potential varies as
+# cos n theta round the circumference; transient contact breaks the single order)
+FOURIER_ANALYSES = ("modal",)
+# polings whose material axes are r, theta, z: the cos n theta and sin n theta parts do not couple
+FOURIER_POLINGS = ("+z", "-z", "radial", "-radial")
 POLING_VECTORS = {"+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0), "-y": (0, -1, 0),
                   "+z": (0, 0, 1), "-z": (0, 0, -1)}
 
@@ -94,6 +100,12 @@ class FEModel:
     grounded_dofs: np.ndarray
     support_dofs: np.ndarray
     point_probes: dict = field(default_factory=dict)
+    circumferential_order: int | None = None   # n of a Fourier-harmonic model
+
+    @property
+    def form_kind(self):
+        """The kinematics the forms take (forms.kinematics.kinematics): the kind, or Fourier(n)."""
+        return kinematics(self.kind, self.circumferential_order)
 
     @property
     def mesh(self):
@@ -113,7 +125,9 @@ class FEModel:
         return dynamics.rayleigh_damping(self.mass, forms, d.alpha_per_s, d.beta_s, betas)
 
     def total_mass_kg(self) -> float:
-        total = sum(r.density_kg_per_m3 * volume_weight(self.mesh, self.kind, self.case.geometry.thickness_m)
+        # the body's own volume: a Fourier model's weight of order n >= 1 is pi r (the mean of cos^2), its volume 2 pi r
+        kind = kinematics(self.kind, 0) if self.kind == "fourier" else self.kind
+        total = sum(r.density_kg_per_m3 * volume_weight(self.mesh, kind, self.case.geometry.thickness_m)
                     * self._dx(r.tag) for r in self.regions)
         return self.comm.allreduce(fem.assemble_scalar(fem.form(total)), op=MPI.SUM)
 
@@ -153,9 +167,12 @@ def _material_tensors(case: Case, region_cfg, index: int, mesh, kind: str):
                     voigt.rotate_piezo_e(fem.Constant(mesh, e), frame),
                     voigt.rotate_permittivity(fem.Constant(mesh, eps), frame))
         if kind == "plane_strain":
-            raise CaseError(case.source, f"regions[{index}].poling", "radial poling needs axisymmetric or 3d")
+            raise CaseError(case.source, f"regions[{index}].poling", "radial poling needs axisymmetric, fourier or 3d")
         frame = voigt.frame_from_poling((sign, 0, 0))
     else:
+        if kind == "fourier" and e is not None and poling not in FOURIER_POLINGS:
+            raise CaseError(case.source, f"regions[{index}].poling", "a Fourier-harmonic model needs material "
+                            f"axes r, theta, z: poling one of {', '.join(FOURIER_POLINGS)}")
         vector = POLING_VECTORS[poling] if isinstance(poling, str) else poling
         frame = voigt.frame_from_poling(vector)
     c_g = voigt.rotate_stiffness(c, frame)
@@ -181,18 +198,41 @@ def _check_electrodes_apart(case: Case, electrode_dofs: dict[str, np.ndarray], c
                                 "only ground electrodes may touch; merge them into one electrode or part them")
 
 
+def _axis_conditions(kind: str, order: int | None, n_axis_facets: int, file) -> tuple[list[int], bool]:
+    """(displacement components held at 0 on the axis r = 0, whether the potential is too) of a model of
+    revolution: u_r in an axisymmetric model; in a Fourier model of order n, u_r and u_theta for n = 0,
+    everything for n >= 2 (the fields of those orders vanish on the axis). Order 1 (u_z and phi vanish,
+    u_r = -u_theta: a constraint between components) is refused when the mesh reaches the axis."""
+    if kind == "axisymmetric":
+        return [0], False
+    if order == 0:
+        return [0, 1], False
+    if order == 1 and n_axis_facets:
+        raise CaseError(file, "geometry.circumferential_order", "order 1 on a mesh that reaches the axis r = 0 is "
+                                                                "not supported (it needs u_r = -u_theta there)")
+    return [0, 1, 2], True
+
+
 def build_model(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, mesh_data: MeshData | None = None) -> FEModel:
     file = case.source
     kind = case.geometry.model
+    order = case.geometry.circumferential_order if kind == "fourier" else None
+    form_kind = kinematics(kind, order)
+    if kind == "fourier":
+        for i, analysis in enumerate(case.analyses or []):
+            if analysis not in FOURIER_ANALYSES:
+                raise CaseError(file, f"analyses[{i}]", f"a Fourier-harmonic model (geometry.model = 'fourier') runs "
+                                                        f"{', '.join(FOURIER_ANALYSES)} only, not {analysis!r}")
     md = mesh_data or build_mesh(case, comm)
     mesh = md.mesh
     tdim = mesh.topology.dim
     fdim = tdim - 1
     mesh.topology.create_connectivity(fdim, tdim)
-    W = mixed_space(mesh, case.geometry.degree)
+    W = mixed_space(mesh, case.geometry.degree, displacement_components(form_kind))
     (u, phi), (v, psi) = ufl.TrialFunctions(W), ufl.TestFunctions(W)
-    dx = ufl.Measure("dx", domain=mesh, subdomain_data=md.cell_tags)
-    weight = volume_weight(mesh, kind, case.geometry.thickness_m)
+    metadata = {} if case.geometry.quadrature_degree is None else {"quadrature_degree": case.geometry.quadrature_degree}
+    dx = ufl.Measure("dx", domain=mesh, subdomain_data=md.cell_tags, metadata=metadata)
+    weight = volume_weight(mesh, form_kind, case.geometry.thickness_m)
 
     mesh_tags = set(np.unique(np.concatenate(comm.allgather(md.cell_tags.values))).tolist())
     regions, covered = [], set()
@@ -209,12 +249,12 @@ def build_model(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, mesh_data: MeshData
         name = str(cfg.cells)
         region = Region(name, tag, cfg.material, material.density_kg_per_m3, material.quality_factor, c, e, eps)
         regions.append(region)
-        k_form = (piezo.coupled_stiffness(u, phi, v, psi, c, e, eps, kind, dx(tag), weight) if e is not None
-                  else piezo.elastic_stiffness(u, v, c, kind, dx(tag), weight))
+        k_form = (piezo.coupled_stiffness(u, phi, v, psi, c, e, eps, form_kind, dx(tag), weight) if e is not None
+                  else piezo.elastic_stiffness(u, v, c, form_kind, dx(tag), weight))
         if e is None:
             grounded_cells.append(md.cell_tags.indices[md.cell_tags.values == tag])
         m_form = dynamics.mass(u, v, fem.Constant(mesh, material.density_kg_per_m3), dx(tag), weight)
-        material_stiffness[name] = piezo.elastic_stiffness(u, v, c, kind, dx(tag), weight)
+        material_stiffness[name] = piezo.elastic_stiffness(u, v, c, form_kind, dx(tag), weight)
         stiffness = k_form if stiffness is None else stiffness + k_form
         mass = m_form if mass is None else mass + m_form
     missing = mesh_tags - covered
@@ -248,6 +288,11 @@ def build_model(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, mesh_data: MeshData
                                                                 "hold no facet of the mesh)")
         electrode_dofs[name] = dofs
     _check_electrodes_apart(case, electrode_dofs, comm)
+    wave = case.harmonic.wave if case.harmonic is not None else None
+    for j, other in enumerate(wave.balance_with if wave is not None else []):
+        if other not in case.electrodes or case.electrodes[other].kind != "voltage" or other == wave.balance:
+            raise CaseError(file, f"harmonic.wave.balance_with[{j}]", f"{other!r} is not another electrode of kind "
+                                                                     "'voltage'")
 
     supports = [np.zeros(0, dtype=np.int32)]
     comp = COMPONENTS[kind]
@@ -270,13 +315,17 @@ def build_model(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, mesh_data: MeshData
                                     f"already held by supports[{other}] (as {other_name!r} of {other_ref!r})")
                 held[tag, comp[name]] = (i, ref, name)
             supports.append(fem.locate_dofs_topological(W.sub(0).sub(comp[name]), fdim, np.concatenate(facets)))
-    if kind == "axisymmetric":
+    if kind in ("axisymmetric", "fourier"):
         axis = dmesh.locate_entities_boundary(mesh, fdim, lambda x: np.isclose(x[0], 0.0, atol=1e-12))
-        supports.append(fem.locate_dofs_topological(W.sub(0).sub(0), fdim, axis))
+        held, potential_held = _axis_conditions(kind, order, comm.allreduce(axis.size), file)
+        for sub in held:
+            supports.append(fem.locate_dofs_topological(W.sub(0).sub(sub), fdim, axis))
+        if potential_held:
+            grounded = np.union1d(grounded, fem.locate_dofs_topological(W1, fdim, axis))
     support_dofs = np.unique(np.concatenate(supports)).astype(np.int32)
 
     model = FEModel(case, comm, kind, md, W, regions, stiffness, mass, material_stiffness, electrode_dofs,
-                    grounded.astype(np.int32), support_dofs)
+                    grounded.astype(np.int32), support_dofs, circumferential_order=order)
     from app.fe.probe import PointProbe
 
     for name, point in case.points.items():

@@ -54,7 +54,11 @@ def add_damping(ops: Operators, model: FEModel, frequency_Hz: float) -> None:
 
 def electrical_state(model: FEModel, state: str) -> ConstraintSet:
     """Constraints for ``state``: 'short' (driven electrodes at 0 V), 'open' (driven electrodes
-    floating) or 'driven' (driven electrodes prescribed; same DOF set as 'short')."""
+    floating) or 'driven' (driven electrodes prescribed; same DOF set as 'short').
+
+    In a Fourier-harmonic model of order n >= 1 the potential amplitude Phi multiplies cos n theta, and
+    an electrode round the whole circumference is one equipotential, whose cos n theta part is zero: a
+    floating electrode is then held at Phi = 0 like a grounded one (open circuit = short circuit)."""
     dirichlet = [model.support_dofs, model.grounded_dofs]
     floating = [model.electrode_dofs[n] for n in model.electrodes_of("floating")]
     dirichlet += [model.electrode_dofs[n] for n in model.electrodes_of("ground")]
@@ -65,6 +69,9 @@ def electrical_state(model: FEModel, state: str) -> ConstraintSet:
         floating += driven
     else:
         raise ValueError(state)
+    if model.kind == "fourier" and model.circumferential_order:
+        dirichlet += floating
+        floating = []
     return ConstraintSet(model.W, np.concatenate(dirichlet).astype(np.int32), floating)
 
 
