@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from app import __version__
 
@@ -97,9 +98,14 @@ def _browse(args, rank: int) -> int:
         return 0
     from app.report import replot
     from app.scenes import SCENES
+    from app.sweep import replot_sweep
 
-    written = replot(args.dir, (lambda line: print(line, flush=True)) if rank == 0 else (lambda line: None), SCENES,
-                     write=rank == 0)
+    log = (lambda line: print(line, flush=True)) if rank == 0 else (lambda line: None)
+    directory = Path(args.dir)
+    if directory.is_dir() and not (directory / "summary.json").exists() and (directory / "sweep.json").exists():
+        written = replot_sweep(directory, log, write=rank == 0)
+    else:
+        written = replot(directory, log, SCENES, write=rank == 0)
     if rank == 0:
         print(f"{args.dir}: " + (", ".join(written) if written else "nothing to plot"))
     return 0

@@ -4,17 +4,16 @@
 this process send SIGKILL to itself: no clean-up, no flush, no atexit, like a killed job. Unset (the
 normal case) it costs one dictionary look-up. Events (where they are called):
 
-- ``step``: after an accepted step was recorded (app/transient/driver.py);
-- ``series_block``: the modal tier wrote a block of time-series rows (one call of its compiled
-  loop; app/reduced/driver.py; the motor: one drive period, app/reduced/motor.py), before the field
-  output and checkpoint that may follow it;
+- ``step``: after an accepted FE step was recorded (app/transient/engine.py);
+- ``series_block``: the run loop wrote a block of time-series rows (app/loop/loop.py; every tier),
+  before the field output and checkpoint that may follow it;
 - ``fields_data``: a field output's HDF5 file is written, the XDMF does not name it yet;
 - ``fields_written``: right after a field output (app/transient/fields.py);
 - ``checkpoint_state``: the checkpoint's state file is written, its JSON not yet;
 - ``checkpoint_tmp``: the checkpoint JSON is half written to its temporary file
   (app/loop/checkpoint.py);
 - ``harmonic_start``: during the harmonic start, after the steady-state solve, before the first
-  output (app/transient/driver.py, app/reduced/driver.py, app/reduced/motor.py).
+  output (app/transient/driver.py, app/reduced/engine.py).
 
 Under MPI every rank reaching the event kills itself (rank 0 alone when the event is rank 0's
 file I/O); mpirun then ends the others.

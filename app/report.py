@@ -144,14 +144,12 @@ def read_summary(result_dir: Path) -> dict:
 def replot(result_dir: str | Path, log, scenes: dict, write: bool = True) -> list[str]:
     """``piezodyn plot DIR``: the table, plots and CSVs of an existing result directory, from summary.json and
     the time series, without solving anything (every result kind: modal, harmonic, the transient tiers, the
-    lumped tier, the scene's, looked up in ``scenes``). A damaged or foreign directory is one CaseError naming
-    the file."""
+    lumped tier, the scene's, looked up in ``scenes``; a sweep's directory: app.sweep.replot_sweep). A damaged
+    or foreign directory is one CaseError naming the file."""
     from app.plots import frequency_domain_outputs, time_series_outputs
     from app.series import check_time_series
 
     result_dir = Path(result_dir)
-    if result_dir.is_dir() and not (result_dir / "summary.json").exists() and (result_dir / "sweep.json").exists():
-        return replot_sweep(result_dir, log, write)
     summary = read_summary(result_dir)
     results, case = summary["results"], summary.get("case") or {}
     name = case.get("scene")
@@ -174,29 +172,4 @@ def replot(result_dir: str | Path, log, scenes: dict, write: bool = True) -> lis
                 title = (tier.get("plot") or {}).get("title", case.get("title", ""))
                 written += scene.outputs(tier, result_dir, title)
     print_table(result_rows(results, scene), log)
-    return written
-
-
-def replot_sweep(result_dir: Path, log, write: bool = True) -> list[str]:
-    """``piezodyn plot`` on a sweep's directory: its plots from sweep.json and its table again."""
-    from app.sweep import table_lines, write_sweep_plots
-
-    path = result_dir / "sweep.json"
-    try:
-        sweep = json.loads(path.read_bytes().decode("utf-8"))
-        rows, keys = sweep["rows"], sweep["parameters"]
-        headline = sweep.get("headline") or []
-        title = sweep.get("title", "")
-        if not isinstance(rows, list) or not all(isinstance(r, dict) and "point" in r for r in rows):
-            raise KeyError("rows")
-    except UnicodeDecodeError:
-        raise CaseError(str(path), None, "is not UTF-8 text (damaged)") from None
-    except json.JSONDecodeError as exc:
-        raise CaseError(str(path), None, f"is not valid JSON (truncated or damaged: {exc.msg})") from None
-    except (KeyError, TypeError) as exc:
-        raise CaseError(str(path), str(exc).strip("'"), "missing: not a piezodyn sweep") from None
-    ok = [r for r in rows if "_failed" not in r]
-    written = write_sweep_plots(ok, keys, result_dir, title, headline) if write and ok else []
-    for line in table_lines(rows, keys, headline):
-        log(line)
     return written

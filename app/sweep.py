@@ -465,3 +465,26 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def replot_sweep(result_dir: Path, log, write: bool = True) -> list[str]:
+    """``piezodyn plot`` on a sweep's directory: its plots from sweep.json and its table again."""
+    path = result_dir / "sweep.json"
+    try:
+        sweep = json.loads(path.read_bytes().decode("utf-8"))
+        rows, keys = sweep["rows"], sweep["parameters"]
+        headline = sweep.get("headline") or []
+        title = sweep.get("title", "")
+        if not isinstance(rows, list) or not all(isinstance(r, dict) and "point" in r for r in rows):
+            raise KeyError("rows")
+    except UnicodeDecodeError:
+        raise CaseError(str(path), None, "is not UTF-8 text (damaged)") from None
+    except json.JSONDecodeError as exc:
+        raise CaseError(str(path), None, f"is not valid JSON (truncated or damaged: {exc.msg})") from None
+    except (KeyError, TypeError) as exc:
+        raise CaseError(str(path), str(exc).strip("'"), "missing: not a piezodyn sweep") from None
+    ok = [r for r in rows if "_failed" not in r]
+    written = write_sweep_plots(ok, keys, result_dir, title, headline) if write and ok else []
+    for line in table_lines(rows, keys, headline):
+        log(line)
+    return written

@@ -10,14 +10,11 @@ by an FE run of the case, see BENCHMARKS.md) times the steps the modal tier took
 the same curves.
 
     .venv/bin/python bench/bench_motor_curves.py --out /tmp/motor_curves [--points 8] [--fe-step-s 2.0]
-        [--chain] [--preloads 4.116] [--set reduction.contact_points=0 ...]
+        [--preloads 4.116] [--set 'transient.contacts[0].sample_points=256' ...]
 
-``--chain`` runs the load points from the highest load down, each continuing from the state the previous point
-ended in (``motor_state.npz``; the stall point's for the first), instead of each starting from the harmonic
-state: the start's transient (the wave decaying from its free amplitude, 300-700 periods) is then paid once per
-preload (docs/motor-rotor.md, "Contact sampling"). ``--chain-up`` chains the other way: the no-load point from the
-harmonic state, then each higher load from the previous one's end state. Where the motor has two branches (the
-coarse stator at 5 mN/V, docs/motor-rotor.md, "Why 4.116 N collapses") the two directions follow different ones.
+Each point starts from the stator's harmonic steady state with the rotor seated (the case's start); the start's
+transient (the wave decaying from its free amplitude, 300-700 periods) is paid by every point. Warm starts
+along a curve (a point continuing from its neighbour's end state) are not offered by the run loop yet.
 """
 
 from __future__ import annotations
@@ -42,25 +39,44 @@ COLUMNS = ("preload_N", "load_torque_N_m", "speed_rpm", "speed_rad_per_s", "fric
            "wall_s")
 
 
-def point(out: Path, sets: list[str], warm_start: Path | None = None) -> dict:
+def point(out: Path, sets: list[str]) -> dict:
+    """One operating point: ``piezodyn run`` of the case with ``sets``; its row (the motor scene's statistics)."""
     start = time.perf_counter()
-    if warm_start is None:
-        tr = run_case(CASE, sets, out, quiet=True)["results"]["transient"]
-    else:
-        from app.reduced.motor import run_continued
-
-        tr = run_continued(CASE, sets, out, warm_start)
+    tr = run_case(CASE, sets, out, quiet=True)["results"]["transient"]
     wall = time.perf_counter() - start
-    m = tr["motor"]
+    m = tr["statistics"]["motor"]
+    steady = tr.get("steady_state", {})
     row = {"load_torque_N_m": m["load_torque_N_m"], "speed_rpm": m["speed_rpm"],
            "speed_rad_per_s": m["speed_rad_per_s"], "friction_torque_N_m": m["friction_torque_N_m"],
            "output_power_W": m["output_power_W"], "electrical_power_W": m["electrical_power_W"],
            "efficiency": m["efficiency"], "normal_force_N": m["normal_force_N"],
            "coulomb_torque_bound_N_m": m["coulomb_torque_bound_N_m"],
-           "energy_balance_relative": m["energy_balance_relative"], "steady": tr["steady"],
-           "periods": tr["periods"], "steps": tr["steps"], "cutbacks": tr["cutbacks"], "wall_s": wall}
+           "energy_balance_relative": m["energy_balance_relative"], "steady": bool(steady.get("steady")),
+           "periods": steady.get("cycles"), "steps": tr["steps"], "cutbacks": tr.get("cutbacks", 0), "wall_s": wall}
     row.update(m["fractions"])
     return row
+
+
+def speed_torque_plot(path: Path, curves: dict, title: str) -> None:
+    """Speed [rpm] and efficiency [%] against load torque [mN m], one line per preload."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (speed_ax, eff_ax) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    for label, c in curves.items():
+        torque_mNm = [1e3 * x for x in c["torque_N_m"]]
+        speed_ax.plot(torque_mNm, c["speed_rpm"], "o-", label=label)
+        eff_ax.plot(torque_mNm, [100 * e for e in c["efficiency"]], "o-", label=label)
+    speed_ax.set(xlabel="load torque [mN m]", ylabel="rotor speed [rpm]")
+    eff_ax.set(xlabel="load torque [mN m]", ylabel="efficiency [%]")
+    for ax in (speed_ax, eff_ax):
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+    fig.suptitle(title)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def main() -> None:
@@ -68,16 +84,10 @@ def main() -> None:
     parser.add_argument("--out", default="/tmp/motor_curves")
     parser.add_argument("--points", type=int, default=8, help="free-rotor load points per preload (besides stall)")
     parser.add_argument("--fe-step-s", type=float, default=None, help="FE-tier wall time per step of this case")
-    parser.add_argument("--chain", action="store_true",
-                        help="each load point continues from the previous one's end state (highest load first)")
-    parser.add_argument("--chain-up", action="store_true",
-                        help="as --chain, but from the no-load point (run from the harmonic state) up")
     parser.add_argument("--preloads", nargs="*", type=float, default=list(PRELOADS_N), metavar="N",
                         help="axial preloads [N] (default: the paper's two)")
     parser.add_argument("--set", nargs="*", default=[], help="further --set overrides for every point")
     args = parser.parse_args()
-    if args.chain and args.chain_up:
-        parser.error("--chain and --chain-up are two directions: give one")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -88,12 +98,10 @@ def main() -> None:
         stall_torque = stall["friction_torque_N_m"]
         stall.update(preload_N=preload, load_torque_N_m=stall_torque)
         print(f"P = {preload} N: stall torque {stall_torque * 1e3:.4g} mN m ({stall['wall_s']:.0f} s)", flush=True)
-        previous = None if args.chain_up else out / f"P{preload}_stall" / "motor_state.npz"
-        for k in (reversed(range(args.points)) if args.chain else range(args.points)):
+        for k in range(args.points):
             load = stall_torque * k / args.points
             sets = base + [f"transient.bodies[0].rotations[0].torque_N_m={-load!r}"]
-            row = point(out / f"P{preload}_T{k}", sets, previous if args.chain or args.chain_up else None)
-            previous = out / f"P{preload}_T{k}" / "motor_state.npz"
+            row = point(out / f"P{preload}_T{k}", sets)
             row["preload_N"] = preload
             rows.append(row)
             print(f"  load {load * 1e3:7.3f} mN m: {row['speed_rpm']:7.2f} rpm, efficiency "
@@ -106,8 +114,6 @@ def main() -> None:
         writer.writeheader()
         for row in rows:
             writer.writerow({k: row[k] for k in COLUMNS})
-    from app.motor.plots import CURVE_PLOT, speed_torque_plot
-
     curves = {}
     for preload in args.preloads:
         mine = sorted((r for r in rows if r["preload_N"] == preload), key=lambda r: r["load_torque_N_m"])
@@ -118,7 +124,7 @@ def main() -> None:
 
     case = load_for_run(CASE, args.set)
     vpp = 2 * max(e.amplitude_V or 0.0 for e in case.electrodes.values())
-    speed_torque_plot(out / CURVE_PLOT, curves, f"WW-USM, modal tier: speed-torque at {vpp:.4g} Vpp, "
+    speed_torque_plot(out / "motor_speed_torque.png", curves, f"WW-USM, modal tier: speed-torque at {vpp:.4g} Vpp, "
                                                 f"{case.transient.drive.frequency_Hz / 1e3:.5g} kHz")
     steps = sum(r["steps"] for r in rows)
     report = {"points": len(rows), "wall_s": total, "steps": steps, "cutbacks": sum(r["cutbacks"] for r in rows)}

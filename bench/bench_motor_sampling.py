@@ -1,18 +1,19 @@
-"""Convergence of the modal motor's contact sampling (docs/motor-rotor.md, "Contact sampling").
+"""The modal tier's reduction choices against the FE tier, on the motor's coarse stator.
 
-Each point is the motor case (cases/wwusm-motor.toml) in the modal tier with the rotor's spin prescribed
-(``constant_rate``) or free, run for a fixed number of drive periods; the result is the mean over the last
-``--window`` periods. Samplings are ``RING:POINTS`` pairs: RING interface nodes of the reduced stator
-(``reduction.ring_points``, a basis each, cached) and POINTS contact points (``reduction.contact_points``;
-0 = at the nodes). The start's transient (the wave decaying from its free amplitude, 8 um, to the loaded one,
-with a lift-off of the rotor) lasts 350-700 periods at 0.98 N, so for each RING the first point runs
-``--settle`` periods from the harmonic start, and every other point of that RING continues from its end state
-(``motor_state.npz``, the same reduced model) for ``--periods`` periods. Prints one JSON line per point and a
-Markdown table.
+The motor case (cases/wwusm-motor.toml) on the tests' coarse stator (mesh 3 mm, tip 1 mm), the rotor spun at a
+prescribed 1.2 rad/s, from the harmonic start with the rotor seated, for 124 drive periods (the landing
+transient: the rotor settles from its seat onto the wave). Each row varies one choice of the modal tier --
+``reduction.interface_nodes`` (stator nodes kept as interface DOFs round the contact band),
+``transient.contacts[0].sample_points`` (contact points sampling the band), ``reduction.cutoff_factor``
+(fixed-interface modes kept up to this multiple of the drive frequency) -- and reports the cycle-mean friction
+torque and normal force over periods 0-123 against the FE tier's run of the same case (``--fe DIR``: a finished
+``piezodyn run`` directory of the FE tier, or none: the FE run is made here, about 5 000 steps). The defaults of
+the case are chosen by this table (docs/reduced.md).
 
-    .venv/bin/python bench/bench_motor_sampling.py --out /tmp/motor_sampling --rpm 0 40 \\
-        --sampling 64:0 64:64 64:128 64:256 64:512 128:0 128:512
-    .venv/bin/python bench/bench_motor_sampling.py --free --periods 1500 --window 100 --sampling 64:512 128:512
+    .venv/bin/python bench/bench_motor_sampling.py --out /tmp/motor_sampling [--fe DIR] \\
+        [--rows 'interface_nodes=64' 'interface_nodes=32' 'sample_points=128' 'cutoff_factor=6.0']
+
+Prints one JSON line per row and a Markdown table; writes sampling.json.
 """
 
 from __future__ import annotations
@@ -30,89 +31,94 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 CASE = ROOT / "cases" / "wwusm-motor.toml"
-PERIOD_S = 1 / 36065.0
+COARSE = ["geometry.parameters.mesh_size_m=0.003", "geometry.parameters.tip_mesh_size_m=0.001"]
+SPIN = ['transient.bodies[0].rotations[0].motion="constant_rate"',
+        "transient.bodies[0].rotations[0].rate_rad_per_s=1.2"]
+PERIODS = 124
+#: a row's key -> the case key it sets
+ROW_KEYS = {"interface_nodes": "reduction.interface_nodes", "sample_points": "transient.contacts[0].sample_points",
+            "cutoff_factor": "reduction.cutoff_factor", "enrich_modes": "reduction.enrich_modes"}
+DEFAULT_ROWS = ["default", "interface_nodes=32", "interface_nodes=128", "sample_points=128", "sample_points=2048",
+                "cutoff_factor=6.0"]
 
 
-def cycle_means(h5_path: Path, name: str, per_period: int, column: int | None = None) -> np.ndarray:
+def cycle_means(h5_path: Path, frequency_Hz: float, periods: int) -> dict[str, np.ndarray]:
+    """Per-period means of the contact's torque [N m] and normal force [N] (samples in (pT, (p+1)T])."""
     import h5py
 
     with h5py.File(h5_path, "r") as f:
-        data = f[name][:]
-    if column is not None:
-        data = data[:, column]
-    k = data.size // per_period
-    return data[:k * per_period].reshape(k, per_period).mean(axis=1)
+        t = f["time_s"][:]
+        torque = f["stator_rotor_torque_N_m"][:].reshape(len(t), -1)[:, 0]
+        normal = f["stator_rotor_normal_force_N"][:].reshape(-1)
+    period = 1.0 / frequency_Hz
+    out = {"torque_N_m": [], "normal_force_N": []}
+    for p in range(periods):
+        rows = (t > p * period * (1 + 1e-9)) & (t <= (p + 1) * period * (1 + 1e-9))
+        if rows.sum() < 2:
+            break
+        out["torque_N_m"].append(torque[rows].mean())
+        out["normal_force_N"].append(normal[rows].mean())
+    return {k: np.asarray(v) for k, v in out.items()}
 
 
-def point(out: Path, ring: int, points: int, rpm: float | None, periods: int, window: int, extra: list[str],
-          warm_start: Path | None) -> dict:
-    from app.reduced.motor import run_continued
+def run(out: Path, tier: str, sets: list[str]) -> dict:
+    from app.runner import run_case
 
-    sets = [f"reduction.ring_points={ring}", f"reduction.contact_points={points}",
-            f"transient.end_time_s={periods * PERIOD_S * (1 + 1e-6)!r}",
-            f"transient.steady_state.window_cycles={window}",
-            "transient.steady_state.relative_tolerance=1e-9",       # run all the periods: the mean is over the window
-            "output.plots=false"] + extra
-    if rpm is not None:
-        sets += ['transient.bodies[0].rotations[0].motion="constant_rate"',
-                 f"transient.bodies[0].rotations[0].rate_rad_per_s={rpm * 2 * math.pi / 60!r}"]
+    end = PERIODS / 36065.0 * (1 + 1e-6)
     start = time.perf_counter()
-    tr = run_continued(CASE, sets, out, warm_start)
-    wall = time.perf_counter() - start
-    m = tr["motor"]
-    per = tr["steps_per_period"]
-    torque = cycle_means(out / tr["time_series"], "stator_rotor_torque_N_m", per)[-window:]
-    speed = cycle_means(out / tr["time_series"], "rotor_angular_velocity_rad_per_s", per, 0)[-window:]
-    half = window // 2
-    return {"ring_points": ring, "contact_points": points, "rpm_prescribed": rpm,
-            "warm_start": str(warm_start) if warm_start else None,
-            "torque_mN_m": m["friction_torque_N_m"] * 1e3, "speed_rpm": m["speed_rpm"],
-            # drift: the window's second half against its first (a slow creep shows here)
-            "torque_drift_mN_m": (torque[half:].mean() - torque[:half].mean()) * 1e3,
-            "speed_drift_rpm": (speed[half:].mean() - speed[:half].mean()) * 60 / (2 * math.pi),
-            "torque_ripple_mN_m": float(np.std(torque)) * 1e3,
-            "normal_force_N": m["normal_force_N"], "separation": m["fractions"]["separation"],
-            "electrical_power_mW": m["electrical_power_W"] * 1e3, "periods": tr["periods"],
-            "loop_s": tr["wall_time_s"], "ms_per_step": 1e3 * tr["wall_time_s"] / tr["steps"], "wall_s": wall}
+    summary = run_case(CASE, COARSE + SPIN + [f'tier="{tier}"', f"transient.end_time_s={end!r}",
+                                              "output.fields=false", "output.plots=false"] + sets, out, quiet=True)
+    tr = summary["results"]["transient"]
+    return {"wall_s": time.perf_counter() - start, "steps": tr["steps"], "loop_s": tr["wall_time_s"],
+            "frequency_Hz": summary["case"]["transient"]["drive"]["frequency_Hz"], "series": out / tr["time_series"]}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="/tmp/motor_sampling")
-    parser.add_argument("--sampling", nargs="+", default=["64:0", "64:128", "64:256", "64:512"],
-                        help="RING:POINTS pairs (POINTS 0: at the ring nodes)")
-    parser.add_argument("--rpm", type=float, nargs="+", default=[0.0, 40.0], help="prescribed speeds [rpm]")
-    parser.add_argument("--free", action="store_true", help="a free rotor at no load instead of prescribed speeds")
-    parser.add_argument("--settle", type=int, default=700, help="periods of each RING's first point (harmonic start)")
-    parser.add_argument("--periods", type=int, default=300, help="periods of the other points (continued)")
-    parser.add_argument("--window", type=int, default=200, help="periods averaged at the end")
-    parser.add_argument("--set", nargs="*", default=[], help="further --set overrides for every point")
-    parser.add_argument("--warm-start", nargs="*", default=[], metavar="RING=STATE",
-                        help="continue RING's first point from this motor_state.npz (instead of the harmonic start)")
+    parser.add_argument("--out", type=Path, default=Path("/tmp/motor_sampling"))
+    parser.add_argument("--fe", type=Path, default=None, help="a finished FE-tier run of the same case (its directory)")
+    parser.add_argument("--rows", nargs="+", default=DEFAULT_ROWS,
+                        help="'default' or KEY=VALUE with KEY one of " + ", ".join(ROW_KEYS))
     args = parser.parse_args()
-    out = Path(args.out)
+    args.out.mkdir(parents=True, exist_ok=True)
+    if args.fe is None:
+        args.fe = args.out / "fe"
+        fe = run(args.fe, "fe", [])
+        print(f"FE tier: {fe['steps']} steps in {fe['wall_s']:.0f} s", file=sys.stderr, flush=True)
+    fe_summary = json.loads((args.fe / "summary.json").read_text())
+    frequency = fe_summary["case"]["transient"]["drive"]["frequency_Hz"]
+    reference = cycle_means(args.fe / fe_summary["results"]["transient"]["time_series"], frequency, PERIODS)
+    periods = len(reference["torque_N_m"])
+    ref = {k: float(v.mean()) for k, v in reference.items()}
     rows = []
-    speeds = [None] if args.free else args.rpm
-    settled = {int(ring): Path(path) for ring, path in (item.split("=") for item in args.warm_start)}
-    for pair in args.sampling:
-        ring, points = (int(x) for x in pair.split(":"))
-        for rpm in speeds:
-            name = f"n{ring}_c{points}_" + ("free" if rpm is None else f"rpm{rpm:g}")
-            warm = settled.get(ring)
-            row = point(out / name, ring, points, rpm, args.periods if warm else args.settle, args.window, args.set,
-                        warm)
-            settled.setdefault(ring, out / name / "motor_state.npz")
-            rows.append(row)
-            print(json.dumps(row), flush=True)
-    (out / "sampling.json").write_text(json.dumps(rows, indent=1))
-    print("| ring nodes | contact points | speed [rpm] | torque [mN m] | drift [mN m] | N [N] | separation | "
-          "ms/step |")
-    print("|---|---|---|---|---|---|---|---|")
+    for spec in args.rows:
+        sets = []
+        if spec != "default":
+            key, _, value = spec.partition("=")
+            if key not in ROW_KEYS:
+                parser.error(f"--rows {spec}: {key} is not one of {', '.join(ROW_KEYS)}")
+            sets = [f"{ROW_KEYS[key]}={value}"]
+        name = spec.replace("=", "_")
+        r = run(args.out / name, "modal", sets)
+        means = cycle_means(r["series"], r["frequency_Hz"], periods)
+        n = min(periods, len(means["torque_N_m"]))
+        row = {"row": spec, "periods": n, "steps": r["steps"], "wall_s": r["wall_s"],
+               "ms_per_step": 1e3 * r["loop_s"] / r["steps"]}
+        for key, values in means.items():
+            value = float(values[:n].mean())
+            row[key] = value
+            row[key + "_vs_fe"] = value / float(reference[key][:n].mean()) - 1
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    (args.out / "sampling.json").write_text(json.dumps({"fe": {**ref, "periods": periods}, "rows": rows}, indent=1))
+    print(f"FE tier over periods 0-{periods - 1}: torque {ref['torque_N_m'] * 1e3:.3f} mN m, "
+          f"N {ref['normal_force_N']:.4f} N")
+    print("| modal tier | torque [mN m] | vs FE | N [N] | vs FE | ms/step |")
+    print("|---|---|---|---|---|---|")
     for r in rows:
-        points = r["contact_points"] or f"{r['ring_points']} (nodes)"
-        print(f"| {r['ring_points']} | {points} | {r['speed_rpm']:.2f} | {r['torque_mN_m']:.3f} | "
-              f"{r['torque_drift_mN_m' if r['rpm_prescribed'] is not None else 'speed_drift_rpm']:+.3f} | "
-              f"{r['normal_force_N']:.3f} | {r['separation']:.3f} | {r['ms_per_step']:.2f} |")
+        print(f"| {r['row']} | {r['torque_N_m'] * 1e3:.3f} | {100 * r['torque_N_m_vs_fe']:+.2f} % | "
+              f"{r['normal_force_N']:.4f} | {100 * r['normal_force_N_vs_fe']:+.2f} % | {r['ms_per_step']:.2f} |")
+    assert all(math.isfinite(r["torque_N_m"]) for r in rows)
 
 
 if __name__ == "__main__":

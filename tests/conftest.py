@@ -10,7 +10,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CASES = ROOT / "cases"
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("MPLBACKEND", "Agg")
-# reduced motor models (app/reduced/motor.py) are cached by their inputs: keep the tests' out of ~/.cache, in one
+# reduced models (app/reduced/model.py) are cached by their inputs: keep the tests' out of ~/.cache, in one
 # place that every rank and subprocess of a run sees
 os.environ.setdefault("PIEZODYN_CACHE_DIR", os.path.join(tempfile.gettempdir(), "piezodyn-test-cache"))
 

@@ -34,7 +34,10 @@ TINY = {
     "validation/ring-inplane-3d.toml": ["geometry.parameters.mesh_size_m=0.002", "modal.n_modes=4"],
     "validation/ring-inplane-fourier.toml": ["geometry.parameters.mesh_size_m=0.0004"],
     "wwusm-motor.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
-                         "reduction.ring_points=16", "transient.end_time_s=2.8e-4"],
+                         "reduction.interface_nodes=16", "transient.contacts[0].sample_points=64",
+                         "transient.end_time_s=2.8e-4"],
+    "wwusm-stator-fourier.toml": ["geometry.parameters.mesh_size_m=0.004",
+                                  "geometry.parameters.tip_mesh_size_m=0.002"],
     "wwusm-stator.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
                           "harmonic.n_points=2", "harmonic.wave.animation_frames=2",
                           # the coarse faceted cylinder sags ~0.15 mm: sample further inside

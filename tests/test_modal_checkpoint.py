@@ -5,7 +5,7 @@ one go, and the XDMF fields (x = T q at the output interval) are those of the re
 
 Bit-identity: a resumed run loads the reduced model and the kernel's complete state from the
 checkpoint, so it repeats the interrupted run's steps exactly, on any number of ranks
-(app/reduced/restart.py). The reference run reduced its model in another process; where that
+(app/loop/checkpoint.py, app/reduced/engine.py). The reference run reduced its model in another process; where that
 reduction came out bit-identical too (always, serially, in our runs: same files compared), the
 series must be identical (rtol 0); where it did not (the 2-rank kill tests reduce on a different
 partition than the serial reference), to the FE tier's solver tolerance."""

@@ -22,7 +22,7 @@ import pytest
 from mpi4py import MPI
 
 from app.case.schema import load_case
-from app.transient.driver import run
+from app.runner import run_transient_analysis
 
 ALPHA_DEG, MU, PRELOAD_N, SPIN_RAD_PER_S = 15.0, 0.3, 1.0, 100.0
 INNER_RADIUS_M, OUTER_RADIUS_M, HEIGHT_M = 0.005, 0.0065, 0.0003
@@ -314,3 +314,8 @@ def test_excluded_initial_gap_on_a_faceted_funnel_gives_p_over_sin_alpha_and_the
     # washer's small radial give (measured +0.24 %)
     penetration = (REFERENCE_Z_M - data["cone_position_m"][last, 2].mean()) * math.sin(alpha)
     np.testing.assert_allclose(penetration, normal_force / (SOFT_PENALTY_PA_PER_M * FUNNEL_AREA_M2), rtol=0.01)
+
+
+def run(case, out_dir, comm, log, resume=False):
+    """The case's transient analysis through the one run loop (the FE tier's engine), as ``piezodyn run`` does."""
+    return run_transient_analysis(case, Path(out_dir), comm, log, resume)

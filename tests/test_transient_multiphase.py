@@ -6,6 +6,8 @@ amplitude scales all phases by one factor."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import h5py
 import numpy as np
 import pytest
@@ -13,7 +15,7 @@ from mpi4py import MPI
 
 from app.case.schema import load_case
 from app.errors import CaseError
-from app.transient.driver import run
+from app.runner import run_transient_analysis
 
 CASE = """
 title = "two-phase PZT-4 strip"
@@ -217,3 +219,8 @@ def test_harmonic_start_is_the_harmonic_solution_at_the_electrode_amplitudes_and
     assert sampler.values(state.u)["end"] == pytest.approx(expected.real, rel=1e-9, abs=1e-12 * abs(expected))
     assert sampler.values(state.v)["end"] == pytest.approx(-omega * expected.imag, rel=1e-9,
                                                          abs=1e-12 * omega * abs(expected))
+
+
+def run(case, out_dir, comm, log, resume=False):
+    """The case's transient analysis through the one run loop (the FE tier's engine), as ``piezodyn run`` does."""
+    return run_transient_analysis(case, Path(out_dir), comm, log, resume)

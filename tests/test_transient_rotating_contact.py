@@ -7,6 +7,8 @@ torque says (J omega' = torque), with Newton converging on the coupled tangent (
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import h5py
 import numpy as np
 import pytest
@@ -14,7 +16,7 @@ from mpi4py import MPI
 
 from app.case.schema import load_case
 from app.errors import CaseError
-from app.transient.driver import run
+from app.runner import run_transient_analysis
 
 RADIUS_M, MU_D, INERTIA_KG_M2 = 0.01, 0.25, 1e-4
 
@@ -203,3 +205,8 @@ component = "x"
     assert closed.sum() > 50 and results["cutbacks"] == 0
     np.testing.assert_allclose(force[closed, 0] / -force[closed, 1], MU_D, rtol=1e-8)
     assert drift[-1] < 0                         # the node is dragged along the disc's surface (-x)
+
+
+def run(case, out_dir, comm, log, resume=False):
+    """The case's transient analysis through the one run loop (the FE tier's engine), as ``piezodyn run`` does."""
+    return run_transient_analysis(case, Path(out_dir), comm, log, resume)

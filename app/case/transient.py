@@ -342,6 +342,7 @@ class TransientSection:
                     known = ", ".join(names) or "none"
                     raise CaseError(file, f"{prefix}.contacts[{i}].{key}",
                                     f"unknown rigid body {name!r} (bodies: {known})")
+        self._check_revolution(file, prefix)
         if self.base_motions and self.initial_state == "harmonic":
             raise CaseError(file, f"{prefix}.initial_state",
                             "base motions start from rest (their amplitude ramps up): use 'rest'")
@@ -375,6 +376,31 @@ class TransientSection:
                 j = unnamed.index(contact)
                 raise CaseError(file, f"{prefix}.contacts[{i}]", f"the same contact as contacts[{j}] "
                                                                  f"({self.contacts[j].name!r}) under another name")
+
+    def _check_revolution(self, file, prefix) -> None:
+        """A rotating body's obstacle must be a body of revolution about each rotation axis (every tier moves the
+        obstacle with the body's translation only; its spin enters the slip velocity): a plane's normal and a
+        cone's axis along the rotation axis (a sphere about its centre is always one)."""
+        unit = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+        for i, contact in enumerate(self.contacts):
+            if contact.kind != "surface" or contact.shape == "sphere":
+                continue
+            j, body = next(((j, b) for j, b in enumerate(self.bodies) if b.name == contact.body), (None, None))
+            key = "axis" if contact.shape == "cone" else "normal"
+            direction = getattr(contact, key)
+            for k, rotation in enumerate(body.rotations if body is not None else ()):
+                a = unit.get(rotation.axis)
+                if a is None or direction is None or len(direction) != 3:
+                    parallel = False
+                else:
+                    cross = (a[1] * direction[2] - a[2] * direction[1], a[2] * direction[0] - a[0] * direction[2],
+                             a[0] * direction[1] - a[1] * direction[0])
+                    parallel = sum(c * c for c in cross) < 1e-24
+                if not parallel:
+                    raise CaseError(file, f"{prefix}.contacts[{i}].{key}",
+                                    f"the {contact.shape} obstacle of contact {contact.name!r} is not a body of "
+                                    f"revolution about the rotation axis {rotation.axis!r} of body {body.name!r} "
+                                    f"({prefix}.bodies[{j}].rotations[{k}].axis)")
 
     def _check_seat(self, file, key, body) -> None:
         contact = next((c for c in self.contacts if c.name == body.seat_on), None)
