@@ -119,6 +119,19 @@ def time_series_plot_spec(case, point: str | None, bodies: list[str], contacts: 
     return {"point": point, "bodies": bodies, "contacts": contacts, "title": f"{title} ({case.tier} tier)"}
 
 
+def plot_spec_of_case(case: dict) -> dict:
+    """The time-series plot spec from a summary's case (a result written before summaries recorded it): the
+    drive point if it is a named point, the bodies that move, every contact."""
+    transient = case.get("transient") or {}
+    point = (transient.get("drive") or {}).get("point")
+    bodies = [b["name"] for b in transient.get("bodies", [])
+              if not b.get("fixed") and (b.get("free_axes") is None or any(b["free_axes"]))]
+    title = case.get("title") or Path(str(case.get("source", "case"))).stem
+    return {"point": point if point in (case.get("points") or {}) else None, "bodies": bodies,
+            "contacts": [c["name"] for c in transient.get("contacts", [])],
+            "title": f"{title} ({case.get('tier', 'fe')} tier)"}
+
+
 def read_summary(result_dir: Path) -> dict:
     """summary.json of a result directory, or a one-line CaseError saying why it cannot be used."""
     if not result_dir.exists():
@@ -167,6 +180,8 @@ def replot(result_dir: str | Path, log, scenes: dict, write: bool = True) -> lis
             tier = results.get(key)
             if not isinstance(tier, dict):
                 continue
+            if key == "transient" and not tier.get("plot"):
+                tier = {**tier, "plot": plot_spec_of_case(case)}
             written += time_series_outputs(result_dir, tier)
             if scene is not None:
                 title = (tier.get("plot") or {}).get("title", case.get("title", ""))

@@ -20,7 +20,6 @@ import json
 import math
 import os
 
-import numpy as np
 import pytest
 
 COARSE = ["geometry.parameters.mesh_size_m=0.003", "geometry.parameters.tip_mesh_size_m=0.001",
@@ -81,8 +80,6 @@ def test_free_rotor_turns_with_the_wave_below_the_surface_speed(motor_runs):
     surface_speed = 2 * math.pi / PERIOD_S * m["contact_point_amplitude_m"]["tangential"]
     rim_speed = m["speed_rad_per_s"] * m["contact_radius_m"]
     assert 0 < abs(rim_speed) < surface_speed
-    assert np.sign(m["friction_torque_N_m"]) in (0.0, np.sign(m["speed_rad_per_s"])) or \
-        abs(m["friction_torque_N_m"]) < 0.05 * held["statistics"]["motor"]["friction_torque_N_m"]
     assert abs(m["friction_torque_N_m"]) < 0.2 * held["statistics"]["motor"]["friction_torque_N_m"]
     assert m["speed_rad_per_s"] == pytest.approx(PINNED["free_speed_rad_per_s"], rel=0.01)
     for name in ("motor_ring.csv", "motor_contact_path.csv", "motor_ring_pressure.png", "motor_contact_path.png",

@@ -183,15 +183,15 @@ def test_checkpoint_of_an_older_version_resumes(one_go, tmp_path):
         shutil.copytree(out_ref, tmp_path / "old", dirs_exist_ok=True)
         pointer = tmp_path / "old" / "checkpoint" / "checkpoint.json"
         meta = json.loads(pointer.read_text())
-        del meta["case"]["reduction"]["ring_points"]        # as if written before the keys were added: in a
+        del meta["case"]["reduction"]["interface_nodes"]   # as if written before the keys were added: in a
         for body in meta["case"]["transient"]["bodies"]:    # section, and in each entry of a list of sections
             del body["seat_on"]
         pointer.write_text(json.dumps(meta))
     sets = [a for o in [*TINY, f"transient.end_time_s={END_S!r}"] for a in ("--set", o)]
     refused = run_cli("run", CASES / CASE, "--resume", tmp_path / "old", *sets,
-                      "--set", "reduction.ring_points=32")
+                      "--set", "reduction.interface_nodes=32")
     assert refused.returncode == 2, refused.stderr[-2000:]
-    assert "reduction.ring_points" in refused.stderr and "Traceback" not in refused.stderr
+    assert "reduction.interface_nodes" in refused.stderr and "Traceback" not in refused.stderr
     resumed = run_cli("run", CASES / CASE, "--resume", tmp_path / "old", *sets)   # finished: 0 steps
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     if MPI.COMM_WORLD.rank == 0:

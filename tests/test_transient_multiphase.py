@@ -223,4 +223,8 @@ def test_harmonic_start_is_the_harmonic_solution_at_the_electrode_amplitudes_and
 
 def run(case, out_dir, comm, log, resume=False):
     """The case's transient analysis through the one run loop (the FE tier's engine), as ``piezodyn run`` does."""
-    return run_transient_analysis(case, Path(out_dir), comm, log, resume)
+    out_dir = Path(out_dir)
+    if comm.rank == 0:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    comm.barrier()
+    return run_transient_analysis(case, out_dir, comm, log, resume)

@@ -207,7 +207,8 @@ def _run(make_engine, case, out_dir, comm, log, resume, steady_floors) -> dict:
     start = time.perf_counter()
     field_wall = checkpoint_wall = 0.0
     steady = watch is not None and watch.steady
-    checkpointed = -1
+    # a resumed run's state is its checkpoint's: nothing to write again unless it takes a step
+    checkpointed = engine.steps if found is not None else -1
     try:
         while engine.t < end * (1 - 1e-12) and not steady:
             stop_at = math.inf
