@@ -240,16 +240,24 @@ def _field_default(cls, key: str):
     return _MISSING
 
 
+def _removed_from(cls, key: str) -> bool:
+    """Whether ``key`` is not a field of the schema class ``cls`` (any more)."""
+    return dataclasses.is_dataclass(cls) and key not in {f.name for f in dataclasses.fields(cls)}
+
+
 def _differences(a, b, prefix="", cls=None) -> list[str]:
     """Dotted keys where the checkpointed record ``a`` and the resumed case's digest ``b`` differ, walking
     sections and lists of sections with their schema classes (``cls``). A key the record lacks (a later
-    version added it) matches when the resumed case leaves it at its schema default, so a program update
-    does not strand older checkpoints."""
+    version added it) matches when the resumed case leaves it at its schema default, and a key the schema
+    no longer has (a later version removed it, e.g. reduction.ring_points of the old modal motor) is not
+    compared: nothing reads it now, so a program update does not strand older checkpoints."""
     if isinstance(a, dict) and isinstance(b, dict):
         out = []
         for key in sorted(set(a) | set(b)):
             path = f"{prefix}.{key}" if prefix else key
             if key not in a and b[key] == _field_default(cls, key):
+                continue
+            if key not in b and _removed_from(cls, key):
                 continue
             types = _section_types(cls, key)
             value_a, value_b = a.get(key), b.get(key)
