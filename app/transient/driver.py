@@ -22,7 +22,7 @@ from dolfinx import fem
 
 from app import series as S
 from app.compat import petsc_vector
-from app.drive import drive_weights
+from app.drive import drive_weights, target_voltage
 from app.errors import CaseError
 from app.killpoint import kill_point
 from app.transient.contact import MidpointFields
@@ -182,7 +182,7 @@ class TransientModel:
             x_re, x_im, amplitude_per_V = self._harmonic_per_volt()
             kill_point("harmonic_start")
             if cfg.drive.tip_amplitude_m is not None:
-                voltage = cfg.drive.tip_amplitude_m / amplitude_per_V
+                voltage = target_voltage(cfg.drive.tip_amplitude_m, amplitude_per_V)
             if cfg.initial_state == "harmonic":
                 omega = 2 * math.pi * cfg.drive.frequency_Hz
                 u0, v0, a0 = voltage * x_re, -omega * voltage * x_im, -omega**2 * voltage * x_re
