@@ -5,7 +5,7 @@ tier), preload 0.98 N, a free rotor under a load torque of 12.929 mN m (half the
 a point of its speed-torque curve, BENCHMARKS.md), started from the stator's harmonic steady state with the rotor
 seated on the highest crest, run until the case's steady-state rule holds (``[transient.steady_state]``: the
 cycle-mean speed within 0.5 % over 20 periods). A loaded free rotor rather than the held one: from the harmonic
-start a held rotor stays on the bouncing branch in the modal tier (docs/motor-rotor.md, "Two regimes"), and a held
+start a held rotor stays on the bouncing branch in the modal tier (docs/motor-studies.md, "Two regimes"), and a held
 rotor's torque ripples by more than 0.5 %, so its run would end at ``end_time_s`` without a steady state.
 
     # the FE tier (hours; resumes from DIR/checkpoint when it exists, same command again after a kill)

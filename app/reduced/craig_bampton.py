@@ -31,7 +31,7 @@ With x the full u-phi vector (every DOF, Dirichlet ones zero):
   Rayleigh-Ritz returns their eigenpairs exactly. Why: a drive within a few damping bandwidths of a
   resonance (the motor's F(1,4), zeta 0.2 %) makes the response steep in the detuning, and the
   Craig-Bampton frequency converges from above slowly in the number of modes and interface nodes
-  (+0.14-0.39 % on the motor's coarse stator, a 23-48 % smaller wave; docs/motor-rotor.md).
+  (+0.14-0.39 % on the motor's coarse stator, a 23-48 % smaller wave; docs/motor-studies.md).
 
 Reduced operators are Galerkin projections K_r = T^T K T, M_r = T^T M T, C_r = T^T C T: the damping
 is the FE model's own C (Rayleigh + material Q), projected, not a guessed modal ratio. Everything
