@@ -135,16 +135,25 @@ def run_case(case_path: str | Path, overrides: list[str] | None = None, out_dir:
     with timer.phase("validate"):
         case = load_for_run(case_path, overrides, resume)
     out = Path(out_dir) if out_dir else Path("results") / Path(case_path).stem
-    prepare_output_dir(out, comm, "--resume" if resume else "--out", resume)
-    log(f"piezodyn {__version__}: {case.title or Path(case_path).name} -> {out}/ ({comm.size} MPI rank(s))")
-    summary = {"case": to_dict(case), "versions": versions(), "mpi_size": comm.size, "results": {},
-               "outputs": []}
-    with silenced(quiet):  # --quiet: no progress output either
-        TIER_RUNNERS[case.tier](case, out, comm, log, timer, summary, resume)
-    summary["wall_time_s"] = timer.seconds
-    summary["outputs"].append("summary.json")
-    if comm.rank == 0:
-        write_json_atomic(out / "summary.json", summary)
+    flag = "--resume" if resume else "--out"
+    prepare_output_dir(out, comm, flag, resume)
+    from app.loop.loop import DirectoryLock
+
+    # held for the whole run, before anything in the directory changes: a second run, or a --resume of a
+    # directory a live run is writing, is refused with one line and leaves every file as it was
+    lock = DirectoryLock(out, comm, flag)
+    try:
+        log(f"piezodyn {__version__}: {case.title or Path(case_path).name} -> {out}/ ({comm.size} MPI rank(s))")
+        summary = {"case": to_dict(case), "versions": versions(), "mpi_size": comm.size, "results": {},
+                   "outputs": []}
+        with silenced(quiet):  # --quiet: no progress output either
+            TIER_RUNNERS[case.tier](case, out, comm, log, timer, summary, resume)
+        summary["wall_time_s"] = timer.seconds
+        summary["outputs"].append("summary.json")
+        if comm.rank == 0:
+            write_json_atomic(out / "summary.json", summary)
+    finally:
+        lock.release()
     log(f"summary: {out / 'summary.json'}")
     return summary
 

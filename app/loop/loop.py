@@ -100,9 +100,16 @@ class DirectoryLock:
     """An exclusive lock on a result directory for the run's duration (rank 0 holds it): a second run or a
     ``--resume`` of a directory a live run is writing is refused before anything in it changes."""
 
+    #: directories this process holds (a run's runner locks for the whole run; the loop inside it then
+    #: finds its directory held and takes no second lock: flock refuses one open file's lock to another)
+    _held: set[str] = set()
+
     def __init__(self, out_dir: Path, comm, flag: str):
         self.handle = None
+        self.key = None
         why = None
+        if str(Path(out_dir).resolve()) in DirectoryLock._held:
+            return
         if comm.rank == 0:
             try:
                 self.handle = open(Path(out_dir) / LOCK_FILE, "a+")
@@ -121,10 +128,15 @@ class DirectoryLock:
         why = comm.bcast(why, root=0) if comm.size > 1 else why
         if why:
             raise CaseError(flag, str(out_dir), why)
+        self.key = str(Path(out_dir).resolve())
+        DirectoryLock._held.add(self.key)
 
     def release(self) -> None:
         """Remove the lock file while holding the lock, then let go (a run killed before this leaves the file;
         the kernel has released its lock, so the next run takes it)."""
+        if self.key is not None:
+            DirectoryLock._held.discard(self.key)
+            self.key = None
         if self.handle is not None:
             Path(self.handle.name).unlink(missing_ok=True)
             fcntl.flock(self.handle.fileno(), fcntl.LOCK_UN)
