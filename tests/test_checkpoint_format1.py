@@ -51,3 +51,14 @@ def test_format1_modal_checkpoint_is_refused_with_one_line(tmp_path, mpi):
     lines = [line for line in proc.stderr.splitlines() if line.startswith("piezodyn: error:")]
     assert len(lines) == 1 and "checkpoint.json: format:" in lines[0] and "Traceback" not in proc.stderr, \
         proc.stderr[-2000:]
+
+
+def test_resuming_with_another_case_says_so(tmp_path):
+    """The drill's directory resumed with the motor case: one line naming the first differing key and saying the
+    checkpoint is another case's (not a missing entry of the other tier's checkpoint)."""
+    out = tmp_path / "fe"
+    shutil.copytree(DATA / "format1-fe-drill", out)
+    proc = run_cli("run", CASES / "wwusm-motor.toml", "--resume", out, "--quiet")
+    assert proc.returncode == 2
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "a run of another case ('USDC percussion drill" in lines[0], proc.stderr[-2000:]

@@ -288,6 +288,12 @@ def read_checkpoint(out_dir: Path, comm, case, digest: dict, tier: str) -> Found
 
     changed = _differences(meta["case"], digest, cls=Case)
     if changed:
+        before = meta["case"]
+        if before.get("title") != digest.get("title") or before.get("scene") != digest.get("scene"):
+            # another case altogether (a title or scene of its own): say so, not only its first differing key
+            raise CaseError(file, changed[0], f"differs from the checkpointed run, which is a run of another case "
+                                              f"({before.get('title')!r}, {len(changed)} keys differ): resume with "
+                                              "that case, or run this one into another directory")
         raise CaseError(file, changed[0], "differs from the checkpointed run (only transient.end_time_s, "
                                           "transient.checkpoint_interval_steps and output.* may change on resume)")
     if verdict["started_only"]:
