@@ -8,10 +8,10 @@ import math
 from dataclasses import dataclass
 
 from petsc4py import PETSc
-from slepc4py import SLEPc
 
 from app.errors import NumericalFailure
 from app.fe.constraints import ConstraintSet
+from app.fe.eigen import shift_invert_solver
 from app.fe.model import FEModel
 from app.fe.operators import Operators, electrical_state
 
@@ -30,22 +30,7 @@ def solve_modes(ops: Operators, constraints: ConstraintSet, target_Hz: float, n_
     M = constraints.reduce(ops.M)
     constraints.apply(K, 1.0)
     constraints.apply(M, 0.0)
-    eps = SLEPc.EPS().create(comm)
-    eps.setOptionsPrefix(prefix)
-    eps.setOperators(K, M)
-    eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
-    eps.setDimensions(nev=n_modes)
-    eps.setTarget((2 * math.pi * target_Hz) ** 2)
-    eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_REAL)
-    eps.setTolerances(tol=1e-10, max_it=200)
-    st = eps.getST()
-    st.setType(SLEPc.ST.Type.SINVERT)
-    ksp = st.getKSP()
-    ksp.setType("preonly")
-    pc = ksp.getPC()
-    pc.setType("lu")
-    pc.setFactorSolverType("mumps")
-    eps.setFromOptions()
+    eps = shift_invert_solver(comm, K, M, n_modes, target_Hz, prefix)
     eps.solve()
     n_conv = eps.getConverged()
     if n_conv == 0:

@@ -112,16 +112,10 @@ def print_table(rows: list[tuple[str, str, str]], log) -> None:
     log("-" * (width + value_width + 12))
 
 
-def time_series_plot_spec(case, point: str | None, bodies: list[str], contacts: list[str]) -> dict:
-    """What the time-series plots of a run show (``results["plot"]``, read again by ``piezodyn plot DIR``):
-    drive point, free bodies, contacts and a title saying what was run."""
-    title = case.title or Path(case.source).stem
-    return {"point": point, "bodies": bodies, "contacts": contacts, "title": f"{title} ({case.tier} tier)"}
-
-
 def plot_spec_of_case(case: dict) -> dict:
-    """The time-series plot spec from a summary's case (a result written before summaries recorded it): the
-    drive point if it is a named point, the bodies that move, every contact."""
+    """What the time-series plots of a run show (``results["plot"]``, read again by ``piezodyn plot DIR``), from
+    the case as the summary records it (also for a result written before summaries recorded the spec): the drive
+    point if it is a named point, the bodies that move, every contact, a title saying what was run."""
     transient = case.get("transient") or {}
     point = (transient.get("drive") or {}).get("point")
     bodies = [b["name"] for b in transient.get("bodies", [])

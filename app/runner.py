@@ -18,7 +18,7 @@ from app.errors import CaseError
 from app.files import write_json_atomic
 from app.mpi_log import PhaseTimer, make_log
 from app.progress import silenced
-from app.report import print_table, result_rows, time_series_plot_spec
+from app.report import plot_spec_of_case, print_table, result_rows
 from app.scenes import scene_of
 
 
@@ -281,11 +281,8 @@ def run_transient_analysis(case: Case, out: Path, comm, log, resume: bool) -> di
     cls = engine_class(case.tier)
     floors = scene.steady_floors(case) if scene is not None else (0.0, 0.0)
     results = run_transient(lambda found: cls(case, comm, log, found), case, out, comm, log, resume, floors)
-    cfg = case.transient
-    moving = [b.name for b in cfg.bodies if not b.fixed and (b.free_axes is None or any(b.free_axes))]
-    point = cfg.drive.point if cfg.drive.point in case.points else None
     results["scene"] = case.scene
-    results["plot"] = time_series_plot_spec(case, point, moving, [c.name for c in cfg.contacts])
+    results["plot"] = plot_spec_of_case(to_dict(case))
     add_scene_results(results, case, out, comm)
     return results
 

@@ -159,6 +159,19 @@ def shape_gap(shape, vector, radius, half_angle, d, n, Dn):
 
 # ------------------------------------------------------------------ one site's force
 @njit(cache=True)
+def friction_tangent(T, dT_dfn, dT_dspeed, s, reg, speed, A, b):
+    """Derivatives of the regularised friction force f_t = -T(fn, |s|) s / reg(|s|) (forms/contact_law.py) at the
+    slip ``s`` [m/s]: ``A`` = d f_t / d s (3 x 3), ``b`` = d f_t / d fn (3), written in place. ``T`` is the shear
+    magnitude [N], ``dT_dfn`` and ``dT_dspeed`` its derivatives, ``reg`` the regularised speed, ``speed`` |s|."""
+    r3 = reg * reg * reg
+    for r in range(3):
+        b[r] = -dT_dfn * s[r] / reg
+        for k in range(3):
+            A[r, k] = -T * ((1.0 if r == k else 0.0) / reg - s[r] * s[k] / r3) \
+                - s[r] / reg * dT_dspeed * s[k] / speed
+
+
+@njit(cache=True)
 def site_force(i, y, v_site, z_mid, zd_mid, sites, contacts, bodies, c_vel, w_f, want, out):
     """Force of site i on the structure (``out.f``, 3) at the mid-point state: the site's displacement ``y`` and
     velocity ``v_site`` (3-vectors), the bodies' mid-point coordinates and rates. With ``want``, the
@@ -267,18 +280,14 @@ def site_force(i, y, v_site, z_mid, zd_mid, sites, contacts, bodies, c_vel, w_f,
         dfn_dv[k] = dfn_drate * n[k]
     # s = v - (n.v) n: ds/dv = P, ds/dd = -(n vDn^T + rate Dn)
     A = out.A             # d f_t / d s
-    for r in range(3):
-        for k in range(3):
-            A[r, k] = 0.0
     bvec = out.b          # d f_t / d fn
-    bvec[0] = bvec[1] = bvec[2] = 0.0
     if mu > 0.0:
-        r3 = reg * reg * reg
+        friction_tangent(T, dT_dfn, dT_dspeed, s, reg, speed, A, bvec)
+    else:
         for r in range(3):
-            bvec[r] = -dT_dfn * s[r] / reg
+            bvec[r] = 0.0
             for k in range(3):
-                A[r, k] = -T * ((1.0 if r == k else 0.0) / reg - s[r] * s[k] / r3) \
-                    - s[r] / reg * dT_dspeed * s[k] / speed
+                A[r, k] = 0.0
     Jd = out.Jd           # d f / d d
     Jv = out.Jv           # d f / d v
     for r in range(3):

@@ -24,9 +24,9 @@ import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
-from slepc4py import SLEPc
 
 from app.errors import CaseError, NumericalFailure
+from app.fe.eigen import shift_invert_solver
 
 
 def _csr(A: PETSc.Mat) -> sp.csr_matrix:
@@ -141,21 +141,7 @@ def cyclic_modes(model, ops, cfg, target_Hz: float, n_modes: int, rigid_cutoff_H
     Kr = (D @ Kr @ D + sp.diags(1.0 - keep)).tocsr()
     Mr = (D @ Mr @ D).tocsr()
     K_p, M_p = _petsc(Kr), _petsc(Mr)
-    eps = SLEPc.EPS().create(PETSc.COMM_SELF)
-    eps.setOptionsPrefix("modal_cyclic_")
-    eps.setOperators(K_p, M_p)
-    eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
-    eps.setDimensions(nev=2 * n_modes)
-    eps.setTarget((2 * math.pi * target_Hz) ** 2)
-    eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_REAL)
-    eps.setTolerances(tol=1e-10, max_it=200)
-    st = eps.getST()
-    st.setType(SLEPc.ST.Type.SINVERT)
-    ksp = st.getKSP()
-    ksp.setType("preonly")
-    ksp.getPC().setType("lu")
-    ksp.getPC().setFactorSolverType("mumps")
-    eps.setFromOptions()
+    eps = shift_invert_solver(PETSc.COMM_SELF, K_p, M_p, 2 * n_modes, target_Hz, "modal_cyclic_")
     eps.solve()
     found = []
     y = K_p.createVecRight()

@@ -53,6 +53,7 @@ from app.contact.law import (
     _friction_coefficient,
     _penalty_energy,
     _penalty_pressure,
+    friction_tangent,
     link_force,
     shape_gap,
     site_force,
@@ -400,12 +401,7 @@ def _evaluate(dd, xi, wk, H, state, dt, model, want):
                 vn = _dot3(vrel, n)
                 for k in range(3):
                     s[k] = vrel[k] - vn * n[k]
-                r3 = reg * reg * reg
-                for r in range(3):
-                    dFdN[r] = -dT_dfn * s[r] / reg
-                    for k in range(3):
-                        dFds[r, k] = -T * ((1.0 if r == k else 0.0) / reg - s[r] * s[k] / r3) \
-                            - s[r] / reg * dT_ds * s[k] / speed
+                friction_tangent(T, dT_dfn, dT_ds, s, reg, speed, dFds, dFdN)
                 # the slip is the tangential part: d s / d v = I - n n
                 tang = np.zeros((3, 3))
                 for r in range(3):
