@@ -180,11 +180,20 @@ def test_both_phases_travel_and_flipping_b_reverses(stator):
     motions are in quadrature, up to the standing part's tilt asin((1 - r) / (1 + r)) for min/max r
     (measured within 0.2 deg). The sensors, a quarter wavelength apart (22.5 deg for n = 4), read
     the direction: the second lags the first (phase < 0) for a wave towards +theta, leads it
-    towards -theta (measured 88 and -68 deg: each sensor also hears its driven neighbour)."""
+    towards -theta (measured 88 and -68 deg: each sensor also hears its driven neighbour).
+    Which way the nominal drive goes follows from the layout: B's strips lie a quarter wavelength
+    (phase_shift_deg = 90 deg / n) ahead of A's in theta, so with B leading A by 90 deg the normal
+    motion is ~ cos(n theta) + i sin(n theta) = exp(i n theta) in phasors, Re(exp(i (omega t + n theta))):
+    towards -theta (app/modeid.py: exp(i (omega t - n theta)) travels towards +theta). A B phase that
+    entered with the wrong sign would turn the motor the other way and still pass the checks above."""
+    from geometry.stator import StatorParameters
+
     forward = stator.solve(NOMINAL)
     backward = stator.solve({"A": 200.0 + 0j, "B": -200j})
-    assert {forward["wave"]["direction"], backward["wave"]["direction"]} == {"+theta", "-theta"}
     parameters = stator.case.geometry.parameters
+    shift_deg = parameters.get("phase_shift_deg", StatorParameters.phase_shift_deg)
+    assert 4 * shift_deg == pytest.approx(90.0)
+    assert (forward["wave"]["direction"], backward["wave"]["direction"]) == ("-theta", "+theta")
     assert 4 * (parameters["sensor2_centre_deg"] - parameters["sensor_centre_deg"]) == pytest.approx(90.0)
     for solution in (forward, backward):
         wave = solution["wave"]
@@ -214,6 +223,7 @@ def test_balanced_two_phase_drive_travels_with_ratio_09(stator):
     finally:
         solver.destroy()
     assert wave["travelling_wave_ratio"] >= 0.9
+    assert wave["direction"] == "-theta"         # the case's A at 0 deg, B at +90 deg: see the test above
     assert wave["nominal"]["travelling_wave_ratio"] < wave["travelling_wave_ratio"]
     orders = wave["orders"]
     forward, backward = orders["towards_plus_theta_m"][4], orders["towards_minus_theta_m"][4]
