@@ -55,8 +55,20 @@ def test_every_case_has_a_tiny_variant():
     assert not missing, f"add tiny-resolution overrides for {missing} to tests/test_cases.py"
 
 
-@pytest.mark.parametrize("ranks", [0, 2], ids=["serial", "mpi2"])
-@pytest.mark.parametrize("case", sorted(TINY))
+#: cases whose 2-rank run is covered by a dedicated two-rank test, so its smoke run goes to the slow suite:
+#: the stator's modal analysis (tests/test_stator.py::test_stator_modal_two_ranks_equal_serial) and its two-phase
+#: harmonic drive (tests/test_harmonic_phases.py, marked mpi) on the same coarse mesh
+TWO_RANKS_COVERED_ELSEWHERE = {"wwusm-stator.toml"}
+
+
+def _case_params():
+    for case in sorted(TINY):
+        for ranks, rank_id in ((0, "serial"), (2, "mpi2")):
+            slow = ranks and case in TWO_RANKS_COVERED_ELSEWHERE
+            yield pytest.param(case, ranks, id=f"{case}-{rank_id}", marks=[pytest.mark.slow] if slow else [])
+
+
+@pytest.mark.parametrize("case, ranks", list(_case_params()))
 def test_case_runs(case, ranks, tmp_path):
     overrides = [arg for o in TINY[case] for arg in ("--set", o)]
     result = run_cli("run", CASES / case, "--out", tmp_path, *overrides, mpi=ranks)

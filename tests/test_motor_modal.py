@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 
 import pytest
 
@@ -36,26 +35,19 @@ def _run(root, name, sets):
 
 @pytest.fixture(scope="module")
 def motor_runs(tmp_path_factory):
-    """A held and a free rotor on a coarse stator (one reduced model, built once into a private cache), and the
-    issue's hard cases, which must finish without abort: no preload (the crests throw the rotor off), a 10x
-    penalty, a prescribed spin."""
+    """A held and a free rotor on a coarse stator (one reduced model, built once into the tests' cache,
+    PIEZODYN_CACHE_DIR of tests/conftest.py, which tests/test_motor_checkpoint.py shares: the npz keeps every array's
+    bytes, so the pinned values hold whichever test builds it), and the issue's hard cases, which must finish without
+    abort: no preload (the crests throw the rotor off), a 10x penalty, a prescribed spin."""
     root = tmp_path_factory.mktemp("motor")
-    old = os.environ.get("PIEZODYN_CACHE_DIR")
-    os.environ["PIEZODYN_CACHE_DIR"] = str(root / "cache")
-    try:
-        held = _run(root, "held", ['transient.bodies[0].rotations[0].motion="fixed"'])
-        free = _run(root, "free", [])
-        short = ["transient.end_time_s=0.003", "output.plots=false"]
-        hard = {name: _run(root, name, short + sets)
-                for name, sets in (("no_preload", ["transient.bodies[0].applied_force_N=[0.0, 0.0, 0.0]"]),
-                                   ("penalty_10x", ["transient.contacts[0].stiffness=4e14"]),
-                                   ("prescribed_spin", ['transient.bodies[0].rotations[0].motion="constant_rate"',
-                                                        "transient.bodies[0].rotations[0].rate_rad_per_s=1.2"]))}
-    finally:
-        if old is None:
-            os.environ.pop("PIEZODYN_CACHE_DIR")
-        else:
-            os.environ["PIEZODYN_CACHE_DIR"] = old
+    held = _run(root, "held", ['transient.bodies[0].rotations[0].motion="fixed"'])
+    free = _run(root, "free", [])
+    short = ["transient.end_time_s=0.003", "output.plots=false"]
+    hard = {name: _run(root, name, short + sets)
+            for name, sets in (("no_preload", ["transient.bodies[0].applied_force_N=[0.0, 0.0, 0.0]"]),
+                               ("penalty_10x", ["transient.contacts[0].stiffness=4e14"]),
+                               ("prescribed_spin", ['transient.bodies[0].rotations[0].motion="constant_rate"',
+                                                    "transient.bodies[0].rotations[0].rate_rad_per_s=1.2"]))}
     return root, held, free, hard
 
 
