@@ -19,7 +19,7 @@ install_packages() {
   local PACKAGES=(
     python3-dolfinx-real python3-petsc4py-real python3-slepc4py-real python3-mpi4py openmpi-bin
     python3-gmsh python3-meshio python3-h5py python3-numpy python3-scipy python3-matplotlib
-    python3-numba python3-tqdm python3-pytest python3-pytest-mpi python3-venv python3-pip
+    python3-numba python3-tqdm python3-pytest python3-pytest-mpi python3-pytest-xdist python3-venv python3-pip
     python3-setuptools python3-wheel python3-threadpoolctl libopenblas0-pthread
   )
   # test extras: tests/test_paraview.py opens results with ParaView's own readers (pvpython under

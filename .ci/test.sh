@@ -8,5 +8,9 @@ export MPLBACKEND=Agg
 export PIEZODYN_REQUIRE_PARAVIEW="${PIEZODYN_REQUIRE_PARAVIEW:-1}"
 PY=.venv/bin/python
 if [ -x .venv/bin/ruff ]; then .venv/bin/ruff check app forms geometry tests bench demos; fi
-$PY -m pytest -q --color=no --with-mpi -m "not slow" tests "$@"
+# the serial suite on two pytest-xdist workers, one test file per worker (a file's module fixtures are built once);
+# PIEZODYN_TEST_WORKERS=0 runs it in this process
+WORKERS="${PIEZODYN_TEST_WORKERS:-2}"
+XDIST=(); if [ "$WORKERS" != 0 ]; then XDIST=(-n "$WORKERS" --dist loadfile); fi
+$PY -m pytest -q --color=no --with-mpi -m "not slow" "${XDIST[@]}" tests "$@"
 mpirun -n 2 -x OPENBLAS_NUM_THREADS=1 $PY -m pytest -q --color=no --with-mpi -m "mpi and not slow" -p no:cacheprovider tests
