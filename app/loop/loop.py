@@ -6,7 +6,7 @@ the summary's common keys are done here once, for every tier. An engine implemen
 (update loads -> solve -> check convergence, cutting dt back on failure -> shift the state -> adapt dt), and
 returns their time-series rows; the loop then exports (series, fields), checkpoints and tests the stop.
 
-    lock the directory; resume: read the checkpoint (every check before anything is touched)
+    (the runner holds the directory's lock) resume: read the checkpoint (every check before anything is touched)
     engine = make(found)                 build the model (a resumed modal run: its saved reduced model)
     found ? engine.restore(found) : (mark started, engine.start())
     while t < end and not steady:
@@ -98,18 +98,12 @@ class Engine(Protocol):
 
 class DirectoryLock:
     """An exclusive lock on a result directory for the run's duration (rank 0 holds it): a second run or a
-    ``--resume`` of a directory a live run is writing is refused before anything in it changes."""
-
-    #: directories this process holds (a run's runner locks for the whole run; the loop inside it then
-    #: finds its directory held and takes no second lock: flock refuses one open file's lock to another)
-    _held: set[str] = set()
+    ``--resume`` of a directory a live run is writing is refused before anything in it changes. Taken once per
+    run, by its runner (app/runner.py:run_case), around every analysis it writes there."""
 
     def __init__(self, out_dir: Path, comm, flag: str):
         self.handle = None
-        self.key = None
         why = None
-        if str(Path(out_dir).resolve()) in DirectoryLock._held:
-            return
         if comm.rank == 0:
             try:
                 self.handle = open(Path(out_dir) / LOCK_FILE, "a+")
@@ -128,15 +122,10 @@ class DirectoryLock:
         why = comm.bcast(why, root=0) if comm.size > 1 else why
         if why:
             raise CaseError(flag, str(out_dir), why)
-        self.key = str(Path(out_dir).resolve())
-        DirectoryLock._held.add(self.key)
 
     def release(self) -> None:
         """Remove the lock file while holding the lock, then let go (a run killed before this leaves the file;
         the kernel has released its lock, so the next run takes it)."""
-        if self.key is not None:
-            DirectoryLock._held.discard(self.key)
-            self.key = None
         if self.handle is not None:
             Path(self.handle.name).unlink(missing_ok=True)
             fcntl.flock(self.handle.fileno(), fcntl.LOCK_UN)
@@ -173,16 +162,9 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     """Run a transient case with the engine ``make_engine(found)`` builds (``found``: the checkpoint to resume
     from, or None) into ``out_dir``; with ``resume`` continue from the checkpoint there (same case except the
     end time, the checkpoint interval and the outputs) and append to its series. Returns the summary's
-    transient results (common keys, the engine's, per-contact summaries and statistics)."""
+    transient results (common keys, the engine's, per-contact summaries and statistics). The caller holds the
+    directory's :class:`DirectoryLock` (app/runner.py:run_case)."""
     out_dir = Path(out_dir)
-    lock = DirectoryLock(out_dir, comm, "--resume" if resume else "--out")
-    try:
-        return _run(make_engine, case, out_dir, comm, log, resume, steady_floors)
-    finally:
-        lock.release()
-
-
-def _run(make_engine, case, out_dir, comm, log, resume, steady_floors) -> dict:
     setup_start = time.perf_counter()
     digest = case_digest(case)
     found = read_checkpoint(out_dir, comm, case, digest, case.tier) if resume else None
