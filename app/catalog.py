@@ -32,9 +32,21 @@ def shipped_cases(root: Path = CASES_DIR) -> list[dict]:
     return rows
 
 
-def format_cases(root: Path = CASES_DIR) -> str:
+def shown_path(path: Path, cwd: Path | None = None) -> str:
+    """``path`` as a user can pass it from ``cwd`` (default: the working directory): relative when it lies
+    below it (a source checkout), else absolute (the Docker image runs in /work, the cases are installed under
+    /opt/piezodyn/cases)."""
+    cwd = Path.cwd() if cwd is None else Path(cwd)
+    try:
+        return str(path.resolve().relative_to(cwd.resolve()))
+    except ValueError:
+        return str(path.resolve())
+
+
+def format_cases(root: Path = CASES_DIR, cwd: Path | None = None) -> str:
+    """The case table; each path opens from ``cwd`` (default: the working directory)."""
     rows = shipped_cases(root)
-    names = [str(r["path"].relative_to(root.parent)) for r in rows]
+    names = [shown_path(r["path"], cwd) for r in rows]
     kinds = [r['tier'] if r['analyses'] == [r['tier']] else f"{r['tier']}: {', '.join(r['analyses'])}" for r in rows]
     w1, w2 = max(map(len, names), default=4), max(map(len, kinds), default=4)
     lines = [f"{len(rows)} case files in {root}:"]

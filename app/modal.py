@@ -205,7 +205,7 @@ def contact_force(model: FEModel, ops: Operators, result: ModalResult) -> dict:
         forces.append(f)
         omegas.append(omega)
         zetas.append(zeta)
-        rows.append({"index": index, "frequency_Hz": mode.frequency_Hz, "modal_mass_kg": 1 / amplitude**2,
+        rows.append({"mode": index + 1, "frequency_Hz": mode.frequency_Hz, "modal_mass_kg": 1 / amplitude**2,
                      "modal_stiffness_N_per_m": omega**2 / amplitude**2, "damping_ratio": zeta,
                      "modal_force_N": abs(f) / amplitude,
                      "electrode_force_factor_N_per_V": {name: abs(q[name]) / amplitude for name in q}})
@@ -283,7 +283,7 @@ def modal_summary(model: FEModel, result: ModalResult) -> dict:
     modes = []
     for i, j, k_eff in result.pairs:
         mode = result.short[i]
-        entry = {"resonance_Hz": mode.frequency_Hz}
+        entry = {"mode": i + 1, "resonance_Hz": mode.frequency_Hz}
         if j is not None:
             entry["antiresonance_Hz"] = result.open[j].frequency_Hz
             entry["k_eff"] = k_eff
@@ -292,9 +292,11 @@ def modal_summary(model: FEModel, result: ModalResult) -> dict:
         modes.append(entry)
     if result.orders is not None:
         for entry, row in zip(modes, mode_table(result)):
-            entry.update({k: row[k] for k in ("m", "n", "component", "order_energy_fraction", "partner_index",
-                                              "partner_split_Hz")})
-    out = {"modes": modes, "working_mode_index": result.working,
+            entry.update({k: row[k] for k in ("m", "n", "component", "order_energy_fraction", "partner_split_Hz")})
+            entry["partner_mode"] = None if row["partner_index"] is None else row["partner_index"] + 1
+    # modes are numbered from 1 (modes.csv, the mode-shape XDMF, the log); working_mode_index is the position in
+    # the list `modes`, from 0
+    out = {"modes": modes, "working_mode": result.working + 1, "working_mode_index": result.working,
            "working_resonance_Hz": result.working_mode.frequency_Hz}
     if result.orders is not None:
         o = result.orders[result.working]
@@ -313,11 +315,11 @@ def modal_summary(model: FEModel, result: ModalResult) -> dict:
 
 
 def mode_table_lines(rows: list[dict], working: int) -> list[str]:
-    """Terminal lines of the mode table (m, n, f, partner split)."""
+    """Terminal lines of the mode table (m, n, f, partner split); modes numbered from 1 as in modes.csv."""
     lines = ["  #   f [Hz]        m   n  comp   partner split [Hz]"]
     for row in rows:
         split = row.get("partner_split_Hz")
-        lines.append(f"{'*' if row['index'] == working else ' '}{row['index']:>2d}  {row['frequency_Hz']:>11.2f}"
+        lines.append(f"{'*' if row['index'] == working else ' '}{row['index'] + 1:>2d}  {row['frequency_Hz']:>11.2f}"
                      f"  {row.get('m') if row.get('m') is not None else '-':>2}  {row.get('n', '-'):>2}"
                      f"  {row.get('component', '-'):>5}  {'' if split is None else f'{split:+.2f}':>12}")
     return lines

@@ -71,17 +71,18 @@ def write_harmonic_table(path: Path, harmonic: dict) -> None:
 
 def write_mode_table(path: Path, modal: dict) -> None:
     """The mode table as CSV: one row per short-circuit mode, its open-circuit partner and k_eff, and
-    its orders (m, n, component, partner and split) when the case asks for mode identification."""
+    its orders (m, n, component, partner and split) when the case asks for mode identification. Modes are
+    numbered from 1 (column ``mode``, and ``partner_mode``), as in the mode-shape XDMF and the log."""
     modes = modal.get("modes") or []
     keys: dict[str, None] = {}      # union of the modes' scalar keys, in first-seen order
     for mode in modes:
-        keys.update({k: None for k, v in mode.items() if not isinstance(v, (list, dict))})
+        keys.update({k: None for k, v in mode.items() if not isinstance(v, (list, dict)) and k != "mode"})
     columns = ["mode", *keys]
     with open(path, "w", newline="") as out:
         writer = csv.writer(out)
         writer.writerow(columns + ["working"])
         for i, mode in enumerate(modes):
-            values = [i] + [mode.get(k, "") for k in columns[1:]]
+            values = [i + 1] + [mode.get(k, "") for k in columns[1:]]
             writer.writerow([repr(v) if isinstance(v, float) else ("" if v is None else v) for v in values]
                             + [int(i == modal.get("working_mode_index"))])
 

@@ -133,3 +133,18 @@ def _run_unprivileged(scratch: Path) -> None:
     assert "Traceback" not in proc.stderr
     assert (out / "summary.json").stat().st_uid == 54321
     assert any((scratch / ".cache" / "fenics").iterdir())  # the JIT cache went where ENV says
+
+
+def test_cases_listed_in_the_image_open_from_its_working_directory(tmp_path):
+    """`docker run piezodyn cases`: the image's working directory is not the install directory (the cases
+    live in /opt/piezodyn/cases), so every path `piezodyn cases` prints must open from the final WORKDIR;
+    checked by listing from a directory outside the source tree, as the image does."""
+    from app.catalog import CASES_DIR, format_cases
+
+    workdirs = [args for keyword, args in _instructions() if keyword == "WORKDIR"]
+    assert workdirs[0] == "/opt/piezodyn" and workdirs[-1] == "/work", workdirs   # the layout this test mimics
+    text = format_cases(CASES_DIR, cwd=tmp_path)
+    listed = [ln.split()[0] for ln in text.splitlines() if ln.startswith("  ")]
+    assert listed and len(listed) == len(list(CASES_DIR.rglob("*.toml")))
+    for name in listed:
+        assert (tmp_path / name).is_file(), name

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -61,7 +62,9 @@ def test_mode_table_marks_the_working_mode(bar_run):
     rows = _rows(out / "modes.csv")
     assert len(rows) == len(modal["modes"])
     working = [r for r in rows if r["working"] == "1"]
-    assert len(working) == 1 and int(working[0]["mode"]) == modal["working_mode_index"]
+    # one numbering everywhere: modes.csv, the summary and the mode-shape XDMF count from 1
+    assert [int(r["mode"]) for r in rows] == [m["mode"] for m in modal["modes"]] == list(range(1, len(rows) + 1))
+    assert len(working) == 1 and int(working[0]["mode"]) == modal["working_mode"] == modal["working_mode_index"] + 1
     assert float(working[0]["resonance_Hz"]) == modal["working_resonance_Hz"]
     assert float(working[0]["k_eff"]) == pytest.approx(modal["working_k_eff"], rel=1e-12)
 
@@ -94,6 +97,22 @@ def test_cases_lists_every_shipped_case_with_its_title():
     assert "PZT-4 33-bar, axisymmetric" in proc.stdout
     line = next(ln for ln in proc.stdout.splitlines() if "usdc-lumped.toml" in ln)
     assert "lumped model" in line  # a case without a title: its leading comment
+
+
+@pytest.mark.parametrize("where", ["checkout", "elsewhere"])
+def test_cases_prints_paths_that_open_from_where_it_runs(where, tmp_path):
+    """Issue 28: the Docker image runs in /work while the cases are installed in /opt/piezodyn/cases, so
+    a path relative to the install directory did not exist there. Each listed path must open from the working
+    directory: relative below a checkout, absolute elsewhere (tests/test_docker.py checks the image's
+    WORKDIR is such an elsewhere)."""
+    cwd = CASES.parent if where == "checkout" else tmp_path
+    proc = run_cli("cases", cwd=cwd)
+    assert proc.returncode == 0, proc.stderr
+    listed = [ln.split()[0] for ln in proc.stdout.splitlines() if ln.startswith("  ")]
+    assert len(listed) == len(list(CASES.rglob("*.toml")))
+    for name in listed:
+        assert (cwd / name).is_file(), name
+        assert Path(name).is_absolute() == (where == "elsewhere")
 
 
 def test_plot_labels_have_readable_names_and_display_units():
