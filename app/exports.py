@@ -156,25 +156,6 @@ def mesh_grid(name: str, vertex: VertexFields, mesh_h5: str, fields_at: str) -> 
     return grid
 
 
-def point_grid(name: str, position: np.ndarray, displacement: np.ndarray) -> ET.Element:
-    """A one-vertex grid (a rigid body) at ``position`` [m] with its displacement [m] (inline)."""
-    grid = ET.Element("Grid", Name=name, GridType="Uniform")
-    topo = ET.SubElement(grid, "Topology", TopologyType="Polyvertex", NumberOfElements="1", NodesPerElement="1")
-    data_item(topo, "0", (1, 1), "Int", 4)
-    geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
-    data_item(geo, " ".join(repr(float(v)) for v in _pad3(position)), (1, 3))
-    attr = ET.SubElement(grid, "Attribute", Name="displacement", AttributeType="Vector", Center="Node")
-    data_item(attr, " ".join(repr(float(v)) for v in _pad3(displacement)), (1, 3))
-    return grid
-
-
-def _pad3(v) -> np.ndarray:
-    out = np.zeros(3)
-    v = np.asarray(v, dtype=float).ravel()[:3]
-    out[:v.size] = v
-    return out
-
-
 def xdmf_document(steps: list[ET.Element | bytes], name: str) -> bytes:
     """An XDMF 3 document: one temporal collection ``name`` holding ``steps`` (elements, or their
     bytes from :func:`step_bytes`: a long series serialises each step once, not at every output)."""

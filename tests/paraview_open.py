@@ -7,9 +7,14 @@ legacy XDMFReader) its blocks with their point, cell and field arrays, and after
 on ``displacement`` at the last time: the warped bounds, the potential's range on the warped FE
 grid and the warped rigid-body positions. Renders the warped result coloured by potential to
 OUT.png (rigid bodies as large points). An optional third argument picks the time (for a mode
-file: the frequency [Hz]) shown and rendered instead of the last."""
+file: the frequency [Hz]) shown and rendered instead of the last.
+
+A transient field file's companion ``<stem minus _fields>_bodies.xdmf`` (the rigid bodies with their shapes,
+app/transient/fields.py) is opened with it when it exists: its blocks per reader, and after the same Warp By
+Vector the warped bounds of each body's vertices (by the cell value ``body``), rendered with the FE grid."""
 
 import json
+import os
 import sys
 
 from paraview import servermanager as sm
@@ -54,6 +59,35 @@ def describe(data):
              "field_arrays": arrays(block.GetFieldData())} for name, block in leaves(data)]
 
 
+def body_bounds(data):
+    """{body index: [xmin, xmax, ymin, ymax, zmin, zmax]} of the vertices of each body's triangles."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    out = {}
+    for _, block in leaves(data):
+        if block.GetNumberOfCells() == 0 or block.GetCellData().GetArray("body") is None:
+            continue
+        points = vtk_to_numpy(block.GetPoints().GetData())
+        body = vtk_to_numpy(block.GetCellData().GetArray("body"))
+        for index in sorted(set(body.tolist())):
+            ids = set()
+            for cell in (c for c in range(block.GetNumberOfCells()) if body[c] == index):
+                pts = block.GetCell(cell).GetPointIds()
+                ids.update(pts.GetId(k) for k in range(pts.GetNumberOfIds()))
+            p = points[sorted(ids)]
+            out[str(index)] = [v for axis in range(3) for v in (float(p[:, axis].min()), float(p[:, axis].max()))]
+    return out
+
+
+def companion(path):
+    """The rigid bodies' file written next to a transient field file, or None."""
+    folder, name = os.path.split(path)
+    if not name.endswith("_fields.xdmf"):
+        return None
+    bodies = os.path.join(folder, name[:-len("_fields.xdmf")] + "_bodies.xdmf")
+    return bodies if os.path.isfile(bodies) else None
+
+
 def main(path, png, at=None):
     report = {}
     readers = {"Xdmf3ReaderT": Xdmf3ReaderT(FileName=[path]), "Xdmf3ReaderS": Xdmf3ReaderS(FileName=[path]),
@@ -63,6 +97,18 @@ def main(path, png, at=None):
         times = list(reader.TimestepValues) if reader.TimestepValues else [0.0]
         reader.UpdatePipeline(times[-1])
         report[name] = {"times": times, "blocks": describe(sm.Fetch(reader))}
+    bodies_path = companion(path)
+    body_readers = {}
+    if bodies_path is not None:
+        body_readers = {"Xdmf3ReaderT": Xdmf3ReaderT(FileName=[bodies_path]),
+                        "Xdmf3ReaderS": Xdmf3ReaderS(FileName=[bodies_path]),
+                        "XDMFReader": XDMFReader(FileNames=[bodies_path])}
+        for name, reader in body_readers.items():
+            reader.UpdatePipelineInformation()
+            times = list(reader.TimestepValues) if reader.TimestepValues else [0.0]
+            reader.UpdatePipeline(times[-1])
+            report[name]["body_times"] = times
+            report[name]["body_blocks"] = describe(sm.Fetch(reader))
     reader = readers["Xdmf3ReaderT"]
     times = report["Xdmf3ReaderT"]["times"]
     show = times[-1] if at is None else min(times, key=lambda t: abs(t - at))
@@ -95,6 +141,15 @@ def main(path, png, at=None):
                         "potential_range": list(potential.GetRange()) if potential is not None else None,
                         "region_range": list(fe_warped.GetCellData().GetArray("region").GetRange()),
                         "bodies": bodies, "frequency_Hz": frequency, "time": show}
+    body_warp = None
+    if body_readers:
+        body_readers["Xdmf3ReaderT"].UpdatePipeline(show)
+        report["body_bounds_before"] = body_bounds(sm.Fetch(body_readers["Xdmf3ReaderT"]))
+        body_warp = WarpByVector(Input=body_readers["Xdmf3ReaderT"])
+        body_warp.Vectors = ["POINTS", "displacement"]
+        body_warp.ScaleFactor = scale
+        body_warp.UpdatePipeline(show)
+        report["warped"]["body_bounds"] = body_bounds(sm.Fetch(body_warp))
     view = GetActiveViewOrCreate("RenderView")
     view.ViewSize = [900, 700]
     view.ViewTime = show
@@ -106,6 +161,10 @@ def main(path, png, at=None):
     display.PointSize = 14
     display.RenderPointsAsSpheres = 1
     GetColorTransferFunction("potential").NanColor = [0.85, 0.2, 0.1]     # the rigid bodies (no potential)
+    if body_warp is not None:
+        body_display = Show(body_warp, view)
+        ColorBy(body_display, ("CELLS", "body"))                        # each body its own grey
+        GetColorTransferFunction("body").ApplyPreset("Grayscale", True)
     label = (f"mode at {frequency:.1f} Hz" if frequency is not None else f"t = {show * 1e3:.4g} ms")
     Show(Text(Text=f"{path.rsplit('/', 1)[-1]}: {label}, displacement x {scale:.3g}, colour: potential [V]"), view)
     view.ResetCamera()

@@ -85,22 +85,28 @@ def _name(block: dict) -> str:
 
 
 def check_transient(report: dict, out: Path) -> None:
+    """The FE series (one grid per output: meshio reads it too) and its companion file of the rigid bodies
+    with their shapes (app/transient/body_shapes.py), read by the three readers at the same times; after
+    Warp By Vector the bodies' triangles sit where the series says their reference points are."""
     import h5py
 
     with h5py.File(out / "transient.h5", "r") as f:
         ball_z = f["ball_position_m"][-1, -1]
+        stem_z = f["stem_position_m"][-1, -1]
+    with h5py.File(out / "transient_fields" / "bodies.h5", "r") as f:
+        names = [str(n) for n in f["body"].attrs["names"]]
     summary = json.loads((out / "summary.json").read_text())
     n_outputs = summary["results"]["transient"]["field_outputs"]
+    assert "transient_bodies.xdmf" in summary["outputs"]
     for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
-        blocks = report[reader]["blocks"]
+        (fe,) = report[reader]["blocks"]                # the FE grid alone, no extra unwarped mesh
         assert len(report[reader]["times"]) == n_outputs
-        assert len(blocks) == 4, blocks                 # the FE grid and 3 bodies, no extra unwarped mesh
-        fe = [b for b in blocks if b["points"] > 1]
-        assert len(fe) == 1
-        assert set(fe[0]["point_arrays"]) == {"displacement", "potential"}
-        assert fe[0]["cell_arrays"] == ["region"]
-    names = sorted(_name(b) for b in report["Xdmf3ReaderT"]["blocks"])
-    assert names == ["ball", "fe_body", "rock", "stem"]
+        assert set(fe["point_arrays"]) == {"displacement", "potential"}
+        assert fe["cell_arrays"] == ["region"]
+        (bodies,) = report[reader]["body_blocks"]       # every body in one triangle grid, at the same times
+        assert report[reader]["body_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
+        assert bodies["point_arrays"] == ["displacement"] and set(bodies["cell_arrays"]) == {"body", "sector"}
+        assert bodies["cells"] > 40                     # shapes, not points
     warped = report["warped"]
     assert warped["time"] == pytest.approx(2e-4, rel=1e-9)
     # Warp By Vector moved the FE grid: the tip (bottom) moved by scale * u, the potential rides along
@@ -108,12 +114,21 @@ def check_transient(report: dict, out: Path) -> None:
     low, high = warped["potential_range"]
     assert high - low > 1.0                             # volts across the ceramic rings
     assert warped["region_range"][1] > warped["region_range"][0]
-    # the bodies: the warped ball sits at start + scale * displacement; its true position is in the series
-    bodies = {re.sub(r"\[\d+\]$", "", k): v for k, v in warped["bodies"].items()}
-    assert set(bodies) == {"ball", "stem", "rock"}
-    start_z = -0.00401
-    assert bodies["ball"][1] == pytest.approx(start_z + warped["scale"] * (ball_z - start_z), rel=1e-6)
-    assert bodies["rock"][1] == pytest.approx(-0.10802, rel=1e-12)      # fixed
+    # the bodies: the warped ball (a half-disc of radius 4 mm about its centre, the section on the axis) moved by
+    # scale times its displacement in the series; the stem (a rod hanging 0.1 m below its top face) likewise; the
+    # rock (a slab below its surface) stays
+    scale = warped["scale"]
+    before = {names[int(k)]: v for k, v in report["body_bounds_before"].items()}
+    after = {names[int(k)]: v for k, v in warped["body_bounds"].items()}
+    assert set(after) == {"ball", "stem", "rock"}
+    assert before["ball"][2:4] == pytest.approx([-0.00401 - 0.004, -0.00401 + 0.004], abs=1e-12)
+    assert before["ball"][0:2] == pytest.approx([0.0, 0.004], abs=1e-12)
+    assert before["stem"][2:4] == pytest.approx([-0.10802, -0.00802], abs=1e-12)
+    for name, z, start in (("ball", ball_z, -0.00401), ("stem", stem_z, -0.00802)):
+        moved = scale * (z - start)
+        assert abs(moved) > 1e-4                        # visibly moved at this scale
+        assert after[name][2:4] == pytest.approx([b + moved for b in before[name][2:4]], abs=1e-9), name
+    assert after["rock"] == pytest.approx(before["rock"], abs=1e-15)      # fixed
 
 
 @pytest.fixture(scope="module")

@@ -193,11 +193,14 @@ class FEEngine:
         from app.exports import VertexFields
         from app.transient.fields import FieldSeriesExport
 
-        tm, system = self.tm, self.system
-        bodies = [(b.name, tm.rigid.dofs(b.name), b.position_m) for b in tm.rigid.bodies]
+        from app.transient.body_shapes import BodyMeshes
+
+        tm, system, case = self.tm, self.system, self.case
+        slices = {b.name: tm.rigid.all_dofs(b.name) for b in tm.rigid.bodies}
         export = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", VertexFields(tm.model),
-                                   lambda: system.solution_vector,
-                                   self.cfg.output_interval_s, bodies=bodies, resume_from_s=resume_from_s)
+                                   lambda: system.solution_vector, self.cfg.output_interval_s,
+                                   bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
+                                   resume_from_s=resume_from_s)
         if resume_from_s is None:
             system.show_state(self.state)
         return export

@@ -1,12 +1,17 @@
-"""XDMF time series of the FE fields and rigid bodies of a transient run (ParaView), at a chosen
+"""XDMF time series of the FE fields and rigid bodies of a transient run (ParaView, meshio), at a chosen
 output interval.
 
 Layout: ``<stem>.xdmf`` (the XML, ours) and ``<stem>/mesh.h5`` (vertices, cells, region tags)
 plus one ``<stem>/step_<k>.h5`` per output (displacement [m], potential [V] at the vertices; see
-:class:`app.exports.VertexFields`). Each output time is a spatial collection of the FE grid
-(``fe_body``: displacement, potential, region) and one single-vertex grid per rigid body at its
-start position with its displacement, so one Warp By Vector moves the transducer, ball, stem and
-rock together.
+:class:`app.exports.VertexFields`). Each output time is one uniform grid of the FE mesh (``fe_body``:
+displacement, potential, region) in a temporal collection, the layout meshio's TimeSeriesReader and
+ParaView's XDMF readers both read. The rigid bodies, drawn with their shapes
+(:mod:`app.transient.body_shapes`), are the companion file ``transient_bodies.xdmf`` written at the same
+times: one triangle grid of all bodies (``rigid_bodies``: cell values ``body``, the index into the
+``names`` attribute of ``<stem>/bodies.h5``, and ``sector``, stripes that show a spin) at their start,
+with each vertex's displacement [m] in the step file (``bodies/displacement``). Both files are written
+in the reference configuration with their displacement, so one Warp By Vector (scale 1) on each puts
+the transducer and the bodies where they are; meshio reads the points once and the displacement per time.
 
 Why a file per output: a process killed while writing HDF5 can leave that file unreadable; here
 it can only hit a step file that the XML does not name yet (step files are written under a
@@ -25,8 +30,8 @@ import numpy as np
 
 from app.exports import (
     FE_GRID,
+    data_item,
     mesh_grid,
-    point_grid,
     step_bytes,
     write_mesh_h5,
     xdmf_document,
@@ -35,48 +40,79 @@ from app.files import replace_file, write_h5_atomic
 from app.killpoint import kill_point
 
 
+BODY_GRID = "rigid_bodies"      # name of the bodies' grid in the companion file
+
+
 class FieldSeriesExport:
     """``write(t, body_positions)`` appends the current displacement [m] and electric potential [V]
     (``vertex.sample(solution())``: :class:`app.exports.VertexFields` of the FE model and a full u-phi PETSc
-    vector, or the modal tier's vertex basis and its coordinates) and the rigid bodies' positions
-    (``body_positions``: the rigid state vector z [m]) when t has reached the next multiple of
-    ``interval_s``. ``bodies``: (name, slice of z, start position [m]) per rigid body.
+    vector, or the modal tier's vertex basis and its coordinates) and the rigid bodies' displacement
+    (``body_positions``: the packed body coordinates z [m, rad]) when t has reached the next multiple of
+    ``interval_s``. ``bodies``: None, or a function of the scene size [m] (the FE mesh's largest extent)
+    returning the :class:`app.transient.body_shapes.BodyMeshes` of the run (called on rank 0).
     ``resume_from_s``: continue the existing series after that time (later steps are dropped)."""
 
-    def __init__(self, path: Path, vertex, solution, interval_s: float, bodies=(), resume_from_s: float | None = None):
+    def __init__(self, path: Path, vertex, solution, interval_s: float, bodies=None,
+                 resume_from_s: float | None = None):
         self.path = Path(path)
         self.dir = self.path.with_suffix("")
+        self.bodies_path = self.path.with_name(self.path.stem.replace("_fields", "") + "_bodies.xdmf")
         self.solution = solution
         self.interval_s = float(interval_s)
-        self.bodies = [(name, sl, np.asarray(start, dtype=float)) for name, sl, start in bodies]
         self.vertex = vertex
         self.comm = vertex.comm
         self.rank0 = self.comm.rank == 0
+        self.bodies = None
         self.steps: list[bytes] = []         # each output's XML, serialised once
+        self.body_steps: list[bytes] = []
         self.next_s = 0.0
         if resume_from_s is not None:
             self.next_s = self._next_after(resume_from_s)
         if self.rank0:
+            if bodies is not None:
+                x = vertex.mesh_arrays["geometry"]
+                meshes = bodies(float(np.ptp(x, axis=0).max()) if len(x) else 1.0)
+                self.bodies = meshes if meshes.names else None
             self.dir.mkdir(parents=True, exist_ok=True)
             if resume_from_s is not None:
                 self.steps = [step_bytes(step) for step in _steps_until(self.path, resume_from_s)]
+                if self.bodies is not None:
+                    self.body_steps = [step_bytes(step) for step in _steps_until(self.bodies_path, resume_from_s)]
+                    if len(self.body_steps) != len(self.steps):     # a kill between the two XMLs
+                        n = min(len(self.body_steps), len(self.steps))
+                        self.steps, self.body_steps = self.steps[:n], self.body_steps[:n]
             for stale in self.dir.glob("step_*.h5*"):       # steps of a killed run past the checkpoint
                 if _step_index(stale) >= len(self.steps):
                     stale.unlink()
             write_mesh_h5(self.dir / "mesh.h5", self.vertex)
-            replace_file(self.path, self._document())
+            if self.bodies is not None:
+                b = self.bodies
+                write_h5_atomic(self.dir / "bodies.h5",
+                                {"points": b.points, "triangles": b.triangles, "body": b.body, "sector": b.sector},
+                                {"points": {"units": "m"},
+                                 "body": {"meaning": "index of the cell's rigid body in names", "names": b.names},
+                                 "sector": {"meaning": "alternating stripes round a body of revolution (its spin)"}})
+            self._replace_documents()
         self.written = self.comm.bcast(len(self.steps), root=0)
+        self.has_bodies = self.comm.bcast(self.bodies is not None, root=0)
 
     def _next_after(self, t: float) -> float:
         return (math.floor(t / self.interval_s * (1 + 1e-9) + 1e-9) + 1) * self.interval_s
 
     def files(self) -> list[str]:
         """Names of the files of the series, relative to the output directory."""
-        return [self.path.name, f"{self.dir.name}/mesh.h5"] + [f"{self.dir.name}/step_{k:06d}.h5"
-                                                               for k in range(self.written)]
+        bodies = [self.bodies_path.name, f"{self.dir.name}/bodies.h5"] if self.has_bodies else []
+        return [self.path.name, f"{self.dir.name}/mesh.h5", *bodies] + [f"{self.dir.name}/step_{k:06d}.h5"
+                                                                        for k in range(self.written)]
 
     def _document(self) -> bytes:
         return xdmf_document(self.steps, self.path.stem)
+
+    def _replace_documents(self) -> None:
+        """The bodies' XML first: a kill between the two leaves the FE series no longer than the bodies'."""
+        if self.bodies is not None:
+            replace_file(self.bodies_path, xdmf_document(self.body_steps, self.bodies_path.stem))
+        replace_file(self.path, self._document())
 
     def write(self, t: float, body_positions=None) -> None:
         if t < self.next_s - 1e-9 * self.interval_s:
@@ -86,21 +122,41 @@ class FieldSeriesExport:
             u, phi = sampled
             k = len(self.steps)
             name = f"step_{k:06d}.h5"
-            write_h5_atomic(self.dir / name, {"displacement": u, "potential": phi},
-                            {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t}})
+            datasets = {"displacement": u, "potential": phi}
+            attrs = {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t}}
+            if self.bodies is not None:
+                datasets["bodies/displacement"] = self.bodies.displacement(body_positions)
+                attrs["bodies/displacement"] = {"units": "m", "time_s": t}
+            write_h5_atomic(self.dir / name, datasets, attrs)
             kill_point("fields_data")                   # the step file exists, the XML does not name it yet
-            step = ET.Element("Grid", Name=f"t = {t:.9g} s", GridType="Collection", CollectionType="Spatial")
-            ET.SubElement(step, "Time", Value=repr(float(t)))
-            step.append(mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:"))
-            z = np.asarray(body_positions, dtype=float) if body_positions is not None else None
-            for body, sl, start in self.bodies:
-                position = z[sl] if z is not None else start
-                step.append(point_grid(body, start, position - start))
+            step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:")
+            step.insert(0, ET.Element("Time", Value=repr(float(t))))
             self.steps.append(step_bytes(step))
-            replace_file(self.path, self._document())
+            if self.bodies is not None:
+                self.body_steps.append(step_bytes(self._body_grid(t, name)))
+            self._replace_documents()
         self.written += 1
         self.next_s = self._next_after(t)
         kill_point("fields_written")
+
+    def _body_grid(self, t: float, step_file: str) -> ET.Element:
+        """One output of the bodies: their triangles at the start and the displacement of ``step_file``."""
+        b, where = self.bodies, f"{self.dir.name}/bodies.h5"
+        grid = ET.Element("Grid", Name=BODY_GRID, GridType="Uniform")
+        ET.SubElement(grid, "Time", Value=repr(float(t)))
+        topo = ET.SubElement(grid, "Topology", TopologyType="Triangle", NumberOfElements=str(len(b.triangles)),
+                             NodesPerElement="3")
+        data_item(topo, f"{where}:/triangles", b.triangles.shape, "Int")
+        geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
+        data_item(geo, f"{where}:/points", b.points.shape)
+        for attr_name, kind, center, source, shape, number in (
+                ("displacement", "Vector", "Node", f"{self.dir.name}/{step_file}:/bodies/displacement",
+                 b.points.shape, "Float"),
+                ("body", "Scalar", "Cell", f"{where}:/body", b.body.shape, "Int"),
+                ("sector", "Scalar", "Cell", f"{where}:/sector", b.sector.shape, "Int")):
+            attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
+            data_item(attr, source, shape, number, 8 if number == "Float" else 4)
+        return grid
 
     def close(self) -> None:
         """Nothing stays open between outputs."""
