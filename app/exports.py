@@ -198,10 +198,10 @@ class _VertexSeriesExport:
     def _name(self, k: int, value: float) -> str:
         raise NotImplementedError
 
-    def _decorate(self, step: ET.Element, value: float) -> None:
-        """Extra attributes of a frame's grid (none by default)."""
+    def _decorate(self, step: ET.Element, k: int, value: float) -> None:
+        """Extra attributes of frame k's grid (none by default)."""
 
-    def _attrs(self, value: float) -> dict:
+    def _attrs(self, k: int, value: float) -> dict:
         return {}
 
     def close(self) -> list[str]:
@@ -215,10 +215,11 @@ class _VertexSeriesExport:
             group = self._group(k)
             datasets[f"{group}/displacement"] = u
             datasets[f"{group}/potential"] = phi
-            attrs[f"{group}/displacement"] = self._attrs(value)
+            attrs[f"{group}/displacement"] = self._attrs(k, value)
+            attrs[f"{group}/potential"] = {"units": "V"}
             step = mesh_grid(self._name(k, value), self.vertex, self.h5_path.name, f"{self.h5_path.name}:/{group}")
             step.insert(0, ET.Element("Time", Value=repr(value)))
-            self._decorate(step, value)
+            self._decorate(step, k, value)
             steps.append(step)
         write_h5_atomic(self.h5_path, datasets, attrs)
         replace_file(self.path, xdmf_document(steps, self.path.stem))
@@ -229,12 +230,30 @@ class _VertexSeriesExport:
 
 
 class ModeShapeExport(_VertexSeriesExport):
-    """Mode shapes of one electrical state as XDMF for ParaView: one grid per mode with the
-    displacement (mass-normalised shape [1/sqrt(kg)]), the potential and the region tags. The
-    'time' of a mode is its frequency [Hz] and its grid is named ``mode <k>: <f> Hz``, so
-    ParaView's time control steps through the modes and shows their frequencies.
+    """Mode shapes of one electrical state as XDMF for ParaView and meshio: one grid per mode with the
+    displacement [m] and potential [V] of the shape scaled so its largest vertex displacement is
+    ``amplitude_m`` (``output.mode_shape_amplitude_m``, default 1 mm: Warp By Vector at scale 1 shows it;
+    the mass-normalised shape [1/sqrt(kg)] is the written one divided by ``shape_scale_m_sqrt_kg``, an
+    Information of the grid and an attribute of ``mode_<k>/displacement`` in the HDF5 file), and the
+    region tags. The 'time' of a mode is its frequency [Hz] and its grid is named ``mode <k>: <f> Hz``
+    (modes numbered from 1, as in modes.csv and the summary), so ParaView's time control steps through the
+    modes and shows their frequencies.
 
     ``write(vector, frequency_Hz)`` takes a full u-phi vector; ``close()`` writes the files."""
+
+    def __init__(self, path: Path, model, amplitude_m: float = 1e-3):
+        super().__init__(path, model)
+        self.amplitude_m = float(amplitude_m)
+        self.scales: list[float] = []
+
+    def write(self, vector, value: float) -> None:
+        sampled = self.vertex.sample(vector)
+        if sampled is not None:
+            u, phi = sampled
+            largest = float(np.linalg.norm(u, axis=1).max(initial=0.0))
+            scale = self.amplitude_m / largest if largest > 0 else 1.0
+            self.scales.append(scale)
+            self.frames.append((float(value), u * scale, phi * scale))
 
     def _group(self, k: int) -> str:
         return f"mode_{k + 1}"
@@ -242,12 +261,17 @@ class ModeShapeExport(_VertexSeriesExport):
     def _name(self, k: int, value: float) -> str:
         return f"mode {k + 1}: {value:.2f} Hz"
 
-    def _decorate(self, step: ET.Element, value: float) -> None:
-        frequency = ET.SubElement(step, "Attribute", Name="frequency_Hz", AttributeType="Scalar", Center="Grid")
-        data_item(frequency, repr(value), (1,))
+    def _decorate(self, step: ET.Element, k: int, value: float) -> None:
+        # Information, not a Grid-centred Attribute: meshio's TimeSeriesReader refuses any Attribute that is
+        # neither Node- nor Cell-centred; the frequency is also the grid's time value and in its name
+        for name, grid_value in (("frequency_Hz", value), ("shape_scale_m_sqrt_kg", self.scales[k])):
+            ET.SubElement(step, "Information", Name=name, Value=repr(grid_value))
 
-    def _attrs(self, value: float) -> dict:
-        return {"frequency_Hz": value, "units": "1/sqrt(kg) (mass-normalised)"}
+    def _attrs(self, k: int, value: float) -> dict:
+        return {"frequency_Hz": value, "units": "m", "amplitude_m": self.amplitude_m,
+                "shape_scale_m_sqrt_kg": self.scales[k],
+                "meaning": "mass-normalised mode shape [1/sqrt(kg)] times shape_scale_m_sqrt_kg: its largest vertex "
+                           "displacement is amplitude_m"}
 
 
 class WaveExport(_VertexSeriesExport):
@@ -258,5 +282,5 @@ class WaveExport(_VertexSeriesExport):
     def _name(self, k: int, value: float) -> str:
         return f"t = {value * 1e6:.3f} us"
 
-    def _attrs(self, value: float) -> dict:
+    def _attrs(self, k: int, value: float) -> dict:
         return {"units": "m"}

@@ -323,7 +323,7 @@ def write_modes(model, modal, out: Path, summary: dict) -> None:
     for state, modes in (("short", modal.short), ("open", modal.open)):
         if not modes:
             continue
-        export = ModeShapeExport(out / f"modes_{state}.xdmf", model)
+        export = ModeShapeExport(out / f"modes_{state}.xdmf", model, model.case.output.mode_shape_amplitude_m)
         for mode in modes:
             export.write(mode.vector, mode.frequency_Hz)
         summary["outputs"] += export.close()

@@ -291,3 +291,46 @@ def read_time_series(path: Path) -> dict[str, np.ndarray]:
 
     with h5py.File(path, "r") as f:
         return {name: f[name][:] for name in f}
+
+
+SERIES_CSV = "transient.csv"
+
+
+def write_series_csv(h5_path: Path, csv_path: Path, block_rows: int = 20000) -> None:
+    """The time rows of a time-series file as CSV (``output.series_csv``): one header line naming each column
+    with its unit, ``<dataset> [<units>]`` or ``<dataset>[<k>] [<units>]`` for component k of a vector (time_s and
+    dt_s first, then the datasets by name), then one
+    line per row with every value exact (17 significant digits). Tables (datasets marked :data:`TABLE`) stay
+    in the HDF5 file. Written to a temporary name and renamed."""
+    import io
+
+    import h5py
+
+    from app.files import atomic_write
+
+    with h5py.File(h5_path, "r") as f:
+        names = [name for name in f if TABLE not in f[name].attrs and f[name].ndim in (1, 2)]
+        first = [name for name in (TIME, STEP) if name in names]        # then the others, by name
+        names = first + [name for name in names if name not in first]
+        rows = f[names[0]].shape[0] if names else 0
+        header = []
+        for name in names:
+            units = f[name].attrs.get(UNITS, "")
+            units = units.decode() if isinstance(units, bytes) else str(units)
+            if f[name].ndim == 1:
+                header.append(f"{name} [{units}]")
+            else:
+                header += [f"{name}[{k}] [{units}]" for k in range(f[name].shape[1])]
+
+        def write(fh) -> None:
+            out = io.TextIOWrapper(fh, encoding="utf-8", newline="\n")
+            out.write(",".join(header) + "\n")
+            for start in range(0, rows, block_rows):
+                stop = min(start + block_rows, rows)
+                block = np.column_stack([np.asarray(f[name][start:stop], dtype=float).reshape(stop - start, -1)
+                                         for name in names])
+                np.savetxt(out, block, fmt="%.17g", delimiter=",")
+            out.flush()
+            out.detach()
+
+        atomic_write(csv_path, write)

@@ -119,6 +119,8 @@ def main(path, png, at=None):
         f = block.GetFieldData().GetArray("frequency_Hz")
         if f is not None:
             frequency = f.GetValue(0)
+    if frequency is None and path.rsplit("/", 1)[-1].startswith("modes_"):
+        frequency = show                                # a mode file's time value is the mode's frequency [Hz]
     # Warp by the displacement, scaled so the largest displacement shows as 10 % of the model size
     fe = max(raw, key=lambda item: item[1].GetNumberOfPoints())[1]
     u_max = max(fe.GetPointData().GetArray("displacement").GetRange(-1)[1], 1e-300)

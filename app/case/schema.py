@@ -279,6 +279,13 @@ class OutputSection:
         False, doc="transient: per output interval and per sample point of every sampled surface contact, the mean "
                    "pressure and the fractions of time closed, sticking and slipping either way (tables "
                    "'<contact>_sites_*' in transient.h5)")
+    series_csv: bool = param(
+        False, doc="transient and lumped: the time series also as transient.csv (a header line of names with units, "
+                   "one column per component, the rows of transient.h5; docs/transient.md)")
+    mode_shape_amplitude_m: float = param(
+        1e-3, gt=0, unit="m", doc="mode-shape files: each mode written scaled so its largest vertex displacement is "
+                                  "this (Warp By Vector at scale 1 shows it); the factor applied to the "
+                                  "mass-normalised shape is in the file (docs/summary.md)")
 
 
 @dataclass(frozen=True)

@@ -255,6 +255,10 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     summaries = engine.statistics(h5_path) if comm.rank == 0 else None
     results["contacts"], results["statistics"] = comm.bcast(summaries, root=0)
     results["outputs"] = [h5_path.name, *checkpoint.files(), *(fields.files() if fields is not None else [])]
+    if case.output.series_csv:                   # the whole series (a resumed run's too), once at the end
+        if comm.rank == 0:
+            S.write_series_csv(h5_path, out_dir / S.SERIES_CSV)
+        results["outputs"].append(S.SERIES_CSV)
     engine.close()
     return results
 

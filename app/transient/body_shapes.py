@@ -101,7 +101,7 @@ def body_shapes(transient, scene_size_m: float) -> dict[str, list[_Shape]]:
     for c in transient.contacts:
         if c.kind == "point" and not shapes[c.lower]:
             shapes[c.lower].append(_Shape("slab", _unit3(c.direction, gdim), _box(patch, -patch / 2, 0.0)))
-    for name, found in shapes.items():
+    for found in shapes.values():
         if not found:
             found.append(_Shape("marker", default_axis, _sphere(scene_size_m / 50)))
     return shapes

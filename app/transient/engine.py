@@ -191,9 +191,8 @@ class FEEngine:
         if not self.case.output.fields:
             return None
         from app.exports import VertexFields
-        from app.transient.fields import FieldSeriesExport
-
         from app.transient.body_shapes import BodyMeshes
+        from app.transient.fields import FieldSeriesExport
 
         tm, system, case = self.tm, self.system, self.case
         slices = {b.name: tm.rigid.all_dofs(b.name) for b in tm.rigid.bodies}

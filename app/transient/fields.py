@@ -39,7 +39,6 @@ from app.exports import (
 from app.files import replace_file, write_h5_atomic
 from app.killpoint import kill_point
 
-
 BODY_GRID = "rigid_bodies"      # name of the bodies' grid in the companion file
 
 
