@@ -216,10 +216,13 @@ def test_expanded_fields_equal_the_reduced_solution_at_the_output_times(one_go_c
         expected = series["tip_displacement_m"][row]
         assert abs(expected) > 1e-7
         assert u[tip, 1] == pytest.approx(expected, rel=1e-12)
-    text = (out / "transient_fields.xdmf").read_text()
-    for body in ("ball", "stem", "rock"):
-        assert text.count(f'<Grid Name="{body}"') == len(times)
+    # the bodies with their shapes: the companion file, one grid of all bodies per output time
+    text = (out / "transient_bodies.xdmf").read_text()
+    assert text.count('<Grid Name="rigid_bodies"') == len(times)
+    with h5py.File(out / "transient_fields" / "bodies.h5", "r") as f:
+        assert [str(n) for n in f["body"].attrs["names"]] == ["ball", "stem", "rock"]
     for name in ("transient_fields.xdmf", "transient_fields/mesh.h5", "transient_fields/step_000002.h5",
+                 "transient_bodies.xdmf", "transient_fields/bodies.h5",
                  "checkpoint/checkpoint.json", "checkpoint/reduced-model.npz", "summary.json"):
         assert name in summary["outputs"]
     assert sorted(summary["outputs"]) == sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())

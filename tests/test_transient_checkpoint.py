@@ -244,11 +244,14 @@ def test_field_series_written_at_the_output_interval(one_go):
             amplitude = max(amplitude, np.abs(f["displacement"][:, 1]).max())
             assert f["displacement"].attrs["time_s"] == times[k]
     assert 1e-6 < amplitude < 30e-6                     # the tip vibrates at ~15 um
-    text = (out / "transient_fields.xdmf").read_text()
-    for body in ("ball", "stem", "rock"):
-        assert text.count(f'<Grid Name="{body}"') == len(times)
+    # the bodies with their shapes: the companion file, one grid of all bodies per output time
+    text = (out / "transient_bodies.xdmf").read_text()
+    assert text.count('<Grid Name="rigid_bodies"') == len(times)
+    with h5py.File(out / "transient_fields" / "bodies.h5", "r") as f:
+        assert [str(n) for n in f["body"].attrs["names"]] == ["ball", "stem", "rock"]
     outputs = summary["outputs"]
     for name in ("transient.h5", "transient_fields.xdmf", "transient_fields/mesh.h5", "transient_fields/step_000002.h5",
+                 "transient_bodies.xdmf", "transient_fields/bodies.h5",
                  "checkpoint/checkpoint.json", "summary.json"):
         assert name in outputs
     for name in outputs:
@@ -321,8 +324,10 @@ def assert_readable_outputs(out: Path) -> None:
         with h5py.File(out / "transient.h5", "r") as f:
             t = f["time_s"][:] if "time_s" in f else np.zeros(0)
         assert np.all(np.diff(t) > 0)
-    if (out / "transient_fields.xdmf").exists():
-        tree = ET.parse(out / "transient_fields.xdmf")
+    for xdmf in ("transient_fields.xdmf", "transient_bodies.xdmf"):
+        if not (out / xdmf).exists():
+            continue
+        tree = ET.parse(out / xdmf)
         for item in tree.iter("DataItem"):
             if item.get("Format") == "HDF":
                 name, path = item.text.strip().split(":", 1)
