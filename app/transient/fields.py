@@ -25,6 +25,7 @@ import numpy as np
 
 from app.exports import (
     FE_GRID,
+    extra_fields,
     mesh_grid,
     point_grid,
     step_bytes,
@@ -66,6 +67,8 @@ class FieldSeriesExport:
             write_mesh_h5(self.dir / "mesh.h5", self.vertex)
             replace_file(self.path, self._document())
         self.written = self.comm.bcast(len(self.steps), root=0)
+        # peaks per region over the frames written by this run (app.fe.derived.region_peaks), every rank
+        self.peaks: dict | None = {} if getattr(vertex, "derived", ()) else None
 
     def _next_after(self, t: float) -> float:
         return (math.floor(t / self.interval_s * (1 + 1e-9) + 1e-9) + 1) * self.interval_s
@@ -76,22 +79,25 @@ class FieldSeriesExport:
                                                                for k in range(self.written)]
 
     def _document(self) -> bytes:
-        return xdmf_document(self.steps, self.path.stem)
+        return xdmf_document(self.steps, self.path.stem, getattr(self.vertex, "region_names", None))
 
     def write(self, t: float, body_positions=None) -> None:
         if t < self.next_s - 1e-9 * self.interval_s:
             return
-        sampled = self.vertex.sample(self.solution())
+        x = self.solution()
+        sampled = self.vertex.sample(x)
+        derived = self._derived(x)
         if self.rank0:
             u, phi = sampled
             k = len(self.steps)
             name = f"step_{k:06d}.h5"
-            write_h5_atomic(self.dir / name, {"displacement": u, "potential": phi},
+            write_h5_atomic(self.dir / name, {"displacement": u, "potential": phi, **derived},
                             {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t}})
             kill_point("fields_data")                   # the step file exists, the XML does not name it yet
             step = ET.Element("Grid", Name=f"t = {t:.9g} s", GridType="Collection", CollectionType="Spatial")
             ET.SubElement(step, "Time", Value=repr(float(t)))
-            step.append(mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:"))
+            step.append(mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:",
+                                  extra_fields(derived)))
             z = np.asarray(body_positions, dtype=float) if body_positions is not None else None
             for body, sl, start in self.bodies:
                 position = z[sl] if z is not None else start
@@ -101,6 +107,20 @@ class FieldSeriesExport:
         self.written += 1
         self.next_s = self._next_after(t)
         kill_point("fields_written")
+
+    def _derived(self, x) -> dict:
+        """The output's derived vertex fields (rank 0; name -> array) and the running peaks. Collective."""
+        if self.peaks is None:
+            return {}
+        from app.fe.derived import merge_peaks, node_fields, region_peaks
+
+        raw = self.vertex.sample_derived(x)
+        fields, peaks = {}, {}
+        if self.rank0:
+            fields = node_fields(self.vertex.vertex_average(raw), self.vertex.derived)
+            peaks = region_peaks(raw, self.vertex.mesh_arrays["region"], self.vertex.model.regions)
+        merge_peaks(self.peaks, self.comm.bcast(peaks, root=0))
+        return fields
 
     def close(self) -> None:
         """Nothing stays open between outputs."""
