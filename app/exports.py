@@ -250,8 +250,8 @@ def write_mesh_h5(path: Path, vertex: VertexFields) -> None:
 
 
 def mesh_h5_attributes(vertex: VertexFields) -> dict:
-    return {"mesh/geometry": {"units": "m"}, "mesh/region": {"meaning": "cell group tag of the mesh",
-                                                             "names": region_names_text(getattr(vertex, "region_names", {}))}}
+    names = region_names_text(getattr(vertex, "region_names", {}))    # the modal tier's vertex basis has none
+    return {"mesh/geometry": {"units": "m"}, "mesh/region": {"meaning": "cell group tag of the mesh", "names": names}}
 
 
 class _VertexSeriesExport:

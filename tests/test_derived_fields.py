@@ -256,7 +256,8 @@ def test_pzt_bar_blocked_stress(kind, lateral):
     else:
         supports = '[{ facets = ["bottom", "top"], components = ["z"] }]'
     case = load_case(ROOT / "cases" / "validation" / f"pzt4-bar-{kind}.toml",
-                     ['analyses=["harmonic"]', 'harmonic.f_start_Hz=1.0', 'harmonic.f_stop_Hz=2.0', f"supports={supports}", f"harmonic.voltage_V={voltage}",
+                     ['analyses=["harmonic"]', "harmonic.f_start_Hz=1.0", "harmonic.f_stop_Hz=2.0",
+                      f"supports={supports}", f"harmonic.voltage_V={voltage}",
                       'output.derived=["stress", "electric_field"]',
                       f"geometry.parameters.length_m={length}", "geometry.parameters.axial_divisions=4"])
     model = build_model(case, comm)

@@ -160,20 +160,20 @@ def largest_principal_cycle_max(T_re: np.ndarray, T_im: np.ndarray, phases: int 
     theta = 2 * np.pi * np.arange(phases) / phases
     step = theta[1]
     out = np.empty(T_re.shape[0])
+
+    def largest(re, im, th):
+        T = re * np.cos(th)[..., None] - im * np.sin(th)[..., None]
+        return np.linalg.eigvalsh(voigt_tensor(T))[..., -1]
+
     for start in range(0, T_re.shape[0], chunk):
         re, im = T_re[start:start + chunk], T_im[start:start + chunk]
-
-        def largest(th):
-            T = re * np.cos(th)[..., None] - im * np.sin(th)[..., None]
-            return np.linalg.eigvalsh(voigt_tensor(T))[..., -1]
-
-        samples = np.stack([largest(np.full(re.shape[0], th)) for th in theta], axis=1)
+        samples = np.stack([largest(re, im, np.full(re.shape[0], th)) for th in theta], axis=1)
         k = np.argmax(samples, axis=1)
         rows = np.arange(re.shape[0])
         y0, y1, y2 = samples[rows, k - 1], samples[rows, k], samples[rows, (k + 1) % phases]
         curvature = y0 - 2 * y1 + y2
         shift = np.where(curvature < 0, 0.5 * (y0 - y2) / np.where(curvature < 0, curvature, -1.0), 0.0)
-        refined = largest(theta[k] + np.clip(shift, -1.0, 1.0) * step)
+        refined = largest(re, im, theta[k] + np.clip(shift, -1.0, 1.0) * step)
         out[start:start + chunk] = np.maximum(y1, refined)
     return out
 

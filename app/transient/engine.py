@@ -195,7 +195,8 @@ class FEEngine:
 
         tm, system = self.tm, self.system
         bodies = [(b.name, tm.rigid.dofs(b.name), b.position_m) for b in tm.rigid.bodies]
-        export = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", VertexFields(tm.model, self.case.output.derived),
+        vertex = VertexFields(tm.model, self.case.output.derived)
+        export = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
                                    lambda: system.solution_vector,
                                    self.cfg.output_interval_s, bodies=bodies, resume_from_s=resume_from_s)
         if resume_from_s is None:
