@@ -99,6 +99,10 @@ class VertexFields:
                 region[p[2]] = p[4]
             self._cell_orders = [p[2] for p in parts]
             self._cell_vertices = cells      # dolfinx vertex order: the derived fields' reference vertices
+            from app.fe.derived import RegionAveraging
+
+            self.averaging = RegionAveraging(cells, region, self.n_nodes,
+                                             [r.tag for r in model.regions if r.e is not None])
             if permutation is not None:
                 cells = cells[:, permutation]
             self.mesh_arrays = {"geometry": x, "topology": cells, "region": region}
@@ -119,13 +123,22 @@ class VertexFields:
             raw[order] = part
         return raw
 
+    def derived_frame(self, x):
+        """(derived vertex fields, peaks per region) of a full u-phi vector on rank 0, (None, None) elsewhere:
+        app.fe.derived.node_fields and region_peaks of the region-wise averaged values. Collective."""
+        from app.fe.derived import node_fields, region_peaks
+
+        raw = self.sample_derived(x)
+        if raw is None:
+            return None, None
+        pairs = self.averaging.average(raw)
+        return (node_fields(self.averaging.at_vertices(pairs), self.derived),
+                region_peaks(pairs, self.averaging.pair_region, self.model.regions))
+
     def vertex_average(self, raw: np.ndarray) -> np.ndarray:
-        """Averaged nodal values (vertices, columns) of cell-vertex values (cells, vertices, columns): the mean
-        over the cells that share a vertex (rank 0)."""
-        sums = np.zeros((self.n_nodes, raw.shape[-1]))
-        np.add.at(sums, self._cell_vertices.ravel(), raw.reshape(-1, raw.shape[-1]))
-        counts = np.bincount(self._cell_vertices.ravel(), minlength=self.n_nodes)
-        return sums / np.maximum(counts, 1)[:, None]
+        """One value per vertex (vertices, columns) of cell-vertex values (cells, vertices, columns), averaged
+        region by region (app.fe.derived.RegionAveraging; rank 0)."""
+        return self.averaging.at_vertices(self.averaging.average(raw))
 
     @staticmethod
     def _node_dofs(space, cell_nodes, n_owned, n_nodes) -> np.ndarray:
@@ -275,12 +288,11 @@ class _VertexSeriesExport:
 
     def _derived(self, vector) -> dict:
         """The frame's derived vertex fields (name -> array, rank 0), app.fe.derived. Collective."""
-        from app.fe.derived import node_fields
 
         if not self.vertex.derived:
             return {}
-        raw = self.vertex.sample_derived(vector)
-        return node_fields(self.vertex.vertex_average(raw), self.vertex.derived) if raw is not None else {}
+        fields, _ = self.vertex.derived_frame(vector)
+        return fields or {}
 
     def _name(self, k: int, value: float) -> str:
         raise NotImplementedError
@@ -369,10 +381,11 @@ class HarmonicFieldExport(_VertexSeriesExport):
         peaks = {}
         if vertex.comm.rank == 0:
             extra = {"displacement_im": im[0], "potential_im": im[1]}
-            extra.update(harmonic_node_fields(vertex.vertex_average(raw_re), vertex.vertex_average(raw_im),
-                                              vertex.derived))
+            pairs_re, pairs_im = vertex.averaging.average(raw_re), vertex.averaging.average(raw_im)
+            at = vertex.averaging.at_vertices
+            extra.update(harmonic_node_fields(at(pairs_re), at(pairs_im), vertex.derived))
             self.frames.append((float(frequency_Hz), *re, extra))
-            peaks = region_peaks(raw_re, vertex.mesh_arrays["region"], vertex.model.regions, raw_im)
+            peaks = region_peaks(pairs_re, vertex.averaging.pair_region, vertex.model.regions, pairs_im)
         return vertex.comm.bcast(peaks, root=0)
 
     def _group(self, k: int) -> str:

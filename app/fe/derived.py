@@ -6,10 +6,9 @@ axisymmetric model, the Fourier amplitudes of a Fourier-harmonic one).
 How they are computed: the UFL expressions are evaluated exactly at the vertices of every cell
 (:class:`CellVertexEvaluator`, at points a relative 1e-6 inside the cell; with degree-2 displacements the
 stress is linear in a straight 3D cell).
-These unaveraged "element nodal" values give the peaks per region (a region's own cells only, so a
-jump of the stress across a material interface is not smeared). The field files carry vertex values
-averaged over the cells that share the vertex (the usual averaged nodal result), see
-:meth:`app.exports.VertexFields.sample_derived`.
+They are averaged region by region at each vertex (:class:`RegionAveraging`): the peaks per region come
+from a region's own values, and the field files carry one value per vertex (the piezoelectric side of an
+interface), see :meth:`app.exports.VertexFields.derived_frame`.
 
 Harmonic results: the field at phase theta is X(theta) = X_re cos theta - X_im sin theta. The maximum over
 the cycle of a quantity whose square is a quadratic form of X (von Mises stress, |E|) is solved exactly:
@@ -209,17 +208,54 @@ def harmonic_node_fields(re: np.ndarray, im: np.ndarray, names) -> dict[str, np.
     return out
 
 
-def region_peaks(raw: np.ndarray, region_of_cell: np.ndarray, regions, raw_im: np.ndarray | None = None) -> dict:
-    """Peaks per named region from unaveraged cell-vertex values (cells, vertices, 18): the largest von Mises
-    stress [Pa]; in piezoelectric regions also the largest principal stress [Pa] and the largest |E| [V/m].
-    With ``raw_im`` (a harmonic solution) each is the maximum over the cycle. Keys :data:`PEAK_KEYS`."""
+class RegionAveraging:
+    """Region-wise averaged vertex values (ANSYS' material-wise averaging): a value per (region, vertex) pair, the
+    mean over the region's cells that share the vertex, so a field that jumps across an interface (E between
+    oppositely poled rings and 0 in a grounded metal part, stress across materials) keeps both sides. The files
+    carry one value per vertex: that of the piezoelectric region if one touches it (E and D live there, and a
+    ceramic's tension is what limits it), else of the region with the larger tag. Built on rank 0 from the
+    mesh's cells (vertex indices) and their region tags."""
+
+    def __init__(self, topology: np.ndarray, region_of_cell: np.ndarray, n_nodes: int, piezoelectric_tags):
+        n_per_cell = topology.shape[1]
+        tags = np.repeat(np.asarray(region_of_cell, dtype=np.int64), n_per_cell)
+        key = tags * n_nodes + np.asarray(topology, dtype=np.int64).ravel()
+        pairs, self.cell_pair = np.unique(key, return_inverse=True)
+        self.pair_region, self.pair_vertex = pairs // n_nodes, pairs % n_nodes
+        self.counts = np.bincount(self.cell_pair, minlength=pairs.size)
+        priority = self.pair_region + np.isin(self.pair_region, list(piezoelectric_tags)) * (self.pair_region.max() + 1)
+        order = np.lexsort((priority, self.pair_vertex))
+        self.vertex_pair = order[np.r_[np.diff(self.pair_vertex[order]) != 0, True]]
+        if self.vertex_pair.size != n_nodes:
+            raise RuntimeError("a mesh vertex belongs to no cell")
+
+    @property
+    def size(self) -> int:
+        return self.pair_region.size
+
+    def average(self, raw: np.ndarray) -> np.ndarray:
+        """(pairs, columns) means of cell-vertex values (cells, vertices per cell, columns)."""
+        sums = np.zeros((self.size, raw.shape[-1]))
+        np.add.at(sums, self.cell_pair, raw.reshape(-1, raw.shape[-1]))
+        return sums / self.counts[:, None]
+
+    def at_vertices(self, pair_values: np.ndarray) -> np.ndarray:
+        """One value per mesh vertex (the rule above) from (pairs, ...) values."""
+        return pair_values[self.vertex_pair]
+
+
+def region_peaks(values: np.ndarray, pair_region: np.ndarray, regions, values_im: np.ndarray | None = None) -> dict:
+    """Peaks per named region from its region-wise averaged vertex values (:class:`RegionAveraging`: (pairs, 18)
+    and each pair's region tag): the largest von Mises stress [Pa]; in piezoelectric regions also the largest
+    principal stress [Pa] and the largest |E| [V/m]. With ``values_im`` (a harmonic solution) each is the
+    maximum over the cycle. Keys :data:`PEAK_KEYS`."""
     out = {}
     for region in regions:
-        mask = region_of_cell == region.tag
+        mask = pair_region == region.tag
         if not mask.any():
             continue
-        re = raw[mask].reshape(-1, RAW_COLUMNS)
-        im = raw_im[mask].reshape(-1, RAW_COLUMNS) if raw_im is not None else None
+        re = values[mask]
+        im = values_im[mask] if values_im is not None else None
         T_re = re[:, RAW["stress"]]
         if im is None:
             peaks = {"von_mises_Pa": float(von_mises(T_re).max())}

@@ -112,15 +112,11 @@ class FieldSeriesExport:
         """The output's derived vertex fields (rank 0; name -> array) and the running peaks. Collective."""
         if self.peaks is None:
             return {}
-        from app.fe.derived import merge_peaks, node_fields, region_peaks
+        from app.fe.derived import merge_peaks
 
-        raw = self.vertex.sample_derived(x)
-        fields, peaks = {}, {}
-        if self.rank0:
-            fields = node_fields(self.vertex.vertex_average(raw), self.vertex.derived)
-            peaks = region_peaks(raw, self.vertex.mesh_arrays["region"], self.vertex.model.regions)
+        fields, peaks = self.vertex.derived_frame(x)
         merge_peaks(self.peaks, self.comm.bcast(peaks, root=0))
-        return fields
+        return fields or {}
 
     def close(self) -> None:
         """Nothing stays open between outputs."""
