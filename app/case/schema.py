@@ -279,7 +279,7 @@ class OutputSection:
         default_factory=lambda: ["von_mises", "principal_stress", "electric_field"],
         doc="derived fields added to the FE field files (modes, harmonic response, FE transient): strain [-], stress "
             "[Pa], von_mises [Pa], principal_stress [Pa], electric_field [V/m], electric_displacement [C/m^2]; "
-            "averaged vertex values (docs/fields.md); [] for none")
+            "region-wise averaged vertex values (docs/fields.md); [] for none")
     energies: bool = param(
         False, doc="transient: energy columns (kinetic, strain, rigid kinetic, contact penalty, damping loss) and the "
                    "electrodes' charges, for an energy balance")
