@@ -201,6 +201,8 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
         with timer.phase("transient"):
             results["transient"] = run_transient_analysis(case, out, comm, log, resume)
         summary["outputs"] += results["transient"].pop("outputs", [])
+        if "regions" in results["transient"]:         # no FE model here: the reduced model's region table
+            summary["regions"] = results["transient"]["regions"]
         print_table(result_rows(results, scene_of(case)), log)
         return
     with timer.phase("mesh"):

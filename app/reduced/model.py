@@ -33,6 +33,8 @@ from app.contact.sites import contact_site_sets
 from app.errors import CaseError, NumericalFailure
 
 CACHE_VERSION = 5
+# fields a saved model may lack (saved before they existed): load() gives them their empty values
+OPTIONAL_FIELDS = ("derived_basis", "region_table")
 
 
 @dataclass
@@ -102,6 +104,8 @@ class ReducedModel:
         values = {}
         with np.load(path, allow_pickle=False) as f:
             for field in dataclasses.fields(cls):
+                if field.name in OPTIONAL_FIELDS and field.name not in f:
+                    continue
                 value = f[field.name]
                 if field.name in ("inputs", "sample_names", "region_table"):
                     values[field.name] = [str(v) for v in value]
@@ -113,6 +117,9 @@ class ReducedModel:
                     values[field.name] = float(value)
                 else:
                     values[field.name] = np.array(value)
+        if "derived_basis" not in values:         # a model saved before the derived fields (a format-1 checkpoint)
+            values["derived_basis"] = np.zeros((0, values["K"].shape[0]))
+            values["region_table"] = []
         return cls(**values)
 
 
