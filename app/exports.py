@@ -98,7 +98,6 @@ class VertexFields:
                 cells[p[2]] = np.searchsorted(all_inputs, p[3])
                 region[p[2]] = p[4]
             self._cell_orders = [p[2] for p in parts]
-            self._cell_vertices = cells      # dolfinx vertex order: the derived fields' reference vertices
             from app.fe.derived import RegionAveraging
 
             self.averaging = RegionAveraging(cells, region, self.n_nodes,
@@ -263,7 +262,7 @@ def write_mesh_h5(path: Path, vertex: VertexFields) -> None:
 
 
 def mesh_h5_attributes(vertex: VertexFields) -> dict:
-    names = region_names_text(getattr(vertex, "region_names", {}))    # the modal tier's vertex basis has none
+    names = region_names_text(getattr(vertex, "region_names", {}))
     return {"mesh/geometry": {"units": "m"}, "mesh/region": {"meaning": "cell group tag of the mesh", "names": names}}
 
 
