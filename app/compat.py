@@ -62,3 +62,15 @@ def colliding_cells(mesh, points):
     from dolfinx import geometry
 
     return geometry.compute_colliding_cells(mesh, cell_candidates(mesh, points), points)
+
+
+def expression_at_points(ufl_expr, reference_points):
+    """A compiled UFL expression evaluated at ``reference_points`` (n, tdim) of each cell."""
+    return fem.Expression(ufl_expr, reference_points)
+
+
+def evaluate_expression(expression, mesh, cells):
+    """(len(cells), points x value size) values of an Expression; ``eval(mesh, cells)`` from 0.7."""
+    import numpy as np
+
+    return expression.eval(np.asarray(cells, dtype=np.int32))

@@ -38,9 +38,10 @@ class VertexFields:
     """Displacement [m] and potential [V] of a full u-phi vector at the mesh vertices, gathered on
     rank 0; and the mesh itself (vertex coordinates padded to 3, cells, region tag per cell) in the
     mesh's input order. ``sample(x)`` is collective and returns ``(u (N, 3), phi (N,))`` on rank 0,
-    None elsewhere."""
+    None elsewhere. ``derived``: the derived fields (app.fe.derived.DERIVED_FIELDS) the writers add,
+    from :meth:`sample_derived`."""
 
-    def __init__(self, model):
+    def __init__(self, model, derived=()):
         mesh = model.mesh
         self.model = model
         self.comm = comm = mesh.comm
@@ -80,6 +81,9 @@ class VertexFields:
         original = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)[:n_owned]
         parts = comm.gather((inputs[nodes], geometry.x[nodes], original, inputs[cell_nodes], tags[:n_owned]), root=0)
         self.mesh_arrays = None
+        self.derived = tuple(derived)
+        self._evaluator = None
+        self.region_names = {int(r.tag): r.name for r in model.regions}
         if comm.rank == 0:
             all_inputs = np.unique(np.concatenate([p[0] for p in parts]))
             self.n_nodes = all_inputs.size
@@ -93,10 +97,47 @@ class VertexFields:
             for p in parts:
                 cells[p[2]] = np.searchsorted(all_inputs, p[3])
                 region[p[2]] = p[4]
+            self._cell_orders = [p[2] for p in parts]
+            from app.fe.derived import RegionAveraging
+
+            self.averaging = RegionAveraging(cells, region, self.n_nodes,
+                                             [r.tag for r in model.regions if r.e is not None])
             if permutation is not None:
                 cells = cells[:, permutation]
             self.mesh_arrays = {"geometry": x, "topology": cells, "region": region}
             self.n_cells = n_cells
+
+    def sample_derived(self, x) -> np.ndarray | None:
+        """Strain, stress, E, D at the vertices of every cell, unaveraged (app.fe.derived.CellVertexEvaluator),
+        gathered on rank 0 in the mesh's input cell order: (cells, vertices, 18); None elsewhere. Collective."""
+        from app.fe.derived import CellVertexEvaluator
+
+        if self._evaluator is None:
+            self._evaluator = CellVertexEvaluator(self.model)
+        parts = self.comm.gather(self._evaluator.evaluate(x), root=0)
+        if self.comm.rank != 0:
+            return None
+        raw = np.zeros((self.n_cells,) + parts[0].shape[1:])
+        for order, part in zip(self._cell_orders, parts):
+            raw[order] = part
+        return raw
+
+    def derived_frame(self, x):
+        """(derived vertex fields, peaks per region) of a full u-phi vector on rank 0, (None, None) elsewhere:
+        app.fe.derived.node_fields and region_peaks of the region-wise averaged values. Collective."""
+        from app.fe.derived import node_fields, region_peaks
+
+        raw = self.sample_derived(x)
+        if raw is None:
+            return None, None
+        pairs = self.averaging.average(raw)
+        return (node_fields(self.averaging.at_vertices(pairs), self.derived),
+                region_peaks(pairs, self.averaging.pair_region, self.model.regions))
+
+    def vertex_average(self, raw: np.ndarray) -> np.ndarray:
+        """One value per vertex (vertices, columns) of cell-vertex values (cells, vertices, columns), averaged
+        region by region (app.fe.derived.RegionAveraging; rank 0)."""
+        return self.averaging.at_vertices(self.averaging.average(raw))
 
     @staticmethod
     def _node_dofs(space, cell_nodes, n_owned, n_nodes) -> np.ndarray:
@@ -137,9 +178,10 @@ def data_item(parent, source: str, shape, number: str = "Float", precision: int 
     return item
 
 
-def mesh_grid(name: str, vertex: VertexFields, mesh_h5: str, fields_at: str) -> ET.Element:
+def mesh_grid(name: str, vertex: VertexFields, mesh_h5: str, fields_at: str, extra=()) -> ET.Element:
     """A uniform grid on the FE mesh with region tags (from ``mesh_h5``), displacement and potential
-    (``<fields_at>/displacement``, ``<fields_at>/potential``, e.g. ``fields_at = "step.h5:"``)."""
+    (``<fields_at>/displacement``, ``<fields_at>/potential``, e.g. ``fields_at = "step.h5:"``), and the
+    vertex fields ``extra``: (name, components) each at ``<fields_at>/<name>`` (derived fields)."""
     grid = ET.Element("Grid", Name=name, GridType="Uniform")
     cells = vertex.mesh_arrays["topology"]
     topo = ET.SubElement(grid, "Topology", TopologyType=vertex.topology_type, NumberOfElements=str(cells.shape[0]),
@@ -153,13 +195,37 @@ def mesh_grid(name: str, vertex: VertexFields, mesh_h5: str, fields_at: str) -> 
             ("region", "Scalar", "Cell", f"{mesh_h5}:/mesh/region", (vertex.n_cells,), "Int")):
         attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
         data_item(attr, source, shape, number, 8 if number == "Float" else 4)
+    for attr_name, components in extra:
+        kind = {1: "Scalar", 3: "Vector"}.get(components, "Matrix")
+        attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center="Node")
+        shape = (vertex.n_nodes,) if components == 1 else (vertex.n_nodes, components)
+        data_item(attr, f"{fields_at}/{attr_name}", shape)
     return grid
 
 
-def xdmf_document(steps: list[ET.Element | bytes], name: str) -> bytes:
+def region_information(region_names: dict[int, str]) -> ET.Element:
+    """The region tag -> name table as an XDMF Information element of the Domain (``Value`` "1: horn; 2: back";
+    meshio reads past it, and ``mesh/region`` in the HDF5 file carries the same table as attribute ``names``)."""
+    return ET.Element("Information", Name="region_names", Value=region_names_text(region_names))
+
+
+def region_names_text(region_names: dict[int, str]) -> str:
+    return "; ".join(f"{tag}: {name}" for tag, name in sorted(region_names.items()))
+
+
+def extra_fields(names: dict) -> list[tuple[str, int]]:
+    """(name, components) of a frame's derived vertex fields (name -> (n,) or (n, k) array)."""
+    return [(name, 1 if np.ndim(values) == 1 else np.shape(values)[1]) for name, values in names.items()]
+
+
+def xdmf_document(steps: list[ET.Element | bytes], name: str, region_names: dict[int, str] | None = None) -> bytes:
     """An XDMF 3 document: one temporal collection ``name`` holding ``steps`` (elements, or their
-    bytes from :func:`step_bytes`: a long series serialises each step once, not at every output)."""
-    head = (f'<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n<Xdmf Version="3.0">\n <Domain>\n'
+    bytes from :func:`step_bytes`: a long series serialises each step once, not at every output),
+    after the region names' Information element when ``region_names`` is given."""
+    info = ""
+    if region_names:
+        info = "  " + ET.tostring(region_information(region_names), encoding="unicode") + "\n"
+    head = (f'<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n<Xdmf Version="3.0">\n <Domain>\n{info}'
             f'  <Grid Name="{name}" GridType="Collection" CollectionType="Temporal">\n').encode()
     body = b"".join(s if isinstance(s, bytes) else step_bytes(s) for s in steps)
     return head + body + b"  </Grid>\n </Domain>\n</Xdmf>\n"
@@ -173,8 +239,12 @@ def step_bytes(step: ET.Element) -> bytes:
 
 def write_mesh_h5(path: Path, vertex: VertexFields) -> None:
     arrays = vertex.mesh_arrays
-    write_h5_atomic(path, {f"mesh/{k}": v for k, v in arrays.items()},
-                    {"mesh/geometry": {"units": "m"}, "mesh/region": {"meaning": "cell group tag of the mesh"}})
+    write_h5_atomic(path, {f"mesh/{k}": v for k, v in arrays.items()}, mesh_h5_attributes(vertex))
+
+
+def mesh_h5_attributes(vertex: VertexFields) -> dict:
+    names = region_names_text(getattr(vertex, "region_names", {}))
+    return {"mesh/geometry": {"units": "m"}, "mesh/region": {"meaning": "cell group tag of the mesh", "names": names}}
 
 
 class _VertexSeriesExport:
@@ -184,16 +254,25 @@ class _VertexSeriesExport:
 
     group = "frame"
 
-    def __init__(self, path: Path, model):
+    def __init__(self, path: Path, model, derived=()):
         self.path = Path(path)
         self.h5_path = self.path.with_suffix(".h5")
-        self.vertex = VertexFields(model)
-        self.frames: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self.vertex = VertexFields(model, derived)
+        self.frames: list[tuple[float, np.ndarray, np.ndarray, dict]] = []
 
     def write(self, vector, value: float) -> None:
         sampled = self.vertex.sample(vector)
+        extra = self._derived(vector)
         if sampled is not None:
-            self.frames.append((float(value), *sampled))
+            self.frames.append((float(value), *sampled, extra))
+
+    def _derived(self, vector) -> dict:
+        """The frame's derived vertex fields (name -> array, rank 0), app.fe.derived. Collective."""
+
+        if not self.vertex.derived:
+            return {}
+        fields, _ = self.vertex.derived_frame(vector)
+        return fields or {}
 
     def _name(self, k: int, value: float) -> str:
         raise NotImplementedError
@@ -210,19 +289,22 @@ class _VertexSeriesExport:
         if self.vertex.comm.rank != 0:
             return names
         datasets = {f"mesh/{k}": v for k, v in self.vertex.mesh_arrays.items()}
-        steps, attrs = [], {}
-        for k, (value, u, phi) in enumerate(self.frames):
+        steps, attrs = [], mesh_h5_attributes(self.vertex)
+        for k, (value, u, phi, extra) in enumerate(self.frames):
             group = self._group(k)
             datasets[f"{group}/displacement"] = u
             datasets[f"{group}/potential"] = phi
             attrs[f"{group}/displacement"] = self._attrs(k, value)
             attrs[f"{group}/potential"] = {"units": "V"}
-            step = mesh_grid(self._name(k, value), self.vertex, self.h5_path.name, f"{self.h5_path.name}:/{group}")
+            for name, values in extra.items():
+                datasets[f"{group}/{name}"] = values
+            step = mesh_grid(self._name(k, value), self.vertex, self.h5_path.name, f"{self.h5_path.name}:/{group}",
+                             extra_fields(extra))
             step.insert(0, ET.Element("Time", Value=repr(value)))
             self._decorate(step, k, value)
             steps.append(step)
         write_h5_atomic(self.h5_path, datasets, attrs)
-        replace_file(self.path, xdmf_document(steps, self.path.stem))
+        replace_file(self.path, xdmf_document(steps, self.path.stem, self.vertex.region_names))
         return names
 
     def _group(self, k: int) -> str:
@@ -241,19 +323,21 @@ class ModeShapeExport(_VertexSeriesExport):
 
     ``write(vector, frequency_Hz)`` takes a full u-phi vector; ``close()`` writes the files."""
 
-    def __init__(self, path: Path, model, amplitude_m: float = 1e-3):
-        super().__init__(path, model)
+    def __init__(self, path: Path, model, amplitude_m: float = 1e-3, derived=()):
+        super().__init__(path, model, derived)
         self.amplitude_m = float(amplitude_m)
         self.scales: list[float] = []
 
     def write(self, vector, value: float) -> None:
         sampled = self.vertex.sample(vector)
+        extra = self._derived(vector)
         if sampled is not None:
             u, phi = sampled
             largest = float(np.linalg.norm(u, axis=1).max(initial=0.0))
             scale = self.amplitude_m / largest if largest > 0 else 1.0
             self.scales.append(scale)
-            self.frames.append((float(value), u * scale, phi * scale))
+            # the derived fields are linear in the shape: the same scale as the displacement
+            self.frames.append((float(value), u * scale, phi * scale, {k: v * scale for k, v in extra.items()}))
 
     def _group(self, k: int) -> str:
         return f"mode_{k + 1}"
@@ -284,3 +368,37 @@ class WaveExport(_VertexSeriesExport):
 
     def _attrs(self, k: int, value: float) -> dict:
         return {"units": "m"}
+
+
+class HarmonicFieldExport(_VertexSeriesExport):
+    """The steady harmonic response at one frequency as one XDMF grid (its 'time' the frequency [Hz]): the
+    real parts of displacement [m] and potential [V] as ``displacement`` and ``potential`` (Warp By Vector
+    shows phase 0), the imaginary parts as ``displacement_im`` and ``potential_im``, and the derived fields
+    of :func:`app.fe.derived.harmonic_node_fields` (real and imaginary parts, maxima over the cycle).
+    ``write_phasor(x_re, x_im, f)`` is collective and returns the peaks per region over the cycle
+    (:func:`app.fe.derived.region_peaks`) on every rank."""
+
+    def write_phasor(self, x_re, x_im, frequency_Hz: float) -> dict:
+        from app.fe.derived import harmonic_node_fields, region_peaks
+
+        vertex = self.vertex
+        re, im = vertex.sample(x_re), vertex.sample(x_im)
+        raw_re, raw_im = vertex.sample_derived(x_re), vertex.sample_derived(x_im)
+        peaks = {}
+        if vertex.comm.rank == 0:
+            extra = {"displacement_im": im[0], "potential_im": im[1]}
+            pairs_re, pairs_im = vertex.averaging.average(raw_re), vertex.averaging.average(raw_im)
+            at = vertex.averaging.at_vertices
+            extra.update(harmonic_node_fields(at(pairs_re), at(pairs_im), vertex.derived))
+            self.frames.append((float(frequency_Hz), *re, extra))
+            peaks = region_peaks(pairs_re, vertex.averaging.pair_region, vertex.model.regions, pairs_im)
+        return vertex.comm.bcast(peaks, root=0)
+
+    def _group(self, k: int) -> str:
+        return "harmonic"
+
+    def _name(self, k: int, value: float) -> str:
+        return f"harmonic response at {value:.2f} Hz"
+
+    def _attrs(self, k: int, value: float) -> dict:
+        return {"frequency_Hz": value, "units": "m"}

@@ -189,6 +189,8 @@ class HarmonicResult:
     drive_scale_for_target: float | None = None
     wave: dict | None = None
     wave_point: HarmonicPoint | None = None
+    field_peaks: dict | None = None        # peaks per region over the cycle at the |Y| peak (app.fe.derived)
+    field_scale: float | None = None       # the drive scale of those fields (to harmonic.target, else 1)
 
 
 def frequency_grid(model: FEModel, f_r: float | None, f_a: float | None) -> np.ndarray:
@@ -289,11 +291,14 @@ def _sweep(solver, grid, comm) -> list:
 
 
 def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float | None, log,
-                 wave_writer=None, wave_frequency_Hz: float | None = None) -> HarmonicResult:
+                 wave_writer=None, wave_frequency_Hz: float | None = None, response_writer=None) -> HarmonicResult:
     """Sweep, |Y| extrema, target amplitude and travelling-wave measures. The wave is evaluated at
     harmonic.wave.frequency_Hz, else ``wave_frequency_Hz`` (the runner passes the centre of the
     working mode's split pair), else f_r, else the |Y| peak. ``wave_writer(model, solver, f)``, when
-    given, exports the steady wave of the solver's last solution (the runner's export)."""
+    given, exports the steady wave of the solver's last solution (the runner's export).
+    ``response_writer(model, solver, f, scale)``, when given, exports the response at the |Y| peak, its drive
+    scaled by ``scale`` (to harmonic.target's amplitude, else 1), and returns its peaks per region
+    (``result.field_peaks``)."""
     cfg = model.case.harmonic
     solver = HarmonicSolver(model, ops, cfg.voltage_V)
     try:
@@ -329,6 +334,9 @@ def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float |
             result.drive_scale_for_target = cfg.target.amplitude_m / amp if amp > 0 else None
             result.voltage_for_target_V = (result.drive_scale_for_target * cfg.voltage_V
                                            if amp > 0 else None)
+        if response_writer is not None:
+            result.field_scale = result.drive_scale_for_target or 1.0
+            result.field_peaks = response_writer(model, solver, result.peak_Hz, result.field_scale)
         if cfg.wave is not None:
             wave_f = cfg.wave.frequency_Hz or wave_frequency_Hz or f_r or result.peak_Hz
             if cfg.wave.balance is not None:
@@ -378,6 +386,11 @@ def harmonic_summary(result: HarmonicResult) -> dict:
         wave["floating_voltage_V"] = point.floating_voltage_V
         wave["floating_voltage_amplitude_V"] = {k: abs(v) for k, v in point.floating_voltage_V.items()}
         out["travelling_wave"] = wave
+    if result.field_peaks is not None:
+        # harmonic_fields.xdmf: the response at the |Y| peak with every drive phasor times field_drive_scale
+        out["field_peaks"] = result.field_peaks
+        out["field_frequency_Hz"] = result.peak_Hz
+        out["field_drive_scale"] = result.field_scale
     return out
 
 

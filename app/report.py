@@ -93,11 +93,29 @@ def lumped_rows(lumped: dict | None) -> list[tuple[str, str, str]]:
 def result_rows(results: dict, scene=None) -> list[tuple[str, str, str]]:
     """Every row of a run's end-of-run table: frequency domain, transient or lumped, the scene's."""
     rows = frequency_domain_rows(results)
+    rows += field_peak_rows((results.get("harmonic") or {}).get("field_peaks"), "harmonic, cycle max")
     for key, common in (("transient", transient_rows), ("lumped", lumped_rows)):
         if results.get(key):
             rows += common(results[key])
+            rows += field_peak_rows(results[key].get("field_peaks"), "transient, frames")
             if scene is not None:
                 rows += scene.table_rows(results[key])
+    return rows
+
+
+# peak keys of app.fe.derived.region_peaks -> (table label, unit, scale)
+FIELD_PEAK_ROWS = {"von_mises_Pa": ("peak von Mises", "MPa", 1e-6),
+                   "max_principal_stress_Pa": ("peak max principal stress", "MPa", 1e-6),
+                   "electric_field_V_per_m": ("peak |E|", "kV/mm", 1e-6)}
+
+
+def field_peak_rows(peaks: dict | None, where: str) -> list[tuple[str, str, str]]:
+    """One row per region and peak of the derived fields (``field_peaks`` of a harmonic or transient result)."""
+    rows = []
+    for region, values in (peaks or {}).items():
+        for key, (label, unit, scale) in FIELD_PEAK_ROWS.items():
+            if key in values:
+                rows.append((f"{label}, {region} ({where})", f"{values[key] * scale:.4g}", unit))
     return rows
 
 

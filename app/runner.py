@@ -201,6 +201,8 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
         with timer.phase("transient"):
             results["transient"] = run_transient_analysis(case, out, comm, log, resume)
         summary["outputs"] += results["transient"].pop("outputs", [])
+        if "regions" in results["transient"]:         # no FE model here: the reduced model's region table
+            summary["regions"] = results["transient"]["regions"]
         print_table(result_rows(results, scene_of(case)), log)
         return
     with timer.phase("mesh"):
@@ -209,6 +211,7 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
     cells = model.mesh.topology.index_map(model.mesh.topology.dim).size_global
     summary["dofs"] = {"total": imap.size_global, "cells": cells}
     results["mass_kg"] = model.total_mass_kg()
+    summary["regions"] = {str(region.tag): region.name for region in model.regions}
     log(f"mesh: {cells} cells, {imap.size_global} DOFs, mass {results['mass_kg'] * 1e3:.2f} g")
     modal = harmonic = None
     f_r = f_a = None
@@ -249,7 +252,12 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
                 if case.output.fields and case.harmonic.wave and case.harmonic.wave.animation_frames:
                     def wave_writer(model_, solver, frequency_Hz):
                         write_wave(model_, solver, frequency_Hz, case.harmonic.wave.animation_frames, out, summary)
-                harmonic = run_harmonic(model, ops, f_r, f_a, log, wave_writer, pair_centre_Hz(modal))
+                response_writer = None
+                if case.output.fields:
+                    def response_writer(model_, solver, frequency_Hz, scale):
+                        return write_harmonic_response(model_, solver, frequency_Hz, scale, out, summary)
+                harmonic = run_harmonic(model, ops, f_r, f_a, log, wave_writer, pair_centre_Hz(modal),
+                                        response_writer)
                 results["harmonic"] = harmonic_summary(harmonic)
                 for line in wave_lines(results["harmonic"].get("travelling_wave")):
                     log(line)
@@ -319,14 +327,36 @@ TIER_RUNNERS = {"fe": run_fe, "modal": run_fe, "lumped": run_lumped}
 
 def write_modes(model, modal, out: Path, summary: dict) -> None:
     from app.exports import ModeShapeExport
+    from app.fe.derived import derived_for_model
 
+    derived = derived_for_model(model, model.case.output.derived)
     for state, modes in (("short", modal.short), ("open", modal.open)):
         if not modes:
             continue
-        export = ModeShapeExport(out / f"modes_{state}.xdmf", model, model.case.output.mode_shape_amplitude_m)
+        export = ModeShapeExport(out / f"modes_{state}.xdmf", model, model.case.output.mode_shape_amplitude_m,
+                                 derived)
         for mode in modes:
             export.write(mode.vector, mode.frequency_Hz)
         summary["outputs"] += export.close()
+
+
+def write_harmonic_response(model, solver, frequency_Hz: float, scale: float, out: Path, summary: dict) -> dict:
+    """The response at ``frequency_Hz`` (the solver's last solution times ``scale``) as harmonic_fields.xdmf;
+    returns the peaks per region over the cycle."""
+    from app.exports import HarmonicFieldExport
+    from app.fe.derived import derived_for_model
+
+    x_re, x_im = solver.full_solution()
+    re, im = x_re.copy(), x_im.copy()
+    re.scale(scale)
+    im.scale(scale)
+    derived = derived_for_model(model, model.case.output.derived)
+    export = HarmonicFieldExport(out / "harmonic_fields.xdmf", model, derived)
+    peaks = export.write_phasor(re, im, frequency_Hz)
+    re.destroy()
+    im.destroy()
+    summary["outputs"] += export.close()
+    return peaks
 
 
 def pair_centre_Hz(modal) -> float | None:

@@ -27,6 +27,17 @@ def electric_displacement(S, E, e, eps):
     return ufl.dot(e, S) + ufl.dot(eps, E)
 
 
+def derived_quantities(u, phi, c, e, eps, kind):
+    """(strain S [-], stress T [Pa], field E [V/m], displacement D [C/m^2]) of a region from the
+    displacement ``u`` and potential ``phi``, by the law above: the Voigt 6-vectors S and T (IEEE order,
+    engineering shear strain) and the 3-vectors E and D in the model's 3D axes. A region without
+    piezoelectric data (e is None) is elastic, T = c S, and carries no D (its potential is held at 0 V)."""
+    S, E = strain_voigt(u, kind), electric_field(phi, kind)
+    if e is None:
+        return S, ufl.dot(c, S), E, ufl.as_vector([0.0, 0.0, 0.0])
+    return S, stress(S, E, c, e), E, electric_displacement(S, E, e, eps)
+
+
 def coupled_stiffness(u, phi, v, psi, c, e, eps, kind: str, dx, weight=1.0):
     """Symmetric indefinite u-phi stiffness form of one piezoelectric region over measure ``dx``;
     ``weight`` is the volume weight (2 pi r for axisymmetric, see kinematics.volume_weight)."""

@@ -76,3 +76,13 @@ def rayleigh_love_factor(poisson, radius, length, order=1):
     """Frequency factor of a thin rod's lateral inertia (Rayleigh-Love): f = f_1D (1 - (nu n pi r_g / L)^2 / 2)
     with r_g^2 = r^2 / 2 the polar radius of gyration of a round section; error O((nu k r)^4)."""
     return 1.0 - 0.5 * (poisson * order * math.pi * radius / length) ** 2 / 2
+
+
+def blocked_stress_33(c, e, E3, lateral: str = "blocked"):
+    """Axial stress T3 [Pa] of a bar poled along 3 whose length is held (S3 = 0) in a uniform field E3 [V/m],
+    from T = c^E S - e^T E: every strain held ("blocked"), T3 = -e33 E3; sides free ("free", T1 = T2 = 0), the
+    lateral strain S1 = S2 = e31 E3 / (c11 + c12) adds 2 c13 S1."""
+    if lateral == "blocked":
+        return -e[2, 2] * E3
+    lateral_strain = e[2, 0] * E3 / (c[0, 0] + c[0, 1])
+    return 2 * c[0, 2] * lateral_strain - e[2, 2] * E3

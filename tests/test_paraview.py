@@ -29,6 +29,7 @@ FE_TINY = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic
 TRANSDUCER_MODAL = ['analyses=["modal"]', "output.plots=false", "geometry.parameters.mesh_size_m=0.003",
                     "geometry.parameters.ceramic_mesh_size_m=0.002"]
 FIGURES = ROOT / "docs" / "figures"
+DEFAULT_DERIVED_NAMES = {"von_mises_Pa", "principal_stress_Pa", "electric_field_V_per_m"}
 MISSING = [tool for tool in ("pvpython", "Xvfb") if shutil.which(tool) is None]
 REQUIRED = os.environ.get("PIEZODYN_REQUIRE_PARAVIEW") == "1"
 needs_paraview = pytest.mark.skipif(MPI.COMM_WORLD.size > 1 or (bool(MISSING) and not REQUIRED),
@@ -101,7 +102,8 @@ def check_transient(report: dict, out: Path) -> None:
     for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
         (fe,) = report[reader]["blocks"]                # the FE grid alone, no extra unwarped mesh
         assert len(report[reader]["times"]) == n_outputs
-        assert set(fe["point_arrays"]) == {"displacement", "potential"}
+        # the default derived fields, units in their names (docs/fields.md)
+        assert set(fe["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
         assert fe["cell_arrays"] == ["region"]
         (bodies,) = report[reader]["body_blocks"]       # every body in one triangle grid, at the same times
         assert report[reader]["body_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
@@ -180,7 +182,7 @@ def test_modal_result_in_paraview(x_display, tmp_path):
     for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
         np.testing.assert_allclose(report[reader]["times"], frequencies, rtol=1e-12)   # time = frequency [Hz]
         (block,) = report[reader]["blocks"]             # one grid: no extra unwarped mesh
-        assert set(block["point_arrays"]) == {"displacement", "potential"}
+        assert set(block["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
         assert block["cell_arrays"] == ["region"]
     import xml.etree.ElementTree as ET
 

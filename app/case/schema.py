@@ -18,6 +18,9 @@ from app.materials import Material, resolve
 
 ModelKind = Literal["axisymmetric", "3d", "plane_strain", "fourier"]
 Analysis = Literal["modal", "harmonic", "circuit", "transient", "lumped"]
+# derived fields of the FE-based analyses (app/fe/derived.py DERIVED_FIELDS; tests/test_derived_fields.py checks the
+# two lists agree)
+DerivedField = Literal["strain", "stress", "von_mises", "principal_stress", "electric_field", "electric_displacement"]
 TagRef = str | int
 
 
@@ -272,6 +275,11 @@ class ReductionSection:
 class OutputSection:
     fields: bool = param(True, doc="write XDMF mode shapes / fields")
     plots: bool = param(True, doc="write PNG plots")
+    derived: list[DerivedField] = param(
+        default_factory=lambda: ["von_mises", "principal_stress", "electric_field"],
+        doc="derived fields added to the FE field files (modes, harmonic response, FE transient): strain [-], stress "
+            "[Pa], von_mises [Pa], principal_stress [Pa], electric_field [V/m], electric_displacement [C/m^2]; "
+            "region-wise averaged vertex values (docs/fields.md); [] for none")
     energies: bool = param(
         False, doc="transient: energy columns (kinetic, strain, rigid kinetic, contact penalty, damping loss) and the "
                    "electrodes' charges, for an energy balance")
@@ -286,6 +294,11 @@ class OutputSection:
         1e-3, gt=0, unit="m", doc="mode-shape files: each mode written scaled so its largest vertex displacement is "
                                   "this (Warp By Vector at scale 1 shows it); the factor applied to the "
                                   "mass-normalised shape is in the file (docs/summary.md)")
+
+    def check(self, file, prefix):
+        for i, name in enumerate(self.derived):
+            if name in self.derived[:i]:
+                raise CaseError(file, f"{prefix}.derived[{i}]", f"{name!r} is listed twice")
 
 
 @dataclass(frozen=True)

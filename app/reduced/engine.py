@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -456,7 +457,8 @@ class ModalEngine:
         from app.transient.fields import FieldSeriesExport
 
         case, slices = self.case, dict(self.body_slices)
-        return FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", ReducedVertexFields(self.model, self.comm),
+        vertex = ReducedVertexFields(self.model, self.comm, self.case.output.derived)
+        return FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
                                  lambda: self.q, self.cfg.output_interval_s,
                                  bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
                                  resume_from_s=resume_from_s)
@@ -498,14 +500,25 @@ class ReducedVertexFields:
     """The field output's vertex values from the reduced model's vertex basis (app/exports.py VertexFields'
     interface): displacement [m] and potential [V] at the mesh vertices = V q, on rank 0."""
 
-    def __init__(self, model: ReducedModel, comm):
+    def __init__(self, model: ReducedModel, comm, derived=()):
         self.comm = comm
         self.model = model
+        # derived fields by expansion (app.fe.derived), when the model carries their basis
+        self.derived = tuple(derived) if model.derived_basis.size else ()
+        self.regions = [_RegionRow(int(tag), name, piezo == "1")
+                        for tag, name, piezo in (row.split("|") for row in model.region_table)]
+        self.region_names = {r.tag: r.name for r in self.regions}
         self.mesh_arrays = {"geometry": model.mesh_geometry, "topology": model.mesh_topology,
                             "region": model.mesh_region}
         self.topology_type = model.mesh_topology_type
         self.n_nodes = model.mesh_geometry.shape[0]
         self.n_cells = model.mesh_topology.shape[0]
+        self.averaging = None
+        if self.derived and comm.rank == 0:
+            from app.fe.derived import RegionAveraging
+
+            self.averaging = RegionAveraging(model.mesh_topology, model.mesh_region, self.n_nodes,
+                                             [r.tag for r in self.regions if r.piezoelectric])
 
     def sample(self, q: np.ndarray):
         if self.comm.rank != 0:
@@ -513,4 +526,28 @@ class ReducedVertexFields:
         values = self.model.vertex_basis @ q
         n = self.n_nodes
         return values[:3 * n].reshape(n, 3), values[3 * n:]
+
+    def derived_frame(self, q: np.ndarray):
+        """(derived vertex fields, peaks per region) of the frame (rank 0; (None, None) elsewhere): the basis's
+        region-wise averaged vertex values combined with q, as the FE tier's (app.exports.VertexFields)."""
+        from app.fe.derived import RAW_COLUMNS, node_fields, region_peaks
+
+        if self.comm.rank != 0:
+            return None, None
+        pairs = (self.model.derived_basis @ q).reshape(self.averaging.size, RAW_COLUMNS)
+        return (node_fields(self.averaging.at_vertices(pairs), self.derived),
+                region_peaks(pairs, self.averaging.pair_region, self.regions))
+
+
+@dataclass(frozen=True)
+class _RegionRow:
+    """A region as app.fe.derived.region_peaks reads it: tag, name, and ``e`` not None when piezoelectric."""
+
+    tag: int
+    name: str
+    piezoelectric: bool
+
+    @property
+    def e(self):
+        return True if self.piezoelectric else None
 

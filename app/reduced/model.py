@@ -32,7 +32,9 @@ from mpi4py import MPI
 from app.contact.sites import contact_site_sets
 from app.errors import CaseError, NumericalFailure
 
-CACHE_VERSION = 3
+CACHE_VERSION = 5
+# fields a saved model may lack (saved before they existed): load() gives them their empty values
+OPTIONAL_FIELDS = ("derived_basis", "region_table")
 
 
 @dataclass
@@ -64,6 +66,11 @@ class ReducedModel:
     mesh_topology: np.ndarray
     mesh_region: np.ndarray
     mesh_topology_type: str
+    # derived fields by expansion: strain, stress, E, D (app.fe.derived.RAW columns) of each basis vector, averaged
+    # region by region at the vertices (app.fe.derived.RegionAveraging of mesh_topology and mesh_region),
+    # (n_pairs * 18, n), or (0, n); and "tag|name|piezoelectric (0/1)" of every region
+    derived_basis: np.ndarray
+    region_table: list
     reduction_wall_s: float
     fe_dofs: int
     mass_kg: float                   # the FE structure's mass (the downforce acts like it)
@@ -86,7 +93,8 @@ class ReducedModel:
         arrays = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            arrays[f.name] = np.array(value, dtype=str) if f.name in ("inputs", "sample_names", "mesh_topology_type") \
+            arrays[f.name] = np.array(value, dtype=str) if f.name in ("inputs", "sample_names", "mesh_topology_type",
+                                                                      "region_table") \
                 else np.asarray(value)
         np.savez(fh, **arrays)
 
@@ -96,8 +104,10 @@ class ReducedModel:
         values = {}
         with np.load(path, allow_pickle=False) as f:
             for field in dataclasses.fields(cls):
+                if field.name in OPTIONAL_FIELDS and field.name not in f:
+                    continue
                 value = f[field.name]
-                if field.name in ("inputs", "sample_names"):
+                if field.name in ("inputs", "sample_names", "region_table"):
                     values[field.name] = [str(v) for v in value]
                 elif field.name == "mesh_topology_type":
                     values[field.name] = str(value)
@@ -107,6 +117,9 @@ class ReducedModel:
                     values[field.name] = float(value)
                 else:
                     values[field.name] = np.array(value)
+        if "derived_basis" not in values:         # a model saved before the derived fields (a format-1 checkpoint)
+            values["derived_basis"] = np.zeros((0, values["K"].shape[0]))
+            values["region_table"] = []
         return cls(**values)
 
 
@@ -134,6 +147,7 @@ def cache_key(case) -> str:
                 "regions": data["regions"], "electrodes": electrodes, "supports": data["supports"],
                 "damping": data["damping"], "reduction": reduction, "contacts": contacts, "bodies": bodies,
                 "motions": motions, "points": data["points"], "fields": bool(case.output.fields),
+                "derived": list(case.output.derived) if case.output.fields else [],
                 "enrich_near_Hz": (case.reduction.enrich_near_Hz or cfg["drive"]["frequency_Hz"])
                 if case.reduction.enrich_modes else None,
                 "damping_Hz": case.damping.reference_frequency_Hz or cfg["drive"]["frequency_Hz"]}
@@ -238,8 +252,10 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
         values = model.point_values(column)
         for i, name in enumerate(sample_names):
             samples[i, j] = values[name]
-    vertex, geometry, topology, region, topology_type = _vertex_basis(model, basis) if case.output.fields else (
-        np.zeros((0, n)), np.zeros((0, 3)), np.zeros((0, 0), np.int64), np.zeros(0, np.int32), "")
+    vertex, geometry, topology, region, topology_type, derived = _vertex_basis(model, basis) if case.output.fields \
+        else (np.zeros((0, n)), np.zeros((0, 3)), np.zeros((0, 0), np.int64), np.zeros(0, np.int32), "",
+              np.zeros((0, n)))
+    region_table = [f"{r.tag}|{r.name}|{int(r.e is not None)}" for r in model.regions]
     n_el = len(electrodes)
     charge = np.array([basis.charge_rows[name] for name in list(electrodes)]).reshape(n_el, n)
     wall = time.perf_counter() - start
@@ -250,7 +266,7 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
                        basis.n_interface, list(basis.electrodes), n_el, basis.mode_frequencies_Hz,
                        basis.enrichment_frequencies_Hz, charge, loads, sample_names, samples, points, weights,
                        contact.astype(np.int64), rows, gdim, areas, vertex, geometry, topology, region, topology_type,
-                       wall,
+                       derived, region_table, wall,
                        int(model.W.dofmap.index_map.size_global * model.W.dofmap.index_map_bs),
                        float(model.total_mass_kg()))
     log(f"modal tier: {basis.n_interface} interface DOFs, {len(basis.electrodes)} inputs, {basis.n_modes} "
@@ -323,18 +339,27 @@ def _rows_at_points(points: np.ndarray, basis, model, name: str) -> np.ndarray:
 
 def _vertex_basis(model, basis):
     """Displacement and potential of every basis vector at the mesh vertices (rank 0's arrays; the field output
-    is then V q), and the mesh in input order."""
+    is then V q), the mesh in input order, and when ``output.derived`` lists any, the derived fields' raw columns
+    (strain, stress, E, D, app.fe.derived) of every basis vector averaged region by region at the vertices
+    (app.fe.derived.RegionAveraging): linear in the
+    displacement and potential, so a frame's are the same combination D q, computed once here."""
     from app.exports import VertexFields
 
-    vertex = VertexFields(model)
-    columns = []
+    derived = model.case.output.derived
+    vertex = VertexFields(model, derived)
+    columns, derived_columns = [], []
     for column in basis.columns:
         sampled = vertex.sample(column)
+        raw = vertex.sample_derived(column) if derived else None
         if model.comm.rank == 0:
             u, phi = sampled
             columns.append(np.concatenate([u.reshape(-1), phi.reshape(-1)]))
+            if derived:
+                derived_columns.append(vertex.averaging.average(raw).reshape(-1))
     if model.comm.rank != 0:
-        return np.zeros((0, basis.size)), np.zeros((0, 3)), np.zeros((0, 0), np.int64), np.zeros(0, np.int32), ""
+        return (np.zeros((0, basis.size)), np.zeros((0, 3)), np.zeros((0, 0), np.int64), np.zeros(0, np.int32), "",
+                np.zeros((0, basis.size)))
     arrays = vertex.mesh_arrays
+    derived_basis = np.column_stack(derived_columns) if derived_columns else np.zeros((0, basis.size))
     return (np.column_stack(columns), arrays["geometry"], arrays["topology"], arrays["region"],
-            vertex.topology_type)
+            vertex.topology_type, derived_basis)

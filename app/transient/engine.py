@@ -196,7 +196,8 @@ class FEEngine:
 
         tm, system, case = self.tm, self.system, self.case
         slices = {b.name: tm.rigid.all_dofs(b.name) for b in tm.rigid.bodies}
-        export = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", VertexFields(tm.model),
+        vertex = VertexFields(tm.model, self.case.output.derived)
+        export = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
                                    lambda: system.solution_vector, self.cfg.output_interval_s,
                                    bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
                                    resume_from_s=resume_from_s)

@@ -31,6 +31,7 @@ import numpy as np
 from app.exports import (
     FE_GRID,
     data_item,
+    extra_fields,
     mesh_grid,
     step_bytes,
     write_mesh_h5,
@@ -94,6 +95,8 @@ class FieldSeriesExport:
             self._replace_documents()
         self.written = self.comm.bcast(len(self.steps), root=0)
         self.has_bodies = self.comm.bcast(self.bodies is not None, root=0)
+        # peaks per region over the frames written by this run (app.fe.derived.region_peaks), every rank
+        self.peaks: dict | None = {} if getattr(vertex, "derived", ()) else None
 
     def _next_after(self, t: float) -> float:
         return (math.floor(t / self.interval_s * (1 + 1e-9) + 1e-9) + 1) * self.interval_s
@@ -105,7 +108,7 @@ class FieldSeriesExport:
                                                                         for k in range(self.written)]
 
     def _document(self) -> bytes:
-        return xdmf_document(self.steps, self.path.stem)
+        return xdmf_document(self.steps, self.path.stem, getattr(self.vertex, "region_names", None))
 
     def _replace_documents(self) -> None:
         """The bodies' XML first: a kill between the two leaves the FE series no longer than the bodies'."""
@@ -116,19 +119,22 @@ class FieldSeriesExport:
     def write(self, t: float, body_positions=None) -> None:
         if t < self.next_s - 1e-9 * self.interval_s:
             return
-        sampled = self.vertex.sample(self.solution())
+        x = self.solution()
+        sampled = self.vertex.sample(x)
+        derived = self._derived(x)
         if self.rank0:
             u, phi = sampled
             k = len(self.steps)
             name = f"step_{k:06d}.h5"
-            datasets = {"displacement": u, "potential": phi}
+            datasets = {"displacement": u, "potential": phi, **derived}
             attrs = {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t}}
             if self.bodies is not None:
                 datasets["bodies/displacement"] = self.bodies.displacement(body_positions)
                 attrs["bodies/displacement"] = {"units": "m", "time_s": t}
             write_h5_atomic(self.dir / name, datasets, attrs)
             kill_point("fields_data")                   # the step file exists, the XML does not name it yet
-            step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:")
+            step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:",
+                             extra_fields(derived))
             step.insert(0, ET.Element("Time", Value=repr(float(t))))
             self.steps.append(step_bytes(step))
             if self.bodies is not None:
@@ -156,6 +162,16 @@ class FieldSeriesExport:
             attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
             data_item(attr, source, shape, number, 8 if number == "Float" else 4)
         return grid
+
+    def _derived(self, x) -> dict:
+        """The output's derived vertex fields (rank 0; name -> array) and the running peaks. Collective."""
+        if self.peaks is None:
+            return {}
+        from app.fe.derived import merge_peaks
+
+        fields, peaks = self.vertex.derived_frame(x)
+        merge_peaks(self.peaks, self.comm.bcast(peaks, root=0))
+        return fields or {}
 
     def close(self) -> None:
         """Nothing stays open between outputs."""

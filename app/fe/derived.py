@@ -1,0 +1,282 @@
+"""Derived fields of an FE solution: strain, stress, von Mises stress, principal stresses, electric field
+and electric displacement, from the stress-charge law written once in forms/piezo.py
+(:func:`forms.piezo.derived_quantities`) with the model's own strain operator (hoop strain u_r / r in an
+axisymmetric model, the Fourier amplitudes of a Fourier-harmonic one).
+
+How they are computed: the UFL expressions are evaluated exactly at the vertices of every cell
+(:class:`CellVertexEvaluator`, at points a relative 1e-6 inside the cell; with degree-2 displacements the
+stress is linear in a straight 3D cell).
+They are averaged region by region at each vertex (:class:`RegionAveraging`): the peaks per region come
+from a region's own values, and the field files carry one value per vertex (the piezoelectric side of an
+interface), see :meth:`app.exports.VertexFields.derived_frame`.
+
+Harmonic results: the field at phase theta is X(theta) = X_re cos theta - X_im sin theta. The maximum over
+the cycle of a quantity whose square is a quadratic form of X (von Mises stress, |E|) is solved exactly:
+q(theta)^2 = a cos^2 - 2 c sin cos + b sin^2 with a = q_re^2, b = q_im^2, c = <X_re, X_im>_q, whose maximum is
+(a + b) / 2 + sqrt(((a - b) / 2)^2 + c^2). The largest principal stress over the cycle is sampled at
+:data:`CYCLE_PHASES` phases and refined by a parabola through the best sample and its neighbours.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import ufl
+from dolfinx import fem
+
+from app.compat import evaluate_expression, expression_at_points
+from forms.piezo import derived_quantities
+
+# the [output] derived key's values -> (base name in the files, unit suffix, components, units text)
+DERIVED_FIELDS = {
+    "strain": ("strain", "", 6, "1 (Voigt xx, yy, zz, yz, xz, xy; engineering shear)"),
+    "stress": ("stress", "Pa", 6, "Pa (Voigt xx, yy, zz, yz, xz, xy)"),
+    "von_mises": ("von_mises", "Pa", 1, "Pa"),
+    "principal_stress": ("principal_stress", "Pa", 3, "Pa (largest first)"),
+    "electric_field": ("electric_field", "V_per_m", 3, "V/m"),
+    "electric_displacement": ("electric_displacement", "C_per_m2", 3, "C/m^2"),
+}
+DEFAULT_DERIVED = ("von_mises", "principal_stress", "electric_field")
+# columns of the raw per-vertex array: strain, stress, E, D
+RAW = {"strain": slice(0, 6), "stress": slice(6, 12), "electric_field": slice(12, 15),
+       "electric_displacement": slice(15, 18)}
+RAW_COLUMNS = 18
+CYCLE_PHASES = 72
+VERTEX_INSET = 1e-6
+# peak keys, the same in every analysis and tier (harmonic: maxima over the cycle; transient: over the frames)
+PEAK_KEYS = ("von_mises_Pa", "max_principal_stress_Pa", "electric_field_V_per_m")
+
+_REFERENCE_VERTICES = {
+    "triangle": [[0, 0], [1, 0], [0, 1]],
+    "quadrilateral": [[0, 0], [1, 0], [0, 1], [1, 1]],
+    "tetrahedron": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+    "hexahedron": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1], [1, 1, 1]],
+}
+
+
+def derived_for_model(model, names) -> tuple[str, ...]:
+    """The derived fields a model writes: all of ``names``, except that a Fourier-harmonic model's stresses are
+    the amplitudes of cos n theta and sin n theta parts (forms.kinematics), which are never at their peak at
+    the same theta, so their von Mises and principal values would mean nothing: it writes the components."""
+    if model.kind == "fourier":
+        return tuple(n for n in names if n in RAW)
+    return tuple(names)
+
+
+def field_name(derived: str, part: str = "") -> str:
+    """Name of a derived field in the files, its unit last: ``stress_Pa``, ``stress_re_Pa``,
+    ``von_mises_cycle_max_Pa``, ``strain``."""
+    base, unit = DERIVED_FIELDS[derived][:2]
+    return "_".join(p for p in (base, part, unit) if p)
+
+
+class CellVertexEvaluator:
+    """Strain, stress, E and D of a full u-phi vector at the vertices of every owned cell.
+    ``evaluate(x)`` (not collective) returns an (owned cells, vertices per cell, 18) array in local cell order,
+    columns :data:`RAW`."""
+
+    def __init__(self, model):
+        mesh = model.mesh
+        self.model = model
+        self.w = fem.Function(model.W)
+        u, phi = ufl.split(self.w)
+        vertices = np.array(_REFERENCE_VERTICES[mesh.topology.cell_type.name], dtype=float)
+        # a relative 1e-6 inside the cell: on the axis of a model of revolution u_r / r is 0 / 0 at the vertex
+        # itself, and its limit (du_r/dr) is what a point just inside gives
+        points = vertices + VERTEX_INSET * (vertices.mean(axis=0) - vertices)
+        self.n_vertices = points.shape[0]
+        self.n_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+        tags = model.mesh_data.cell_tags
+        self.region_tag = np.zeros(self.n_owned, dtype=np.int32)
+        self._parts = []
+        for region in model.regions:
+            cells = np.asarray(tags.indices[tags.values == region.tag], dtype=np.int32)
+            cells = cells[cells < self.n_owned]
+            self.region_tag[cells] = region.tag
+            S, T, E, D = derived_quantities(u, phi, region.c, region.e, region.eps, model.form_kind)
+            columns = ufl.as_vector([S[i] for i in range(6)] + [T[i] for i in range(6)]
+                                    + [E[i] for i in range(3)] + [D[i] for i in range(3)])
+            self._parts.append((cells, expression_at_points(columns, points)))
+        self._n_dofs = model.W.dofmap.index_map.size_local
+
+    def evaluate(self, x) -> np.ndarray:
+        self.w.x.array[:self._n_dofs] = x.array_r[:self._n_dofs]
+        self.w.x.scatter_forward()
+        out = np.zeros((self.n_owned, self.n_vertices, RAW_COLUMNS))
+        for cells, expression in self._parts:
+            if cells.size:
+                values = evaluate_expression(expression, self.model.mesh, cells)
+                out[cells] = values.reshape(cells.size, self.n_vertices, RAW_COLUMNS)
+        return out
+
+
+# ---------------------------------------------------------------------------------------- invariants (numpy)
+def voigt_tensor(T: np.ndarray) -> np.ndarray:
+    """(..., 6) Voigt stress (xx, yy, zz, yz, xz, xy) -> (..., 3, 3) symmetric tensor."""
+    out = np.empty(T.shape[:-1] + (3, 3))
+    for (i, j), k in {(0, 0): 0, (1, 1): 1, (2, 2): 2, (1, 2): 3, (0, 2): 4, (0, 1): 5}.items():
+        out[..., i, j] = out[..., j, i] = T[..., k]
+    return out
+
+
+def von_mises(T: np.ndarray) -> np.ndarray:
+    """Von Mises stress [Pa] of (..., 6) Voigt stresses [Pa]."""
+    return np.sqrt(np.maximum(_vm_form(T, T), 0.0))
+
+
+def _vm_form(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """The symmetric bilinear form whose quadratic form is the von Mises stress squared."""
+    d = lambda X: (X[..., 0] - X[..., 1], X[..., 1] - X[..., 2], X[..., 2] - X[..., 0])  # noqa: E731
+    return (0.5 * sum(a * b for a, b in zip(d(A), d(B)))
+            + 3.0 * (A[..., 3] * B[..., 3] + A[..., 4] * B[..., 4] + A[..., 5] * B[..., 5]))
+
+
+def principal_stresses(T: np.ndarray) -> np.ndarray:
+    """(..., 3) principal stresses [Pa], largest first, of (..., 6) Voigt stresses."""
+    return np.linalg.eigvalsh(voigt_tensor(T))[..., ::-1]
+
+
+def _cycle_max(a, b, c) -> np.ndarray:
+    """max over theta of a cos^2 - 2 c sin cos + b sin^2 (a, b >= 0)."""
+    return np.maximum(0.5 * (a + b) + np.sqrt((0.5 * (a - b)) ** 2 + c * c), 0.0)
+
+
+def von_mises_cycle_max(T_re: np.ndarray, T_im: np.ndarray) -> np.ndarray:
+    """max over the cycle of the von Mises stress of T_re cos theta - T_im sin theta [Pa] (exact)."""
+    return np.sqrt(_cycle_max(_vm_form(T_re, T_re), _vm_form(T_im, T_im), _vm_form(T_re, T_im)))
+
+
+def norm_cycle_max(E_re: np.ndarray, E_im: np.ndarray) -> np.ndarray:
+    """max over the cycle of |E_re cos theta - E_im sin theta| (exact)."""
+    return np.sqrt(_cycle_max(np.sum(E_re * E_re, -1), np.sum(E_im * E_im, -1), np.sum(E_re * E_im, -1)))
+
+
+def largest_principal_cycle_max(T_re: np.ndarray, T_im: np.ndarray, phases: int = CYCLE_PHASES,
+                                chunk: int = 8192) -> np.ndarray:
+    """max over the cycle of the largest principal stress of T_re cos theta - T_im sin theta [Pa]: sampled at
+    ``phases`` phases, then the parabola through the best sample and its neighbours (its vertex, clipped to
+    the neighbours' interval, is evaluated)."""
+    T_re, T_im = T_re.reshape(-1, 6), T_im.reshape(-1, 6)
+    theta = 2 * np.pi * np.arange(phases) / phases
+    step = theta[1]
+    out = np.empty(T_re.shape[0])
+
+    def largest(re, im, th):
+        T = re * np.cos(th)[..., None] - im * np.sin(th)[..., None]
+        return np.linalg.eigvalsh(voigt_tensor(T))[..., -1]
+
+    for start in range(0, T_re.shape[0], chunk):
+        re, im = T_re[start:start + chunk], T_im[start:start + chunk]
+        samples = np.stack([largest(re, im, np.full(re.shape[0], th)) for th in theta], axis=1)
+        k = np.argmax(samples, axis=1)
+        rows = np.arange(re.shape[0])
+        y0, y1, y2 = samples[rows, k - 1], samples[rows, k], samples[rows, (k + 1) % phases]
+        curvature = y0 - 2 * y1 + y2
+        shift = np.where(curvature < 0, 0.5 * (y0 - y2) / np.where(curvature < 0, curvature, -1.0), 0.0)
+        refined = largest(re, im, theta[k] + np.clip(shift, -1.0, 1.0) * step)
+        out[start:start + chunk] = np.maximum(y1, refined)
+    return out
+
+
+# ------------------------------------------------------------------------------------- fields and peaks
+def node_fields(averaged: np.ndarray, names, kind: str = "real") -> dict[str, np.ndarray]:
+    """File fields (name -> array) from averaged raw vertex values (n, 18) of a real solution."""
+    out = {}
+    stress = averaged[:, RAW["stress"]]
+    for derived in names:
+        if derived in RAW:
+            out[field_name(derived)] = averaged[:, RAW[derived]]
+        elif derived == "von_mises":
+            out[field_name(derived)] = von_mises(stress)
+        elif derived == "principal_stress":
+            out[field_name(derived)] = principal_stresses(stress)
+    return out
+
+
+def harmonic_node_fields(re: np.ndarray, im: np.ndarray, names) -> dict[str, np.ndarray]:
+    """File fields of a harmonic solution: real and imaginary parts of the tensors and vectors, and the
+    maxima over the cycle of the von Mises stress and of the largest principal stress."""
+    out = {}
+    for derived in names:
+        if derived in RAW:
+            out[field_name(derived, "re")] = re[:, RAW[derived]]
+            out[field_name(derived, "im")] = im[:, RAW[derived]]
+        elif derived == "von_mises":
+            out[field_name(derived, "cycle_max")] = von_mises_cycle_max(re[:, RAW["stress"]], im[:, RAW["stress"]])
+        elif derived == "principal_stress":
+            out["max_principal_stress_cycle_max_Pa"] = largest_principal_cycle_max(re[:, RAW["stress"]],
+                                                                                    im[:, RAW["stress"]])
+    return out
+
+
+class RegionAveraging:
+    """Region-wise averaged vertex values (ANSYS' material-wise averaging): a value per (region, vertex) pair, the
+    mean over the region's cells that share the vertex, so a field that jumps across an interface (E between
+    oppositely poled rings and 0 in a grounded metal part, stress across materials) keeps both sides. The files
+    carry one value per vertex: that of the piezoelectric region if one touches it (E and D live there, and a
+    ceramic's tension is what limits it), else of the region with the larger tag. Built on rank 0 from the
+    mesh's cells (vertex indices) and their region tags."""
+
+    def __init__(self, topology: np.ndarray, region_of_cell: np.ndarray, n_nodes: int, piezoelectric_tags):
+        n_per_cell = topology.shape[1]
+        tags = np.repeat(np.asarray(region_of_cell, dtype=np.int64), n_per_cell)
+        key = tags * n_nodes + np.asarray(topology, dtype=np.int64).ravel()
+        pairs, self.cell_pair = np.unique(key, return_inverse=True)
+        self.pair_region, self.pair_vertex = pairs // n_nodes, pairs % n_nodes
+        self.counts = np.bincount(self.cell_pair, minlength=pairs.size)
+        priority = self.pair_region + np.isin(self.pair_region, list(piezoelectric_tags)) * (self.pair_region.max() + 1)
+        order = np.lexsort((priority, self.pair_vertex))
+        self.vertex_pair = order[np.r_[np.diff(self.pair_vertex[order]) != 0, True]]
+        if self.vertex_pair.size != n_nodes:
+            raise RuntimeError("a mesh vertex belongs to no cell")
+
+    @property
+    def size(self) -> int:
+        return self.pair_region.size
+
+    def average(self, raw: np.ndarray) -> np.ndarray:
+        """(pairs, columns) means of cell-vertex values (cells, vertices per cell, columns)."""
+        sums = np.zeros((self.size, raw.shape[-1]))
+        np.add.at(sums, self.cell_pair, raw.reshape(-1, raw.shape[-1]))
+        return sums / self.counts[:, None]
+
+    def at_vertices(self, pair_values: np.ndarray) -> np.ndarray:
+        """One value per mesh vertex (the rule above) from (pairs, ...) values."""
+        return pair_values[self.vertex_pair]
+
+
+def region_peaks(values: np.ndarray, pair_region: np.ndarray, regions, values_im: np.ndarray | None = None) -> dict:
+    """Peaks per named region from its region-wise averaged vertex values (:class:`RegionAveraging`: (pairs, 18)
+    and each pair's region tag): the largest von Mises stress [Pa]; in piezoelectric regions also the largest
+    principal stress [Pa] and the largest |E| [V/m]. With ``values_im`` (a harmonic solution) each is the
+    maximum over the cycle. Keys :data:`PEAK_KEYS`."""
+    out = {}
+    for region in regions:
+        mask = pair_region == region.tag
+        if not mask.any():
+            continue
+        re = values[mask]
+        im = values_im[mask] if values_im is not None else None
+        T_re = re[:, RAW["stress"]]
+        if im is None:
+            peaks = {"von_mises_Pa": float(von_mises(T_re).max())}
+        else:
+            peaks = {"von_mises_Pa": float(von_mises_cycle_max(T_re, im[:, RAW["stress"]]).max())}
+        if region.e is not None:
+            E_re = re[:, RAW["electric_field"]]
+            if im is None:
+                peaks["max_principal_stress_Pa"] = float(principal_stresses(T_re)[:, 0].max())
+                peaks["electric_field_V_per_m"] = float(np.linalg.norm(E_re, axis=1).max())
+            else:
+                peaks["max_principal_stress_Pa"] = float(largest_principal_cycle_max(T_re, im[:, RAW["stress"]]).max())
+                peaks["electric_field_V_per_m"] = float(norm_cycle_max(E_re, im[:, RAW["electric_field"]]).max())
+        out[region.name] = peaks
+    return out
+
+
+def merge_peaks(into: dict, peaks: dict) -> dict:
+    """Running maxima of :func:`region_peaks` results (a transient's peaks over its frames)."""
+    for name, values in peaks.items():
+        mine = into.setdefault(name, {})
+        for key, value in values.items():
+            mine[key] = max(mine.get(key, value), value)
+    return into
