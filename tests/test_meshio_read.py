@@ -23,6 +23,9 @@ TRANSDUCER_MODAL = ['analyses=["modal"]', "output.plots=false", "geometry.parame
                     "geometry.parameters.ceramic_mesh_size_m=0.002"]
 
 
+# the default [output] derived fields, units in their names (docs/fields.md)
+DEFAULT_DERIVED_NAMES = {"von_mises_Pa", "principal_stress_Pa", "electric_field_V_per_m"}
+
 def read_series(path) -> tuple[np.ndarray, list, list[tuple[float, dict, dict]]]:
     """(points, cell blocks, [(time, point_data, cell_data)]) of an XDMF time series, through meshio."""
     with meshio.xdmf.TimeSeriesReader(path) as reader:
@@ -47,7 +50,7 @@ def test_every_transient_xdmf_reads_in_meshio(drill):
     points, cells, frames = read_series(out / "transient_fields.xdmf")
     assert len(frames) == n_outputs and cells[0].type == "triangle"
     for _, point_data, cell_data in frames:
-        assert set(point_data) == {"displacement", "potential"} and set(cell_data) == {"region"}
+        assert set(point_data) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES} and set(cell_data) == {"region"}
         assert point_data["displacement"].shape == (len(points), 3)
     assert max(np.abs(frames[-1][1]["displacement"]).max(), 0) > 1e-7       # the transducer rings
 
@@ -118,7 +121,7 @@ def test_mode_files_read_in_meshio_with_one_numbering(tmp_path):
         path = tmp_path / f"modes_{state}.xdmf"
         points, cells, frames = read_series(path)
         for _, point_data, cell_data in frames:
-            assert set(point_data) == {"displacement", "potential"} and set(cell_data) == {"region"}
+            assert set(point_data) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES} and set(cell_data) == {"region"}
             assert np.linalg.norm(point_data["displacement"], axis=1).max() == pytest.approx(2e-3, rel=1e-12)
         grids = [g for g in ET.parse(path).iter("Grid") if g.get("GridType") == "Uniform"]
         assert [g.get("Name").split(":")[0] for g in grids] == [f"mode {k}" for k in range(1, len(frames) + 1)]
