@@ -77,3 +77,16 @@ def test_motor_rotor_is_a_closed_conical_disc_that_turns():
     moved = meshes.points + meshes.displacement(z)
     expected = np.column_stack([-meshes.points[:, 1], meshes.points[:, 0], meshes.points[:, 2] + lift])
     np.testing.assert_allclose(moved, expected, rtol=0, atol=1e-15)
+
+
+def test_plane_obstacle_is_a_slab_on_its_side_of_the_plane():
+    """The strip friction drive (plane strain): the slider's plane contact, outward normal (0, -1) towards the
+    strip, is drawn as a slab above its reference point, both halves (no axis), as wide as the scene."""
+    case = load_case(CASES / "validation" / "strip-friction-drive.toml")
+    (body,) = case.transient.bodies
+    scene = 0.01
+    meshes = BodyMeshes(case.transient, case.geometry.model, {body.name: slice(0, 2)}, scene)
+    x, y = meshes.points[:, 0] - body.position_m[0], meshes.points[:, 1] - body.position_m[1]
+    assert y.min() == pytest.approx(0.0, abs=1e-18) and y.max() == pytest.approx(scene / 4, rel=1e-12)
+    assert x.min() == pytest.approx(-scene / 2, rel=1e-12) and x.max() == pytest.approx(scene / 2, rel=1e-12)
+    assert _area(meshes.points, meshes.triangles) == pytest.approx(scene * scene / 4, rel=1e-12)
