@@ -279,6 +279,11 @@ class OutputSection:
         False, doc="transient: per output interval and per sample point of every sampled surface contact, the mean "
                    "pressure and the fractions of time closed, sticking and slipping either way (tables "
                    "'<contact>_sites_*' in transient.h5)")
+    contact_pressure: bool = param(
+        False, doc="transient, FE tier: the normal contact pressure of every surface contact at the vertices of its "
+                   "facets, the solver's penalty law (field 'contact_pressure_Pa' of transient_fields.xdmf, zero off "
+                   "the contact surfaces), each step's peak ('<contact>_peak_pressure_Pa' in transient.h5) and the "
+                   "run's (results.transient.contacts.<contact>.max_pressure_Pa)")
 
 
 @dataclass(frozen=True)

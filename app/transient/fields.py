@@ -41,15 +41,19 @@ class FieldSeriesExport:
     vector, or the modal tier's vertex basis and its coordinates) and the rigid bodies' positions
     (``body_positions``: the rigid state vector z [m]) when t has reached the next multiple of
     ``interval_s``. ``bodies``: (name, slice of z, start position [m]) per rigid body.
-    ``resume_from_s``: continue the existing series after that time (later steps are dropped)."""
+    ``resume_from_s``: continue the existing series after that time (later steps are dropped).
+    ``scalars``: a callable returning further vertex fields of the current state, {name: (values at the
+    vertices on rank 0 (None elsewhere), units)}, e.g. ``contact_pressure_Pa`` (collective)."""
 
-    def __init__(self, path: Path, vertex, solution, interval_s: float, bodies=(), resume_from_s: float | None = None):
+    def __init__(self, path: Path, vertex, solution, interval_s: float, bodies=(), resume_from_s: float | None = None,
+                 scalars=None):
         self.path = Path(path)
         self.dir = self.path.with_suffix("")
         self.solution = solution
         self.interval_s = float(interval_s)
         self.bodies = [(name, sl, np.asarray(start, dtype=float)) for name, sl, start in bodies]
         self.vertex = vertex
+        self.scalars = scalars
         self.comm = vertex.comm
         self.rank0 = self.comm.rank == 0
         self.steps: list[bytes] = []         # each output's XML, serialised once
@@ -82,16 +86,20 @@ class FieldSeriesExport:
         if t < self.next_s - 1e-9 * self.interval_s:
             return
         sampled = self.vertex.sample(self.solution())
+        scalars = self.scalars() if self.scalars is not None else {}
         if self.rank0:
             u, phi = sampled
             k = len(self.steps)
             name = f"step_{k:06d}.h5"
-            write_h5_atomic(self.dir / name, {"displacement": u, "potential": phi},
-                            {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t}})
+            data = {"displacement": u, "potential": phi, **{key: v for key, (v, _) in scalars.items()}}
+            attrs = {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t},
+                     **{key: {"units": units, "time_s": t} for key, (_, units) in scalars.items()}}
+            write_h5_atomic(self.dir / name, data, attrs)
             kill_point("fields_data")                   # the step file exists, the XML does not name it yet
             step = ET.Element("Grid", Name=f"t = {t:.9g} s", GridType="Collection", CollectionType="Spatial")
             ET.SubElement(step, "Time", Value=repr(float(t)))
-            step.append(mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:"))
+            step.append(mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:",
+                                  scalars=list(scalars)))
             z = np.asarray(body_positions, dtype=float) if body_positions is not None else None
             for body, sl, start in self.bodies:
                 position = z[sl] if z is not None else start
