@@ -146,6 +146,21 @@ class VertexFields:
         out[cell_nodes.ravel()] = dofs.ravel()
         return out
 
+    def sample_scalar(self, function) -> np.ndarray | None:
+        """A scalar field (any dolfinx Function or Expression of one value on this mesh, e.g. the contact
+        pressure [Pa]) interpolated to P1 at the vertices, gathered on rank 0 in the mesh's input order
+        (None elsewhere). Collective."""
+        target = fem.Function(self.S1)
+        target.interpolate(function)
+        target.x.scatter_forward()
+        parts = self.comm.gather(target.x.array[self._phi_dofs], root=0)
+        if self.comm.rank != 0:
+            return None
+        out = np.zeros(self.n_nodes)
+        for place, part in zip(self._places, parts):
+            out[place] = part
+        return out
+
     def sample(self, x) -> tuple[np.ndarray, np.ndarray] | None:
         model = self.model
         self.u1.interpolate(model.displacement(x))
@@ -181,7 +196,8 @@ def data_item(parent, source: str, shape, number: str = "Float", precision: int 
 def mesh_grid(name: str, vertex: VertexFields, mesh_h5: str, fields_at: str, extra=()) -> ET.Element:
     """A uniform grid on the FE mesh with region tags (from ``mesh_h5``), displacement and potential
     (``<fields_at>/displacement``, ``<fields_at>/potential``, e.g. ``fields_at = "step.h5:"``), and the
-    vertex fields ``extra``: (name, components) each at ``<fields_at>/<name>`` (derived fields)."""
+    vertex fields ``extra``: (name, components) each at ``<fields_at>/<name>`` (derived fields, the contact
+    pressure)."""
     grid = ET.Element("Grid", Name=name, GridType="Uniform")
     cells = vertex.mesh_arrays["topology"]
     topo = ET.SubElement(grid, "Topology", TopologyType=vertex.topology_type, NumberOfElements=str(cells.shape[0]),

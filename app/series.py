@@ -98,6 +98,10 @@ def contact_area(contact: str) -> str:
     return f"{contact}_area_in_contact_m2"
 
 
+def contact_peak_pressure(contact: str) -> str:
+    return f"{contact}_peak_pressure_Pa"
+
+
 def contact_dissipated(contact: str) -> str:
     return f"{contact}_dissipated_J"
 

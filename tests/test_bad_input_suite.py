@@ -116,6 +116,10 @@ SET_INPUTS = [
     (FE, [*FE_TINY, "transient.steps.min_s=1e-6"], "transient.steps.min_s"),
     (FE, [*FE_TINY, "transient.scheme.rho_inf=2"], "transient.scheme.rho_inf"),
     (FE, [*FE_TINY, "transient.checkpoint_interval_steps=-1"], "transient.checkpoint_interval_steps"),
+    # the contact pressure field: the FE tier's transient, of a surface contact (docs/contact.md)
+    (FE, [*FE_TINY, "output.contact_pressure=true"], "output.contact_pressure"),        # no surface contact
+    (MOTOR, ["output.contact_pressure=true"], "output.contact_pressure"),               # the modal tier
+    (TRANSDUCER, ["output.contact_pressure=true"], "output.contact_pressure"),          # no transient analysis
     # prescribed travelling wave
     (STRIP, [f'{_WAVE}.facets="nowhere"'], f"{_WAVE}.facets"),
     (STRIP, [f"{_WAVE}.direction=[0.0, 0.0]"], f"{_WAVE}.direction"),
@@ -411,6 +415,8 @@ MPI_INPUTS = {
     "base motion on a missing facet group (mesh)": lambda d, f: (
         ["run", STRIP, "--out", d / "strip", "--set", 'transient.base_motions[0].facets="nowhere"'],
         [STRIP.name, "transient.base_motions[0].facets"]),
+    "contact pressure without a surface contact": lambda d, f: (
+        ["validate", FE, *_sets([*FE_TINY, "output.contact_pressure=true"])], [FE.name, "output.contact_pressure"]),
     "resume a file": lambda d, f: (["run", FE, "--resume", f, *_sets(FE_TINY)], ["--resume"]),
     "sweep out is a file": lambda d, f: (["sweep", LUMPED, "--param", "lumped.downforce_N=0,3", "--out", f],
                                          ["--out"]),

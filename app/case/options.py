@@ -83,3 +83,16 @@ def check_tier(case, file: str, written=None) -> None:
     for section in tier.foreign:
         if (section in written) if written is not None else getattr(case, section) is not None:
             raise foreign_section(tier.name, section, file)
+    if case.output.contact_pressure:
+        _check_contact_pressure(case, file)
+
+
+def _check_contact_pressure(case, file: str) -> None:
+    """``output.contact_pressure`` is the FE tier's transient field of its surface contacts (the modal tier
+    reports the pressure at its contact sites: ``output.contact_sites``)."""
+    if case.tier != "fe" or "transient" not in (case.analyses or ()):
+        raise CaseError(file, "output.contact_pressure", "is written by the FE tier's transient analysis only "
+                                                         "(the modal tier: output.contact_sites)")
+    if not any(c.kind == "surface" for c in case.transient.contacts):
+        raise CaseError(file, "output.contact_pressure", "the case has no surface contact ([[transient.contacts]] "
+                                                         "of kind 'surface') to write the pressure of")

@@ -294,6 +294,11 @@ class OutputSection:
         1e-3, gt=0, unit="m", doc="mode-shape files: each mode written scaled so its largest vertex displacement is "
                                   "this (Warp By Vector at scale 1 shows it); the factor applied to the "
                                   "mass-normalised shape is in the file (docs/summary.md)")
+    contact_pressure: bool = param(
+        False, doc="transient, FE tier: the normal contact pressure of every surface contact at the vertices of its "
+                   "facets, the solver's penalty law (field 'contact_pressure_Pa' of transient_fields.xdmf, zero off "
+                   "the contact surfaces), each step's peak ('<contact>_peak_pressure_Pa' in transient.h5) and the "
+                   "run's (results.transient.contacts.<contact>.max_pressure_Pa)")
 
     def check(self, file, prefix):
         for i, name in enumerate(self.derived):

@@ -40,6 +40,7 @@ class FEEngine:
         self.sampler = PointSampler(self.tm.model)
         self.charges = self._charge_vectors() if case.output.energies else {}
         self.sites = SiteProbe(case, self.tm) if case.output.contact_sites else None
+        self.pressures = self._pressure_probes() if case.output.contact_pressure else []
         self.end_time_s = cfg.end_time_s
         self.checkpoint_interval_steps = cfg.checkpoint_interval_steps
         self.state: TransientState | None = None
@@ -94,6 +95,32 @@ class FEEngine:
             ones.destroy()
         return out
 
+    def _pressure_probes(self) -> list:
+        """``output.contact_pressure``: a :class:`app.transient.contact.ContactPressureProbe` per surface contact."""
+        from app.transient.contact import ContactPressureProbe, SurfaceContact
+
+        return [ContactPressureProbe(c) for c in self.system.interactions if isinstance(c, SurfaceContact)]
+
+    def _evaluate_pressures(self) -> None:
+        """Every surface contact's pressure field at the current (end-of-step) state."""
+        state, rigid = self.state, self.tm.rigid
+        for probe in self.pressures:
+            body = probe.contact.body
+            sl = rigid.dofs(body)
+            omega = rigid.angular_velocity(body, state.zd) if probe.body_angular_velocity is not None else None
+            probe.evaluate(state, state.z[sl], state.zd[sl], omega)
+
+    def _pressure_fields(self, vertex) -> dict:
+        """The field file's ``contact_pressure_Pa``: the sum of the surface contacts' pressures (their facet
+        groups do not overlap), at the vertices on rank 0."""
+        self._evaluate_pressures()
+        total = None
+        for probe in self.pressures:
+            values = vertex.sample_scalar(probe.pressure)
+            if values is not None:
+                total = values if total is None else total + values
+        return {"contact_pressure_Pa": (total, "Pa")}
+
     def _started(self) -> None:
         cfg = self.cfg
         self.log(f"transient: {cfg.initial_state} start, drive {self.voltage_V:.4g} V at {cfg.drive.frequency_Hz:.2f} "
@@ -117,6 +144,7 @@ class FEEngine:
             out.update(S.ENERGY_COLUMNS)
         if self.sites is not None:
             out.update(self.sites.columns())
+        out.update({S.contact_peak_pressure(p.contact.name): "Pa" for p in self.pressures})
         return out
 
     def advance(self, t_end: float, max_steps: int, stop_at_s: float) -> dict[str, np.ndarray]:
@@ -167,6 +195,10 @@ class FEEngine:
             row["damping_dissipated_J"] = rec["damping_dissipated_J"]
         if self.sites is not None:
             row.update(self.sites.step(self.state, rec["dt_s"]))
+        if self.pressures:
+            self._evaluate_pressures()
+            for probe in self.pressures:
+                row[S.contact_peak_pressure(probe.contact.name)] = probe.peak_Pa()
         return row
 
     def take_tables(self) -> dict:
@@ -197,10 +229,11 @@ class FEEngine:
         tm, system, case = self.tm, self.system, self.case
         slices = {b.name: tm.rigid.all_dofs(b.name) for b in tm.rigid.bodies}
         vertex = VertexFields(tm.model, self.case.output.derived)
+        scalars = (lambda: self._pressure_fields(vertex)) if self.pressures else None
         export = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
                                    lambda: system.solution_vector, self.cfg.output_interval_s,
                                    bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
-                                   resume_from_s=resume_from_s)
+                                   resume_from_s=resume_from_s, scalars=scalars)
         if resume_from_s is None:
             system.show_state(self.state)
         return export

@@ -50,16 +50,19 @@ class FieldSeriesExport:
     (``body_positions``: the packed body coordinates z [m, rad]) when t has reached the next multiple of
     ``interval_s``. ``bodies``: None, or a function of the scene size [m] (the FE mesh's largest extent)
     returning the :class:`app.transient.body_shapes.BodyMeshes` of the run (called on rank 0).
-    ``resume_from_s``: continue the existing series after that time (later steps are dropped)."""
+    ``resume_from_s``: continue the existing series after that time (later steps are dropped).
+    ``scalars``: a callable returning further vertex fields of the current state, {name: (values at the
+    vertices on rank 0 (None elsewhere), units)}, e.g. ``contact_pressure_Pa`` (collective)."""
 
     def __init__(self, path: Path, vertex, solution, interval_s: float, bodies=None,
-                 resume_from_s: float | None = None):
+                 resume_from_s: float | None = None, scalars=None):
         self.path = Path(path)
         self.dir = self.path.with_suffix("")
         self.bodies_path = self.path.with_name(self.path.stem.replace("_fields", "") + "_bodies.xdmf")
         self.solution = solution
         self.interval_s = float(interval_s)
         self.vertex = vertex
+        self.scalars = scalars
         self.comm = vertex.comm
         self.rank0 = self.comm.rank == 0
         self.bodies = None
@@ -122,19 +125,22 @@ class FieldSeriesExport:
         x = self.solution()
         sampled = self.vertex.sample(x)
         derived = self._derived(x)
+        scalars = self.scalars() if self.scalars is not None else {}
         if self.rank0:
             u, phi = sampled
             k = len(self.steps)
             name = f"step_{k:06d}.h5"
-            datasets = {"displacement": u, "potential": phi, **derived}
-            attrs = {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t}}
+            datasets = {"displacement": u, "potential": phi, **derived,
+                        **{key: v for key, (v, _) in scalars.items()}}
+            attrs = {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t},
+                     **{key: {"units": units, "time_s": t} for key, (_, units) in scalars.items()}}
             if self.bodies is not None:
                 datasets["bodies/displacement"] = self.bodies.displacement(body_positions)
                 attrs["bodies/displacement"] = {"units": "m", "time_s": t}
             write_h5_atomic(self.dir / name, datasets, attrs)
             kill_point("fields_data")                   # the step file exists, the XML does not name it yet
             step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:",
-                             extra_fields(derived))
+                             extra_fields({**derived, **{key: v for key, (v, _) in scalars.items()}}))
             step.insert(0, ET.Element("Time", Value=repr(float(t))))
             self.steps.append(step_bytes(step))
             if self.bodies is not None:

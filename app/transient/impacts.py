@@ -62,6 +62,8 @@ def contact_summary(data: dict[str, np.ndarray], names: list[str]) -> dict:
         impacts = int(np.sum(np.diff((closed > 0).astype(np.int8)) == 1))
         out[name] = {"impacts": impacts, "max_force_N": float(force.max()), "impulse_N_s": float(np.sum(force * dt)),
                      "closed_time_s": float(np.sum(dt * (closed > 0)))}
+        if S.contact_peak_pressure(name) in data:         # output.contact_pressure (FE tier, surface contacts)
+            out[name]["max_pressure_Pa"] = float(data[S.contact_peak_pressure(name)].max())
     return out
 
 
