@@ -452,13 +452,13 @@ class ModalEngine:
             return None
         if not self.model.vertex_basis.size and self.comm.rank == 0:
             raise CaseError(self.case.source, "output.fields", "the reduced model holds no vertex basis")
-        from app.transient.fields import FieldSeriesExport
+        from app.transient.fields import FieldSeriesExport, frame_schedule
 
         gdim = self.model.gdim
         bodies = [(b.name, slice(self.body_slices[b.name].start, self.body_slices[b.name].start + gdim),
                    b.position_m) for b in self.cfg.bodies]
         return FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", ReducedVertexFields(self.model, self.comm),
-                                 lambda: self.q, self.cfg.output_interval_s, bodies=bodies,
+                                 lambda: self.q, frame_schedule(self.case), bodies=bodies,
                                  resume_from_s=resume_from_s)
 
     def body_positions(self) -> np.ndarray:

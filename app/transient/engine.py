@@ -191,13 +191,13 @@ class FEEngine:
         if not self.case.output.fields:
             return None
         from app.exports import VertexFields
-        from app.transient.fields import FieldSeriesExport
+        from app.transient.fields import FieldSeriesExport, frame_schedule
 
         tm, system = self.tm, self.system
         bodies = [(b.name, tm.rigid.dofs(b.name), b.position_m) for b in tm.rigid.bodies]
         export = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", VertexFields(tm.model),
                                    lambda: system.solution_vector,
-                                   self.cfg.output_interval_s, bodies=bodies, resume_from_s=resume_from_s)
+                                   frame_schedule(self.case), bodies=bodies, resume_from_s=resume_from_s)
         if resume_from_s is None:
             system.show_state(self.state)
         return export
