@@ -13,7 +13,7 @@ import pytest
 from conftest import CASES, run_cli
 
 from app.errors import CaseError
-from app.sweep import build_parser, main, parse_param, run_sweep
+from app.sweep import build_parser, main, parse_param, run_sweep, sweep_figures
 
 LUMPED = CASES / "usdc-lumped.toml"
 FAST = ["lumped.duration_s=0.004", "lumped.output.plots=false", "lumped.output.write_time_series=false"]
@@ -122,6 +122,66 @@ def test_fe_transient_downforce_sweep_equals_single_runs(tmp_path):
     table = _table(tmp_path / "sweep" / "sweep.csv")
     assert table[1]["transient.loads.fe_force_N"] == "[0.0, -9.0]"
     assert (tmp_path / "sweep" / "sweep_transient_loads_fe_force_N.png").exists()
+    # the plot reads "downforce [N]" increasing to the right (the drill scene's axis, kept in sweep.json)
+    sweep = json.loads((tmp_path / "sweep" / "sweep.json").read_text())
+    assert sweep["axes"] == {"transient.loads.fe_force_N": ["downforce [N]", -1, -1.0]}
+    ((_, fig),) = list(sweep_figures([r for r in sweep["rows"]], sweep["parameters"], sweep["title"],
+                                     sweep["headline"], sweep["axes"]))
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert visible and all(ax.get_xlabel() == "downforce [N]" for ax in visible)
+    assert list(visible[0].lines[0].get_xdata()) == [0.0, 9.0]
+
+
+def _drill_rows(with_intervals: bool) -> list[dict]:
+    """Sweep rows as the drill's downforce sweep makes them: the vector key, one headline that is zero at
+    every point, one with batch-means half-widths."""
+    rate = "transient.statistics.impact_rate_per_s.stem_rock"
+    zero = "transient.statistics.transducer.flight_rate_per_s"
+    rows = []
+    for i, force in enumerate([0.0, -3.0, -9.0]):
+        row = {"point": i, "transient.loads.fe_force_N": [0.0, force], rate: 200.0 - 40 * force, zero: 0.0}
+        if with_intervals:
+            row["transient.statistics.interval_95.impact_rate_per_s.stem_rock"] = 30.0 + i
+        rows.append(row)
+    return rows
+
+
+@pytest.mark.parametrize("with_intervals", [True, False])
+def test_downforce_sweep_plot_reads_downforce_increasing_with_intervals_and_no_zero_panel(with_intervals):
+    """Issue 28: the FE drill's downforce sweep is plotted against "downforce [N]" (the scene's axis: -F_z, not
+    "loads FE force, component 1" from -9 to 0), x increasing to the right; a panel whose values are all zero
+    is left out; a statistic with a 95 % batch-means interval gets error bars of that half-width; the title
+    says what is plotted; the terminal table names the axis and the intervals."""
+    from matplotlib.container import ErrorbarContainer
+
+    from app.case.schema import load_case
+    from app.sweep import scene_axes, table_lines
+
+    key = "transient.loads.fe_force_N"
+    axes = scene_axes(load_case(DRILL), [key])
+    assert axes == {key: ["downforce [N]", -1, -1.0]}
+    rows = _drill_rows(with_intervals)
+    headline = ["transient.statistics.impact_rate_per_s.stem_rock", "transient.statistics.transducer.flight_rate_per_s"]
+    ((name, fig),) = list(sweep_figures(rows, [key], "drill", headline, axes))
+    assert name == "sweep_transient_loads_fe_force_N.png"
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(visible) == 1                                   # the all-zero flight rate has no panel
+    ax = visible[0]
+    assert ax.get_xlabel() == "downforce [N]" and "impact rate" in ax.get_ylabel() and "[1/s]" in ax.get_ylabel()
+    low, high = ax.get_xlim()
+    assert low < high
+    line = ax.lines[0]
+    assert list(line.get_xdata()) == [0.0, 3.0, 9.0] and list(line.get_ydata()) == [200.0, 320.0, 560.0]
+    bars = [c for c in ax.containers if isinstance(c, ErrorbarContainer)]
+    assert len(bars) == int(with_intervals)
+    if with_intervals:
+        segments = bars[0].lines[2][0].get_segments()
+        assert [seg[1][1] - seg[0][1] for seg in segments] == pytest.approx([60.0, 62.0, 64.0])
+    title = fig._suptitle.get_text()
+    assert "drill" in title and "downforce [N]" in title and ("95 %" in title) == with_intervals
+    table = table_lines(rows, [key], headline, axes)
+    assert "downforce [N]" in table[0] and "flight rate" not in table[0]
+    assert ("± 32" in table[2 + 2]) == with_intervals
 
 
 def test_cli_sweep_is_a_subcommand_with_quiet(tmp_path):
