@@ -230,3 +230,49 @@ def test_fe_drill_downforce_sweep_over_ranks(shared_tmp):
     else:
         assert rows is None
     comm.barrier()
+
+
+def test_drill_batch_intervals_are_the_spread_of_the_window_means():
+    """The drill scene's 95 % batch-means intervals (app/scenes/percussion_drill batch_intervals): on a
+    synthetic 0.2 s series whose stem-rock contact closes 5 + w times in window w of the 10 windows after the
+    first tenth (3 rows each at 2 N), the impact rate's half-width is t_{0.975, 9} s / sqrt(10) of the
+    per-window rates counted here (exact to round-off: same windows, the count is known), the mean force's
+    likewise, and a statistic that does not change (no other contact closes) has a zero interval. A run
+    whose windows would be shorter than 10 ms gets none."""
+    import numpy as np
+    from scipy import stats as sps
+
+    from app import series as S
+    from app.case.schema import load_case
+    from app.scenes.percussion_drill import BATCHES, batch_intervals
+
+    cfg = load_case(DRILL).transient
+    dt, n = 1e-5, 20000
+    t = dt * np.arange(1, n + 1)
+    closed = np.zeros(n)
+    edges = np.linspace(t[0] + 0.1 * (t[-1] - t[0]), t[-1], BATCHES + 1)
+    rates, forces = [], []
+    for w, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        rows = np.flatnonzero((t > lo) & (t <= hi))
+        for k in range(5 + w):
+            closed[rows[10 + 20 * k: 13 + 20 * k]] = 1.0
+        duration = rows.size * dt
+        rates.append((5 + w) / duration)
+        forces.append(2.0 * 3 * dt * (5 + w) / duration)
+    data = {S.TIME: t, S.STEP: np.full(n, dt)}
+    for c in cfg.contacts:
+        data[S.contact_closed(c.name)] = closed if c.name == "stem_rock" else np.zeros(n)
+        data[S.contact_force(c.name)] = np.zeros((n, 2))
+    data[S.contact_force("stem_rock")][:, 1] = 2.0 * closed
+    for body in ("ball", "stem"):
+        data[S.body_position(body)] = np.zeros((n, 2))
+        data[S.body_velocity(body)] = np.zeros((n, 2))
+    out = batch_intervals(data, cfg)
+    t_crit = sps.t.ppf(0.975, BATCHES - 1)
+    assert out["impact_rate_per_s"]["stem_rock"] == pytest.approx(
+        t_crit * np.std(rates, ddof=1) / np.sqrt(BATCHES), rel=1e-12)
+    assert out["stem_rock_foundation"]["mean_force_N"] == pytest.approx(
+        t_crit * np.std(forces, ddof=1) / np.sqrt(BATCHES), rel=1e-9)
+    assert out["impact_rate_per_s"]["tip_ball"] == 0.0
+    short = {name: array[: n // 2] for name, array in data.items()}       # 0.1 s: windows of 9 ms
+    assert batch_intervals(short, cfg) == {}
