@@ -276,3 +276,34 @@ def test_drill_batch_intervals_are_the_spread_of_the_window_means():
     assert out["impact_rate_per_s"]["tip_ball"] == 0.0
     short = {name: array[: n // 2] for name, array in data.items()}       # 0.1 s: windows of 9 ms
     assert batch_intervals(short, cfg) == {}
+
+
+def test_lumped_batch_intervals_count_the_events_per_window():
+    """The lumped tier's batch-means intervals (from its exact event table): stem-rock closings 5 + w in window
+    w of a 0.2 s run, each followed by an opening carrying 1e-3 N s; the rate's and the mean force's half-widths
+    are t_{0.975, 9} s / sqrt(10) of the per-window values counted here; no tip-ball event: zero."""
+    import numpy as np
+    from scipy import stats as sps
+
+    from app.lumped import kernel as K
+    from app.scenes.percussion_drill import BATCHES, lumped_batch_intervals
+
+    duration = 0.2
+    edges = np.linspace(0.1 * duration, duration, BATCHES + 1)
+    rows, rates, forces = [], [], []
+    for w, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        for k in range(5 + w):
+            t = lo + (k + 0.5) * (hi - lo) / 20
+            for closing, impulse in ((1.0, 0.0), (0.0, 1e-3)):
+                row = np.zeros(8)
+                row[[K.EV_TIME, K.EV_CONTACT, K.EV_CLOSING, K.EV_IMPULSE]] = t + 1e-6 * (1 - closing), 2, closing, \
+                    impulse
+                rows.append(row)
+        rates.append((5 + w) / (hi - lo))
+        forces.append((5 + w) * 1e-3 / (hi - lo))
+    out = lumped_batch_intervals(np.array(rows), duration)
+    half = sps.t.ppf(0.975, BATCHES - 1) / np.sqrt(BATCHES)
+    assert out["impact_rate_per_s"]["stem_rock"] == pytest.approx(half * np.std(rates, ddof=1), rel=1e-12)
+    assert out["stem_rock_foundation"]["mean_force_N"] == pytest.approx(half * np.std(forces, ddof=1), rel=1e-12)
+    assert out["impact_rate_per_s"]["tip_ball"] == 0.0
+    assert lumped_batch_intervals(np.array(rows), 0.1) == {}          # windows of 9 ms: too short

@@ -14,7 +14,7 @@ displacement over one drive period (the vibration averages out), the lumped tier
 coordinate z and the exact take-off velocity of every flight (apex z + z'^2 / 2a). The lumped tier
 adds the flight-duration spread and histogram (``flight_durations.png``) and the rise per half run.
 
-FE and modal tiers, runs of at least ~0.11 s: ``statistics.interval_95`` holds the half-widths of the 95 %
+Runs of at least ~0.11 s (every tier): ``statistics.interval_95`` holds the half-widths of the 95 %
 batch-means intervals of the time-mean statistics (:func:`batch_intervals`); a sweep draws them as error bars.
 A sweep of ``transient.loads.fe_force_N`` is plotted against the downforce, -F_z [N] (:meth:`sweep_axis`).
 """
@@ -113,6 +113,34 @@ def batch_intervals(data: dict[str, np.ndarray], cfg) -> dict:
     return out
 
 
+def lumped_batch_intervals(events: np.ndarray, duration_s: float) -> dict:
+    """As :func:`batch_intervals` for the lumped tier, from its exact event table (its samples are too coarse for
+    microsecond contacts): per window, the impact rates (closing events) per contact and the rock's mean force
+    (the impulses of the stem-rock contacts ending in the window over its width); the same windows and
+    t-interval (the method of bench/bench_tier_statistics.py)."""
+    from scipy import stats as sps
+
+    from app.lumped import kernel as K
+    from app.lumped.parameters import CONTACT_NAMES
+
+    edges = np.linspace(0.1 * duration_s, duration_s, BATCHES + 1)
+    if edges[1] - edges[0] < MIN_BATCH_S or events.size == 0:
+        return {}
+    ev = np.asarray(events)
+    closing = ev[:, K.EV_CLOSING] == 1.0
+    rates = {name: [] for name in CONTACT_NAMES}
+    force = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        inside = (ev[:, K.EV_TIME] > lo) & (ev[:, K.EV_TIME] <= hi)
+        for c, name in enumerate(CONTACT_NAMES):
+            rates[name].append(np.sum(inside & closing & (ev[:, K.EV_CONTACT] == c)) / (hi - lo))
+        rock_ends = inside & ~closing & (ev[:, K.EV_CONTACT] == CONTACT_NAMES.index("stem_rock"))
+        force.append(float(np.sum(ev[rock_ends, K.EV_IMPULSE])) / (hi - lo))
+    half = float(sps.t.ppf(0.975, BATCHES - 1)) / np.sqrt(BATCHES)
+    return {"impact_rate_per_s": {name: half * float(np.std(v, ddof=1)) for name, v in rates.items()},
+            "stem_rock_foundation": {"mean_force_N": half * float(np.std(force, ddof=1))}}
+
+
 def lumped_statistics(data: dict[str, np.ndarray], parameters: dict, duration_s: float, min_rise_m: float,
                       bins: int) -> dict:
     """``{"transducer": ...}`` of a lumped run from its time series and event table (app/lumped/outputs.py):
@@ -206,8 +234,12 @@ class PercussionDrill(SceneReport):
             section = case.lumped
             if "events" not in data or S.TIME not in data:
                 return {}
-            return lumped_statistics(data, results["parameters"], results["simulated_time_s"],
-                                     section.output.min_flight_rise_m, section.output.histogram_bins)
+            out = lumped_statistics(data, results["parameters"], results["simulated_time_s"],
+                                    section.output.min_flight_rise_m, section.output.histogram_bins)
+            intervals = lumped_batch_intervals(np.asarray(data["events"]), results["simulated_time_s"])
+            if intervals:
+                out["interval_95"] = intervals
+            return out
         out = transient_statistics(data, case.transient)
         intervals = batch_intervals(data, case.transient)
         if intervals:
