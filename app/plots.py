@@ -121,14 +121,14 @@ def _what_is_plotted(harmonic: dict, what: str) -> tuple[str, str]:
         return f"FE: {what} of {names}", f"{name} {what} = {'I/V' if what == 'Y' else 'V/I'} of electrode {names}"
     phases = ", ".join(f"{n} {a:.4g} V at {p:.0f} deg" for n, (a, p) in drive.items())
     return (f"FE: total current / reference V under the drive ({phases}); not a driving-point {what}",
-            f"{name}: each driven electrode alone (the others at 0 V) and the multi-phase drive's total")
+            f"{name}: each driven electrode alone (others at 0 V); dashed: the drive's total")
 
 
 def _frequency_plot(path: Path, f: np.ndarray, magnitude: np.ndarray, phase: np.ndarray, fine, fine_values,
                     f_r, f_a, what: str, unit: str, title: str, harmonic: dict | None = None,
                     alone: dict | None = None) -> None:
     fe_label, name = _what_is_plotted(harmonic or {}, what)
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6.5))
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 7))
     for electrode, (alone_magnitude, alone_phase) in (alone or {}).items():
         label = f"{what}_{electrode} = {'I/V' if what == 'Y' else 'V/I'}, {electrode} driven alone"
         ax1.semilogy(f / 1e3, alone_magnitude, "s-", ms=3, label=label)
@@ -146,9 +146,11 @@ def _frequency_plot(path: Path, f: np.ndarray, magnitude: np.ndarray, phase: np.
     ax1.set_ylabel(f"|{what}| [{unit}]")
     ax2.set_ylabel(f"phase({what}) [deg]")
     ax2.set_xlabel("frequency [kHz]")
-    ax1.legend(loc="best", fontsize=7, framealpha=0.9)
     ax1.set_title(f"{title}\n{name}" if title else name, fontsize=9)
-    fig.tight_layout()
+    # the legend below the panels: over a panel it would hide a curve's resonance loop whatever its corner
+    handles, labels = ax1.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.035 * len(labels) + 0.01, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

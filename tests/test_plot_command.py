@@ -69,8 +69,10 @@ def _figures_drawn(directory, monkeypatch) -> dict:
         drawn = [ax for ax in fig.axes if ax.get_visible() and ax.has_data()]
         title = " ".join([fig._suptitle.get_text() if fig._suptitle else "", *(ax.get_title() for ax in drawn)])
         legends = [ax.get_legend() for ax in drawn if ax.get_legend() is not None]
+        outside = [legend for legend in fig.legends if legend._loc == 8]       # below the panels (lower center)
         seen[Path(fname).name] = {"title": title.strip(), "x": [ax.get_xlabel() for ax in drawn],
                                   "y": [ax.get_ylabel() for ax in drawn], "legend_locs": [lg._loc for lg in legends],
+                                  "outside_legends": len(outside), "figure_legends": len(fig.legends),
                                   "patches": sum(len(ax.patches) for ax in drawn)}
         return original(fig, fname, *args, **kwargs)
 
@@ -86,9 +88,9 @@ def _figures_drawn(directory, monkeypatch) -> dict:
 def test_every_plot_is_titled_and_labelled(results, motor_result, kind, monkeypatch):
     """Issue 28: every plot of every result kind says what it shows: a title, every drawn panel's y label and
     the x label of at least the bottom panel (stacked panels share x), and legends placed where they cover
-    the fewest points (loc 'best' = 0), not fixed in a corner a curve's peak may occupy. The motor: the ring
-    plot is titled by what it shows (not the case's old "speed-torque"), the speed plot marks the steady
-    window (a shaded span) and names the rotor speed."""
+    the fewest points (loc 'best' = 0) or below the panels, not in a fixed corner a curve's peak may occupy.
+    The motor: the ring plot is titled by what it shows (not the case's old "speed-torque"), the speed plot
+    marks the steady window (a shaded span) and names the rotor speed."""
     directory = motor_result if kind == "motor" else results / kind
     seen = _figures_drawn(directory, monkeypatch)
     assert seen, "no plot drawn"
@@ -97,6 +99,7 @@ def test_every_plot_is_titled_and_labelled(results, motor_result, kind, monkeypa
         assert all(figure["y"]), (name, figure["y"])
         assert any(figure["x"]), (name, figure["x"])
         assert all(loc == 0 for loc in figure["legend_locs"]), (name, figure["legend_locs"])
+        assert figure["figure_legends"] == figure["outside_legends"], name
     if kind == "motor":
         from app.scenes.wwusm_motor.outputs import RING_PLOT, SPEED_PLOT
 
