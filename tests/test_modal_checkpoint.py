@@ -134,12 +134,12 @@ KILL_POINTS = [
     "series_block:1",          # the first 100 rows written, their checkpoint not yet
     "checkpoint_state:1",      # the first checkpoint's state file written, its JSON not
     "checkpoint_tmp:1",        # half the first checkpoint JSON in its temporary file
-    "series_block:5",          # rows up to the 0.1 ms output step written, 5 steps after a checkpoint
-    "fields_data:2",           # a field output's HDF5 written, the XDMF not yet naming it
-    "fields_written:2",        # right after a field output, steps after the last checkpoint
+    "series_block:5",          # rows of a later block written, 5 steps after a checkpoint
+    "fields_data:6",           # a field output's HDF5 written, the XDMF not yet naming it (after checkpoint 1)
+    "fields_written:7",        # right after a field output, steps after the last checkpoint
     "checkpoint_tmp:5",        # a later checkpoint half written
     "checkpoint_state:8",      # the last interval checkpoint
-    "fields_written:3",        # right after the last output, before the final checkpoint
+    "fields_written:8",        # right after the last output (the end of the first period's burst)
     "checkpoint_tmp:9",        # during the final checkpoint at the end time
 ]
 KILL_POINTS_FAST = ["harmonic_start:1", "checkpoint_tmp:1", "series_block:5", "fields_written:2",

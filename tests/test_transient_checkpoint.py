@@ -309,7 +309,8 @@ def test_point_sampler_equals_point_values():
 
 # ------------------------------------------------------------------ kill anywhere, resume to the same series
 # PIEZODYN_KILL_AT=<event>:<n> SIGKILLs the run at the n-th <event> (app/killpoint.py). The tiny run
-# takes ~820 steps to 0.2 ms with outputs at ~0, ~410 and 820 steps; checkpoints every 100 steps.
+# takes ~820 steps to 0.2 ms with field outputs at the 8 phases of the first drive period (steps ~0-200, the
+# default phase-locked burst); checkpoints every 100 steps.
 KILL_SETS = [*TINY, f"transient.end_time_s={END_S!r}", "transient.checkpoint_interval_steps=100"]
 KILL_POINTS = [
     "harmonic_start:1",        # during the harmonic start: no checkpoint yet, --resume starts again
@@ -318,11 +319,11 @@ KILL_POINTS = [
     "checkpoint_state:1",      # the first checkpoint's state file written, its JSON not
     "checkpoint_tmp:1",        # half the first checkpoint JSON in its temporary file
     "step:250",                # between checkpoints
-    "fields_data:2",           # a field output's HDF5 written, the XDMF not yet naming it
-    "fields_written:2",        # right after a field output, 10+ steps after the last checkpoint
+    "fields_data:6",           # a field output's HDF5 written, the XDMF not yet naming it (after checkpoint 1)
+    "fields_written:7",        # right after a field output, steps after the last checkpoint
     "checkpoint_tmp:5",        # a later checkpoint half written
     "checkpoint_state:8",      # the last interval checkpoint
-    "fields_written:3",        # right after the last output, before the final checkpoint
+    "fields_written:8",        # right after the last output (the end of the first period's burst)
     "checkpoint_tmp:9",        # during the final checkpoint at the end time
 ]
 KILL_POINTS_FAST = ["harmonic_start:1", "checkpoint_tmp:1", "fields_written:2", "checkpoint_state:8"]
