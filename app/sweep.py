@@ -297,7 +297,8 @@ def _axis(rows: list[dict], key: str, axis=None):
     if axis is not None:
         label, component, sign = axis
         try:
-            return [sign * (v if component is None else v[component]) for v in values], label
+            # + 0.0: a zero force reads 0, not -0
+            return [sign * (v if component is None else v[component]) + 0.0 for v in values], label
         except (TypeError, IndexError, KeyError):
             pass
     if all(_is_number(v) for v in values):

@@ -181,6 +181,7 @@ def test_downforce_sweep_plot_reads_downforce_increasing_with_intervals_and_no_z
     assert "drill" in title and "downforce [N]" in title and ("95 %" in title) == with_intervals
     table = table_lines(rows, [key], headline, axes)
     assert "downforce [N]" in table[0] and "flight rate" not in table[0]
+    assert table[2].split()[:2] == ["0", "0"]                      # point 0 at 0 N, not "-0"
     assert ("± 32" in table[2 + 2]) == with_intervals
 
 
