@@ -34,6 +34,9 @@ class HarmonicPoint:
     electrode_admittance_S: dict[str, complex] = field(default_factory=dict)
     floating_voltage_V: dict[str, complex] = field(default_factory=dict)
     electrode_charge_C: dict[str, complex] = field(default_factory=dict)
+    # several driven electrodes: each one's driving-point admittance I_k / V_k with it driven alone (the others
+    # held at 0 V); under a multi-phase drive an electrode's I/V also holds the other phases' coupling
+    alone_admittance_S: dict[str, complex] = field(default_factory=dict)
 
 
 def drive_phasors(model: FEModel, voltage_V: float) -> dict[str, complex]:
@@ -88,6 +91,11 @@ class HarmonicSolver:
         self.ksp.setFromOptions()
         self.b, self.y = self.B.createVecs()[::-1]
         self.x_bc = self.b.duplicate()
+        self.alone_bc = {}                  # several driven electrodes: 1 V on each alone (driving-point Y)
+        if len(driven) > 1:
+            for name in driven:
+                self.set_phasors({other: complex(other == name) for other in driven})
+                self.alone_bc[name] = self.x_bc.copy()
         self.set_phasors(drive_phasors(model, voltage_V) if phasors is None else phasors)
         self.rows = self._block_rows()
         self.x_full_re = ops.K.createVecRight()
@@ -122,19 +130,29 @@ class HarmonicSolver:
         self.Cm.scale(-omega)
         self.nest.assemble()
         self.nest.convert("aij", self.B)
+        # each driven electrode alone: the right-hand side zeroRowsColumns would make (b = -B x off the
+        # prescribed rows, x on them), formed before the rows are zeroed; solved with the same factors below
+        local_rows = self.rows - self.block_start
+        alone_rhs = {}
+        for name, x_k in self.alone_bc.items():
+            b_k = self.b.duplicate()
+            self.B.mult(x_k, b_k)
+            b_k.scale(-1.0)
+            b_k.array[local_rows] = x_k.array_r[local_rows]
+            alone_rhs[name] = b_k
         self.b.zeroEntries()
         self.B.zeroRowsColumns(self.rows, diag=1.0, x=self.x_bc, b=self.b)
         self.ksp.setOperators(self.B)
+        alone = {}
+        for name, b_k in alone_rhs.items():
+            self.ksp.solve(b_k, self.y)
+            b_k.destroy()
+            alone[name] = 1j * omega * self._charges_of_solution()[name]       # I_k / (1 V)
         self.ksp.solve(self.b, self.y)
         reason = self.ksp.getConvergedReason()
         if reason < 0:
             raise NumericalFailure(f"harmonic LU solve failed at {frequency_Hz} Hz (KSP reason {reason})")
-        self.y_re.array[:] = self.y.array_r[: self.n_local]
-        self.y_im.array[:] = self.y.array_r[self.n_local:]
-        self.constraints.expand(self.y_re, self.x_full_re)
-        self.constraints.expand(self.y_im, self.x_full_im)
-        charges = {name: complex(charge(self.ops.K, self.x_full_re, chi), charge(self.ops.K, self.x_full_im, chi))
-                   for name, chi in self.chi_e.items()}
+        charges = self._charges_of_solution()
         q = complex(charge(self.ops.K, self.x_full_re, self.chi), charge(self.ops.K, self.x_full_im, self.chi))
         re = self.model.point_values(self.x_full_re)
         im = self.model.point_values(self.x_full_im)
@@ -147,7 +165,16 @@ class HarmonicSolver:
             has = self.model.comm.allreduce(1 if dof.size else 0)
             floating[name] = self.model.comm.allreduce(local) / max(has, 1)
         return HarmonicPoint(frequency_Hz, q, 1j * omega * q / self.voltage_V, displacement, electrode_y, floating,
-                             charges)
+                             charges, alone)
+
+    def _charges_of_solution(self) -> dict[str, complex]:
+        """Expand the block solution ``self.y`` into the full u-phi vectors; each driven electrode's charge [C]."""
+        self.y_re.array[:] = self.y.array_r[: self.n_local]
+        self.y_im.array[:] = self.y.array_r[self.n_local:]
+        self.constraints.expand(self.y_re, self.x_full_re)
+        self.constraints.expand(self.y_im, self.x_full_im)
+        return {name: complex(charge(self.ops.K, self.x_full_re, chi), charge(self.ops.K, self.x_full_im, chi))
+                for name, chi in self.chi_e.items()}
 
     def full_solution(self) -> tuple[PETSc.Vec, PETSc.Vec]:
         """(real, imaginary) full u-phi vectors of the last solve (owned by the solver)."""
@@ -156,7 +183,7 @@ class HarmonicSolver:
     def destroy(self):
         for obj in (self.K_r, self.M_r, self.C_r, self.A, self.Cp, self.Cm, self.nest, self.B, self.ksp,
                     self.b, self.y, self.x_bc, self.chi, self.x_full_re, self.x_full_im,
-                    self.y_re, self.y_im, *self.chi_e.values()):
+                    self.y_re, self.y_im, *self.chi_e.values(), *self.alone_bc.values()):
             obj.destroy()
 
 
@@ -191,6 +218,8 @@ class HarmonicResult:
     wave_point: HarmonicPoint | None = None
     field_peaks: dict | None = None        # peaks per region over the cycle at the |Y| peak (app.fe.derived)
     field_scale: float | None = None       # the drive scale of those fields (to harmonic.target, else 1)
+    peak_interior: bool = True          # False: |Y| is largest at an end of the sweep (no peak inside it)
+    drive: dict = field(default_factory=dict)     # {electrode: [amplitude V, phase deg]} of the sweep's drive
 
 
 def frequency_grid(model: FEModel, f_r: float | None, f_a: float | None) -> np.ndarray:
@@ -305,6 +334,7 @@ def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float |
         grid = frequency_grid(model, f_r, f_a)
         points = _sweep(solver, grid, model.comm)
         result = HarmonicResult(points)
+        result.drive = {name: [abs(v), math.degrees(np.angle(v))] for name, v in solver.phasors.items()}
         magnitude = np.array([abs(p.admittance_S) for p in points])
         i_max = int(np.argmax(magnitude))
         i_min = int(np.argmin(magnitude[i_max:])) + i_max
@@ -326,7 +356,8 @@ def run_harmonic(model: FEModel, ops: Operators, f_r: float | None, f_a: float |
             if i_max < i_min < len(grid) - 1:
                 trough_f = golden_section(abs_y, *bracket(i_min), tol, maximize=False)
         result.peak_Hz = float(peak_f)
-        result.trough_Hz = float(trough_f) if i_min > i_max else None
+        result.trough_Hz = float(trough_f) if i_max < i_min < len(grid) - 1 else None    # an interior minimum only
+        result.peak_interior = 0 < i_max < len(grid) - 1
         result.peak = solver.solve(result.peak_Hz)
         if cfg.target is not None:
             amp = abs(result.peak.displacement_m[cfg.target.point])
@@ -360,7 +391,16 @@ def harmonic_summary(result: HarmonicResult) -> dict:
         "admittance_phase_deg": [math.degrees(np.angle(p.admittance_S)) for p in result.points],
         "admittance_peak_Hz": result.peak_Hz,
         "admittance_trough_Hz": result.trough_Hz,
+        "admittance_peak_interior": result.peak_interior,
+        # what admittance_* is: j omega (the driven electrodes' total charge) / voltage_V under this drive
+        "drive_phasors_V_deg": result.drive,
     }
+    if result.points and result.points[0].alone_admittance_S:
+        # each driven electrode alone (the others at 0 V): its driving-point admittance I_k / V_k
+        for name in result.points[0].alone_admittance_S:
+            y = [p.alone_admittance_S[name] for p in result.points]
+            out[f"admittance_{name}_alone_magnitude_S"] = [abs(v) for v in y]
+            out[f"admittance_{name}_alone_phase_deg"] = [math.degrees(np.angle(v)) for v in y]
     if result.points and result.points[0].displacement_m:
         for name in result.points[0].displacement_m:
             out[f"displacement_{name}_amplitude_m_per_drive"] = [abs(p.displacement_m[name]) for p in result.points]

@@ -104,11 +104,39 @@ def _circuit_curve(circuit: dict | None, f: np.ndarray):
     return fine, bvd_admittance(circuit, fine)
 
 
+def _drive_of(harmonic: dict) -> dict:
+    """{electrode: (amplitude V, phase deg)} of the sweep's drive (empty for an old summary)."""
+    return {name: tuple(value) for name, value in (harmonic.get("drive_phasors_V_deg") or {}).items()}
+
+
+def _what_is_plotted(harmonic: dict, what: str) -> tuple[str, str]:
+    """(the FE curve's legend, the title's line): what the sweep's admittance is under its drive. One driven
+    electrode (or several in phase): its I / V. Several phases: j omega (total driven charge) / voltage_V, not a
+    driving-point admittance; each electrode driven alone is drawn beside it."""
+    drive = _drive_of(harmonic)
+    name = {"Y": "Electrical admittance", "Z": "Electrical impedance"}[what]
+    if not drive:                                   # a summary from before the drive was recorded
+        return "FE", f"{name} of the driven electrodes"
+    names = ", ".join(drive)
+    if len({round(p, 6) for _, p in drive.values()}) <= 1:
+        return f"FE: {what} of {names}", f"{name} {what} = {'I/V' if what == 'Y' else 'V/I'} of electrode {names}"
+    phases = ", ".join(f"{n} {a:.4g} V at {p:.0f} deg" for n, (a, p) in drive.items())
+    return (f"FE: total current / reference V under the drive ({phases}); not a driving-point {what}",
+            f"{name}: each driven electrode alone (others at 0 V); dashed: the drive's total")
+
+
 def _frequency_plot(path: Path, f: np.ndarray, magnitude: np.ndarray, phase: np.ndarray, fine, fine_values,
-                    f_r, f_a, what: str, unit: str, title: str) -> None:
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
-    ax1.semilogy(f / 1e3, magnitude, "o-", ms=3, label="FE")
-    ax2.plot(f / 1e3, phase, "o-", ms=3, label="FE")
+                    f_r, f_a, what: str, unit: str, title: str, harmonic: dict | None = None,
+                    alone: dict | None = None) -> None:
+    fe_label, name = _what_is_plotted(harmonic or {}, what)
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 7))
+    for electrode, (alone_magnitude, alone_phase) in (alone or {}).items():
+        label = f"{what}_{electrode} = {'I/V' if what == 'Y' else 'V/I'}, {electrode} driven alone"
+        ax1.semilogy(f / 1e3, alone_magnitude, "s-", ms=3, label=label)
+        ax2.plot(f / 1e3, alone_phase, "s-", ms=3, label=label)
+    style = "o--" if alone else "o-"
+    ax1.semilogy(f / 1e3, magnitude, style, ms=3, label=fe_label)
+    ax2.plot(f / 1e3, phase, style, ms=3, label=fe_label)
     if fine is not None:
         ax1.semilogy(fine / 1e3, np.abs(fine_values), "-", lw=1, label="1-DOF equivalent circuit")
         ax2.plot(fine / 1e3, np.degrees(np.angle(fine_values)), "-", lw=1, label="1-DOF equivalent circuit")
@@ -119,10 +147,11 @@ def _frequency_plot(path: Path, f: np.ndarray, magnitude: np.ndarray, phase: np.
     ax1.set_ylabel(f"|{what}| [{unit}]")
     ax2.set_ylabel(f"phase({what}) [deg]")
     ax2.set_xlabel("frequency [kHz]")
-    ax1.legend(loc="lower left" if what == "Y" else "upper left", fontsize=8, framealpha=0.9)
-    name = {"Y": "Electrical admittance", "Z": "Electrical impedance"}[what]
-    ax1.set_title(f"{title}\n{name}" if title else name, fontsize=10)
-    fig.tight_layout()
+    ax1.set_title(f"{title}\n{name}" if title else name, fontsize=9)
+    # the legend below the panels: over a panel it would hide a curve's resonance loop whatever its corner
+    handles, labels = ax1.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.035 * len(labels) + 0.01, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -132,7 +161,19 @@ def admittance_plot(path: Path, harmonic: dict, f_r: float | None, f_a: float | 
     f = np.array(harmonic["frequency_Hz"])
     fine, y = _circuit_curve(circuit, f)
     _frequency_plot(path, f, np.array(harmonic["admittance_magnitude_S"]), np.array(harmonic["admittance_phase_deg"]),
-                    fine, y, f_r, f_a, "Y", "S", title)
+                    fine, y, f_r, f_a, "Y", "S", title, harmonic, _alone(harmonic, impedance=False))
+
+
+def _alone(harmonic: dict, impedance: bool) -> dict:
+    """{electrode: (magnitude, phase)} of each driven electrode driven alone (app/harmonic.py), as Y or Z."""
+    out = {}
+    for name in _drive_of(harmonic):
+        magnitude = harmonic.get(f"admittance_{name}_alone_magnitude_S")
+        phase = harmonic.get(f"admittance_{name}_alone_phase_deg")
+        if magnitude is not None and phase is not None:
+            magnitude, phase = np.asarray(magnitude, dtype=float), np.asarray(phase, dtype=float)
+            out[name] = (1.0 / magnitude, -phase) if impedance else (magnitude, phase)
+    return out
 
 
 def impedance_plot(path: Path, harmonic: dict, f_r: float | None, f_a: float | None, circuit: dict | None = None,
@@ -142,7 +183,7 @@ def impedance_plot(path: Path, harmonic: dict, f_r: float | None, f_a: float | N
     fine, y = _circuit_curve(circuit, f)
     _frequency_plot(path, f, 1.0 / np.array(harmonic["admittance_magnitude_S"]),
                     -np.array(harmonic["admittance_phase_deg"]), fine, None if y is None else 1.0 / y,
-                    f_r, f_a, "Z", "Ω", title)
+                    f_r, f_a, "Z", "Ω", title, harmonic, _alone(harmonic, impedance=True))
 
 
 def frequency_domain_outputs(out: Path, results: dict, plots: bool = True, title: str = "") -> list[str]:
@@ -210,7 +251,7 @@ def plot_time_series(h5_path: Path, out_dir: Path, point: str | None, bodies: li
     ax.set_xlabel(TIME_AXIS)
     ax.set_ylabel(MOTION_AXIS)
     ax.set_title(f"{title}: displacements" if title else "displacements")
-    ax.legend(loc="upper right")
+    ax.legend(loc="best")
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(out_dir / S.MOTION_PLOT, dpi=120)

@@ -30,7 +30,9 @@ def frequency_domain_rows(results: dict) -> list[tuple[str, str, str]]:
             rows.append(("effective coupling k_eff", f"{modal['working_k_eff']:.4f}", "1"))
     harmonic = results.get("harmonic")
     if harmonic:
-        rows.append(("|Y| peak (harmonic)", f"{harmonic['admittance_peak_Hz']:.2f}", "Hz"))
+        peak = ("|Y| peak (harmonic)" if harmonic.get("admittance_peak_interior", True)
+                else "|Y| largest at the sweep's end (no peak inside)")
+        rows.append((peak, f"{harmonic['admittance_peak_Hz']:.2f}", "Hz"))
         if harmonic.get("admittance_trough_Hz"):
             rows.append(("|Y| trough (harmonic)", f"{harmonic['admittance_trough_Hz']:.2f}", "Hz"))
         if "voltage_for_target_amplitude_V" in harmonic:

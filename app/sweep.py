@@ -228,9 +228,10 @@ def run_sweep(case_path, params, out_dir, sets=None, comm=None, progress=True) -
     rows.sort(key=lambda r: r["point"])
     title = (points[0]["case"].title if points else "") or Path(case_path).name
     headline = scene_columns(points[0]["case"]) if points else []
-    write_table(rows, [k for k, _ in params], out_dir, case_path, title, headline)
+    axes = scene_axes(points[0]["case"], [k for k, _ in params]) if points else {}
+    write_table(rows, [k for k, _ in params], out_dir, case_path, title, headline, axes)
     if progress:                  # the table as the terminal shows it (not with --quiet)
-        for line in table_lines(rows, [k for k, _ in params], headline):
+        for line in table_lines(rows, [k for k, _ in params], headline, axes):
             print(line, flush=True)
     return rows
 
@@ -258,7 +259,7 @@ def table_columns(rows: list[dict], keys: list[str]) -> list[str]:
 
 
 def write_table(rows: list[dict], keys: list[str], out_dir: Path, case_path: str, title: str = "",
-                headline: list[str] | None = None) -> None:
+                headline: list[str] | None = None, axes: dict | None = None) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     columns = table_columns(rows, keys)
     with open(out_dir / "sweep.csv", "w", newline="") as f:
@@ -267,11 +268,12 @@ def write_table(rows: list[dict], keys: list[str], out_dir: Path, case_path: str
         for row in rows:
             writer.writerow([_csv(row.get(c, "")) for c in columns])
     write_json_atomic(out_dir / "sweep.json", {"case": case_path, "title": title, "parameters": keys,
-                                               "columns": columns, "headline": headline or [], "rows": rows},
+                                               "columns": columns, "headline": headline or [],
+                                               "axes": axes or {}, "rows": rows},
                       indent=1)
     ok = [r for r in rows if "_failed" not in r]
     if ok:
-        write_sweep_plots(ok, keys, out_dir, title, headline)
+        write_sweep_plots(ok, keys, out_dir, title, headline, axes)
 
 
 def _csv(value):
@@ -286,11 +288,19 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _axis(rows: list[dict], key: str):
-    """(x values, x label) for a swept key; a vector value is plotted by the one component that varies."""
+def _axis(rows: list[dict], key: str, axis=None):
+    """(x values, x label) for a swept key: by the scene's ``axis`` (label, component, sign) when it gives one
+    (:func:`scene_axes`), else a number with its unit, or a vector by the one component that varies."""
     from app.plots import quantity_label
 
     values = [r[key] for r in rows]
+    if axis is not None:
+        label, component, sign = axis
+        try:
+            # + 0.0: a zero force reads 0, not -0
+            return [sign * (v if component is None else v[component]) + 0.0 for v in values], label
+        except (TypeError, IndexError, KeyError):
+            pass
     if all(_is_number(v) for v in values):
         text, scale = quantity_label(key)
         return [v * scale for v in values], text
@@ -326,18 +336,59 @@ def scene_columns(case) -> list[str]:
     return [f"{analysis}.{column}" for column in scene.sweep_columns]
 
 
+def scene_axes(case, keys: list[str]) -> dict:
+    """{swept key: [label, component, sign]} for the keys the case's scene plots its own way
+    (``Scene.sweep_axis``); kept in sweep.json, so ``piezodyn plot`` draws the same axes."""
+    from app.scenes import scene_of
+
+    scene = scene_of(case)
+    hook = getattr(scene, "sweep_axis", None)
+    axes = {}
+    for key in keys:
+        axis = hook(key) if hook is not None else None
+        if axis is not None:
+            axes[key] = list(axis)
+    return axes
+
+
+def interval_column(column: str) -> str | None:
+    """The column holding the half-width of a statistic's 95 % interval (``X.statistics.interval_95.Y`` for
+    ``X.statistics.Y``: a scene's batch means), None for a column that is not a statistic."""
+    head, sep, tail = column.partition(".statistics.")
+    return f"{head}.statistics.interval_95.{tail}" if sep and not tail.startswith("interval_95.") else None
+
+
 def plot_columns(rows: list[dict], headline: list[str] | None = None) -> list[str]:
-    present = [c for c in [*(headline or []), *PLOT_COLUMNS] if all(_is_number(r.get(c)) for r in rows)]
+    """The results a sweep plots: the scene's headlines, then the generic ones, those present at every point and
+    not zero at all (an all-zero panel says nothing), at most MAX_PLOTS."""
+    present = [c for c in [*(headline or []), *PLOT_COLUMNS] if all(_is_number(r.get(c)) for r in rows)
+               and any(r[c] != 0 for r in rows)]
     if not present:  # a tier without headlines: its first scalar results
         present = [c for c in table_columns(rows, []) if c != "point" and not c.endswith(_BOOKKEEPING)
-                   and all(_is_number(r.get(c)) for r in rows)]
+                   and ".interval_95." not in c and all(_is_number(r.get(c)) for r in rows)
+                   and any(r[c] != 0 for r in rows)]
     return present[:MAX_PLOTS]
 
 
 def write_sweep_plots(rows: list[dict], keys: list[str], out_dir: Path, title: str = "",
-                      headline: list[str] | None = None) -> list[str]:
-    """One figure per swept parameter: headline results against it, one line per combination of the
-    others; labels and units as the rest of piezodyn shows them (mm, kHz, g)."""
+                      headline: list[str] | None = None, axes: dict | None = None) -> list[str]:
+    """One PNG per swept parameter (:func:`sweep_figures`); returns the file names."""
+    import matplotlib.pyplot as plt
+
+    files = []
+    for name, fig in sweep_figures(rows, keys, title, headline, axes):
+        fig.savefig(out_dir / name, dpi=110)
+        plt.close(fig)
+        files.append(name)
+    return files
+
+
+def sweep_figures(rows: list[dict], keys: list[str], title: str = "", headline: list[str] | None = None,
+                  axes: dict | None = None):
+    """(file name, figure) per swept parameter: headline results against it (x increasing to the right, as the
+    scene names the quantity: :func:`scene_axes`), one line per combination of the others, error bars where
+    the results carry 95 % intervals (:func:`interval_column`), no all-zero panel; labels and units as the
+    rest of piezodyn shows them (mm, kHz, g)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -346,9 +397,8 @@ def write_sweep_plots(rows: list[dict], keys: list[str], out_dir: Path, title: s
     from app.plots import quantity_label
 
     columns = plot_columns(rows, headline)
-    files = []
     for key in keys:
-        x_all, x_label = _axis(rows, key)
+        x_all, x_label = _axis(rows, key, (axes or {}).get(key))
         if x_all is None or not columns:
             continue
         x_of = dict(zip((r["point"] for r in rows), x_all))
@@ -358,41 +408,60 @@ def write_sweep_plots(rows: list[dict], keys: list[str], out_dir: Path, title: s
             groups.setdefault(tuple(json.dumps(r[k]) for k in others), []).append(r)
         ncols = min(3, len(columns))
         nrows = math.ceil(len(columns) / ncols)
-        fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), squeeze=False)
-        for ax, column in zip(axes.flat, columns):
+        fig, panels = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), squeeze=False)
+        with_bars = False
+        for ax, column in zip(panels.flat, columns):
             y_label, y_scale = quantity_label(column)
+            bars = interval_column(column)
             for label, group in groups.items():
                 group = sorted(group, key=lambda r: x_of[r["point"]])
                 name = ", ".join(_legend(k, json.loads(v)) for k, v in zip(others, label)) or None
-                ax.plot([x_of[r["point"]] for r in group], [r[column] * y_scale for r in group], "o-", label=name)
+                x = [x_of[r["point"]] for r in group]
+                y = [r[column] * y_scale for r in group]
+                if bars is not None and all(_is_number(r.get(bars)) for r in group):
+                    ax.errorbar(x, y, yerr=[r[bars] * y_scale for r in group], fmt="o-", capsize=3, label=name)
+                    with_bars = True
+                else:
+                    ax.plot(x, y, "o-", label=name)
             ax.set_xlabel(x_label)
             ax.set_ylabel(y_label, fontsize=8)
             ax.grid(alpha=0.3)
-        for ax in list(axes.flat)[len(columns):]:
+        for ax in list(panels.flat)[len(columns):]:
             ax.set_visible(False)
         if others:
-            axes.flat[0].legend(fontsize=7)
-        fig.suptitle(f"{title}: sweep of {x_label}" if title else f"sweep of {x_label}", fontsize=10)
+            panels.flat[0].legend(fontsize=7, loc="best")
+        what = f"results against {x_label}" + (" (bars: 95 % batch-means intervals)" if with_bars else "")
+        fig.suptitle(f"{title}\n{what}" if title else what, fontsize=10)
         fig.tight_layout()
-        name = f"sweep_{key.replace('.', '_')}.png"
-        fig.savefig(out_dir / name, dpi=110)
-        plt.close(fig)
-        files.append(name)
-    return files
+        yield f"sweep_{key.replace('.', '_')}.png", fig
 
 
-def table_lines(rows: list[dict], keys: list[str], headline: list[str] | None = None) -> list[str]:
-    """The sweep as a terminal table: each point's swept values and its headline results, with units."""
+def table_lines(rows: list[dict], keys: list[str], headline: list[str] | None = None,
+                axes: dict | None = None) -> list[str]:
+    """The sweep as a terminal table: each point's swept values (as the scene names them: :func:`scene_axes`)
+    and its headline results with units, a statistic with its 95 % interval as "mean ± half-width"."""
     from app.plots import quantity_label
 
     columns = plot_columns([r for r in rows if "_failed" not in r], headline) if rows else []
     heads, cells = ["point"], [[str(r["point"])] for r in rows]
-    for key in [*keys, *columns]:
+    own = set()
+    for key in keys:
+        x, label = _axis(rows, key, (axes or {}).get(key)) if (axes or {}).get(key) else (None, None)
+        if x is None:
+            continue
+        own.add(key)
+        heads.append(label)
+        for cell, value in zip(cells, x):
+            cell.append(f"{value:.5g}")
+    for key in [k for k in keys if k not in own] + columns:
         label, scale = quantity_label(key)
         heads.append(label)
+        bars = interval_column(key)
         for cell, r in zip(cells, rows):
             value = r.get(key)
-            if _is_number(value):
+            if _is_number(value) and bars is not None and _is_number(r.get(bars)):
+                cell.append(f"{value * scale:.4g} ± {r[bars] * scale:.2g}")
+            elif _is_number(value):
                 cell.append(f"{value * scale:.5g}")
             elif isinstance(value, list):
                 cell.append("[" + ", ".join(f"{v * scale:.4g}" if _is_number(v) else str(v) for v in value) + "]")
@@ -474,6 +543,7 @@ def replot_sweep(result_dir: Path, log, write: bool = True) -> list[str]:
         sweep = json.loads(path.read_bytes().decode("utf-8"))
         rows, keys = sweep["rows"], sweep["parameters"]
         headline = sweep.get("headline") or []
+        axes = sweep.get("axes") or {}
         title = sweep.get("title", "")
         if not isinstance(rows, list) or not all(isinstance(r, dict) and "point" in r for r in rows):
             raise KeyError("rows")
@@ -484,7 +554,7 @@ def replot_sweep(result_dir: Path, log, write: bool = True) -> list[str]:
     except (KeyError, TypeError) as exc:
         raise CaseError(str(path), str(exc).strip("'"), "missing: not a piezodyn sweep") from None
     ok = [r for r in rows if "_failed" not in r]
-    written = write_sweep_plots(ok, keys, result_dir, title, headline) if write and ok else []
-    for line in table_lines(rows, keys, headline):
+    written = write_sweep_plots(ok, keys, result_dir, title, headline, axes) if write and ok else []
+    for line in table_lines(rows, keys, headline, axes):
         log(line)
     return written

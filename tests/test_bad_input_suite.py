@@ -110,6 +110,16 @@ SET_INPUTS = [
     (FE, [*FE_TINY, "transient.loads.fe_force_N=[0.0]"], "transient.loads.fe_force_N"),
     (FE, [*FE_TINY, 'electrodes.hot.kind="ground"'], "transient.drive.tip_amplitude_m"),
     (FE, [*FE_TINY, "transient.end_time_s=-2e-4"], "transient.end_time_s"),
+    # the phase-locked field frames (app/case/schema.py OutputSection.check_frames)
+    (FE, [*FE_TINY, "output.field_phases=0"], "output.field_phases"),
+    (FE, [*FE_TINY, "output.field_phases=100"], "output.field_phases"),
+    (FE, [*FE_TINY, "output.field_interval_periods=0.5"], "output.field_interval_periods"),
+    (FE, [*FE_TINY, "output.field_interval_periods=2", "output.field_burst_times_s=[0.0]"],
+     "output.field_burst_times_s"),
+    (FE, [*FE_TINY, "output.field_burst_times_s=[0.0, 1e-5]"], "output.field_burst_times_s[1]"),
+    (FE, [*FE_TINY, "output.field_burst_times_s=[0.0, 5e-4]"], "output.field_burst_times_s[1]"),
+    (FE, [*FE_TINY, "output.field_burst_times_s=[-1e-4]"], "output.field_burst_times_s[0]"),
+    (BAR, ["output.field_phases=4"], "output.field_phases"),
     (FE, [*FE_TINY, "transient.output_interval_s=1.0"], "transient.end_time_s: 0.0002 s is shorter than "
                                                         "output_interval_s = 1 s"),
     (FE, [*FE_TINY, 'transient.initial_state="warm"'], "transient.initial_state"),

@@ -154,6 +154,21 @@ def test_phases_superpose(stator):
 
 
 @pytest.mark.mpi
+def test_each_phase_alone_is_its_driving_point_admittance(stator):
+    """Issue 28: under the two-phase drive every solve also gives each driven electrode's driving-point
+    admittance with it driven alone (app/harmonic.py: extra right-hand sides on the same factors, formed as
+    the row elimination would). Each equals that electrode's I / V from a separate solve with only it
+    driven (its own elimination), to solver precision; the two-phase drive's total current / 200 V is not
+    either (its phase is that of A + jB)."""
+    nominal = stator.solve(NOMINAL)["point"]
+    for name, phasors in (("A", {"A": 200.0 + 0j, "B": 0j}), ("B", {"A": 0j, "B": 200.0 + 0j})):
+        alone = stator.solve(phasors)["point"]
+        expected = alone.electrode_admittance_S[name]
+        assert abs(nominal.alone_admittance_S[name] - expected) <= SOLVER_RTOL * 1e2 * abs(expected)
+        assert alone.alone_admittance_S[name] == pytest.approx(expected, rel=SOLVER_RTOL * 1e2)
+
+
+@pytest.mark.mpi
 def test_floating_sensors_are_equipotential_without_net_charge(stator):
     """The floating electrode's two conditions, in the solved field and independent of how they are
     imposed: every potential DOF of each sensor equals its reported voltage (spread 0 to round-off),

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +18,11 @@ from conftest import CASES, run_cli
 
 DRILL = ['tier="modal"', "geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic_mesh_size_m=0.0025",
          "transient.end_time_s=1e-4", "transient.output_interval_s=1e-4", "output.fields=false"]
+
+
+# as tests/test_cases.py runs the motor (its reduced model in the tests' shared cache)
+MOTOR = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
+         "reduction.interface_nodes=16", "transient.contacts[0].sample_points=64", "transient.end_time_s=2.8e-4"]
 
 
 def _sets(overrides):
@@ -36,6 +42,71 @@ def results(tmp_path_factory):
                    "lumped.duration_s=0.01", "--out", root / "sweep", "--quiet")
     assert proc.returncode == 0, proc.stderr
     return root
+
+
+@pytest.fixture(scope="module")
+def motor_result(tmp_path_factory):
+    """The motor scene (modal tier) on the tests' coarse stator for ten periods, as tests/test_cases.py runs it."""
+    out = tmp_path_factory.mktemp("plot_motor")
+    proc = run_cli("run", CASES / "wwusm-motor.toml", "--out", out, "--quiet", *_sets(MOTOR))
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+def _figures_drawn(directory, monkeypatch) -> dict:
+    """{file name: what each saved figure shows} of ``piezodyn plot DIRECTORY`` run in this process: the titles
+    (figure and axes), each drawn axes' labels and its legend's placement."""
+    from matplotlib.figure import Figure
+
+    from app.report import replot
+    from app.scenes import SCENES
+    from app.sweep import replot_sweep
+
+    seen = {}
+    original = Figure.savefig
+
+    def record(fig, fname, *args, **kwargs):
+        drawn = [ax for ax in fig.axes if ax.get_visible() and ax.has_data()]
+        title = " ".join([fig._suptitle.get_text() if fig._suptitle else "", *(ax.get_title() for ax in drawn)])
+        legends = [ax.get_legend() for ax in drawn if ax.get_legend() is not None]
+        outside = [legend for legend in fig.legends if legend._loc == 8]       # below the panels (lower center)
+        seen[Path(fname).name] = {"title": title.strip(), "x": [ax.get_xlabel() for ax in drawn],
+                                  "y": [ax.get_ylabel() for ax in drawn], "legend_locs": [lg._loc for lg in legends],
+                                  "outside_legends": len(outside), "figure_legends": len(fig.legends),
+                                  "patches": sum(len(ax.patches) for ax in drawn)}
+        return original(fig, fname, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", record)
+    if (directory / "sweep.json").is_file():
+        replot_sweep(directory, lambda line: None)
+    else:
+        replot(directory, lambda line: None, SCENES)
+    return seen
+
+
+@pytest.mark.parametrize("kind", ["drill", "lumped", "bar", "sweep", "motor"])
+def test_every_plot_is_titled_and_labelled(results, motor_result, kind, monkeypatch):
+    """Issue 28: every plot of every result kind says what it shows: a title, every drawn panel's y label and
+    the x label of at least the bottom panel (stacked panels share x), and legends placed where they cover
+    the fewest points (loc 'best' = 0) or below the panels, not in a fixed corner a curve's peak may occupy.
+    The motor: the ring plot is titled by what it shows (not the case's old "speed-torque"), the speed plot
+    marks the steady window (a shaded span) and names the rotor speed."""
+    directory = motor_result if kind == "motor" else results / kind
+    seen = _figures_drawn(directory, monkeypatch)
+    assert seen, "no plot drawn"
+    for name, figure in seen.items():
+        assert figure["title"], name
+        assert all(figure["y"]), (name, figure["y"])
+        assert any(figure["x"]), (name, figure["x"])
+        assert all(loc == 0 for loc in figure["legend_locs"]), (name, figure["legend_locs"])
+        assert figure["figure_legends"] == figure["outside_legends"], name
+    if kind == "motor":
+        from app.scenes.wwusm_motor.outputs import RING_PLOT, SPEED_PLOT
+
+        assert "contact pressure round the ring" in seen[RING_PLOT]["title"]
+        assert "speed-torque" not in seen[RING_PLOT]["title"]
+        assert "rotor speed" in seen[SPEED_PLOT]["title"] and seen[SPEED_PLOT]["patches"] >= 1
+        assert seen[SPEED_PLOT]["x"] == ["time [ms]"] and seen[SPEED_PLOT]["y"] == ["rotor speed [rpm]"]
 
 
 @pytest.mark.parametrize("kind, expect", [("drill", ["transient_motion.png", "transient_force.png"]),

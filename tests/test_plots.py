@@ -147,3 +147,54 @@ def test_transient_result_replots_its_time_series(tmp_path):
     replot = run_cli("plot", out)
     assert replot.returncode == 0, replot.stderr
     assert (out / "transient_motion.png").stat().st_size > 0 and (out / "transient_force.png").stat().st_size > 0
+
+
+def _saved_figure(monkeypatch):
+    """Capture the figure a plot function saves: [(figure)]."""
+    from matplotlib.figure import Figure
+
+    saved = []
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *args, **kwargs: saved.append(fig))
+    return saved
+
+
+def _stator_like_sweep(phases_deg):
+    """A synthetic two-electrode sweep (|Y| of a resonance) with the drive and the driven-alone curves as
+    app/harmonic.py writes them."""
+    f = np.linspace(35750.0, 36250.0, 21)
+    y = 1j * 2 * np.pi * f * 2e-9 + 1e-3 / (1 + 2j * (f - 36000.0) / 144.0)
+    out = {"frequency_Hz": f.tolist(), "admittance_magnitude_S": np.abs(2 * y).tolist(),
+           "admittance_phase_deg": np.degrees(np.angle((1 + 1j) * y)).tolist(),
+           "drive_phasors_V_deg": {"A": [200.0, phases_deg[0]], "B": [200.0, phases_deg[1]]}}
+    for name in ("A", "B"):
+        out[f"admittance_{name}_alone_magnitude_S"] = np.abs(y).tolist()
+        out[f"admittance_{name}_alone_phase_deg"] = np.degrees(np.angle(y)).tolist()
+    return out
+
+
+def test_two_phase_admittance_plot_says_what_each_curve_is(monkeypatch, tmp_path):
+    """Issue 28: under a two-phase drive the total current / V is no driving-point admittance (phase near 135
+    deg for A + jB): the plot draws each electrode driven alone, labelled so, beside the total, labelled as
+    what it is; the title says so; axes labelled; the legend below the panels (off the curves)."""
+    from app.plots import admittance_plot
+
+    saved = _saved_figure(monkeypatch)
+    admittance_plot(tmp_path / "admittance.png", _stator_like_sweep((0.0, 90.0)), 36000.0, None, title="stator")
+    (fig,) = saved
+    top, bottom = fig.axes
+    labels = [line.get_label() for line in top.lines]
+    assert "Y_A = I/V, A driven alone" in labels and "Y_B = I/V, B driven alone" in labels
+    total = [label for label in labels if label.startswith("FE:")]
+    assert len(total) == 1 and "not a driving-point Y" in total[0] and "B 200 V at 90 deg" in total[0]
+    assert "each driven electrode alone" in top.get_title() and top.get_title().startswith("stator")
+    assert top.get_ylabel() == "|Y| [S]" and bottom.get_ylabel() == "phase(Y) [deg]"
+    assert bottom.get_xlabel() == "frequency [kHz]"
+    assert top.get_legend() is None and len(fig.legends) == 1       # below the panels, off the curves
+    # in phase (one electrode or several together): the curve is their I/V, no alone curves asked
+    saved.clear()
+    single = {k: v for k, v in _stator_like_sweep((0.0, 0.0)).items() if "alone" not in k}
+    admittance_plot(tmp_path / "admittance.png", single, 36000.0, None, title="stator")
+    (fig,) = saved
+    assert "I/V of electrode A, B" in fig.axes[0].get_title()
+    assert [line.get_label() for line in fig.axes[0].lines if not line.get_label().startswith("f_")] == \
+        ["FE: Y of A, B"]

@@ -299,11 +299,52 @@ class OutputSection:
                    "facets, the solver's penalty law (field 'contact_pressure_Pa' of transient_fields.xdmf, zero off "
                    "the contact surfaces), each step's peak ('<contact>_peak_pressure_Pa' in transient.h5) and the "
                    "run's (results.transient.contacts.<contact>.max_pressure_Pa)")
+    field_phases: int | None = param(
+        None, ge=1, doc="transient fields: frames per drive period (transient.drive.frequency_Hz) in each burst, "
+                        "evenly spaced in phase; a burst spans one period (default 8)")
+    field_interval_periods: float | None = param(
+        None, gt=0, doc="transient fields: drive periods from one burst's start to the next (at least 1 when "
+                        "field_phases > 1); default: field_phases x transient.output_interval_s in whole periods "
+                        "(as many frames as one per output_interval_s, none aliased to one phase)")
+    field_burst_times_s: list[float] | None = param(
+        None, unit="s", doc="transient fields: bursts start at these times (increasing, before end_time_s, one "
+                            "period apart) instead of every field_interval_periods")
 
     def check(self, file, prefix):
         for i, name in enumerate(self.derived):
             if name in self.derived[:i]:
                 raise CaseError(file, f"{prefix}.derived[{i}]", f"{name!r} is listed twice")
+
+    def check_frames(self, case, file) -> None:
+        """Cross-key rules of the phase-locked field output (app/transient/fields.py frame_schedule)."""
+        given = [k for k in ("field_phases", "field_interval_periods", "field_burst_times_s")
+                 if getattr(self, k) is not None]
+        if not given:
+            return
+        if case.transient is None or "transient" not in (case.analyses or ()):
+            raise CaseError(file, f"output.{given[0]}", "sets the transient field output: the case runs no transient")
+        if self.field_interval_periods is not None and self.field_burst_times_s is not None:
+            raise CaseError(file, "output.field_burst_times_s", "give field_burst_times_s or "
+                                                                "field_interval_periods, not both")
+        phases = self.field_phases or 8
+        period = 1.0 / case.transient.drive.frequency_Hz
+        if phases > 1 and self.field_interval_periods is not None and self.field_interval_periods < 1:
+            raise CaseError(file, "output.field_interval_periods",
+                            f"{self.field_interval_periods:g} periods is shorter than a burst (one period of "
+                            f"field_phases = {phases} frames)")
+        steps = case.transient.steps
+        largest = max(steps.open_s, steps.closed_s, steps.change_s)
+        if phases > 1 and period / phases < largest * (1 - 1e-9):
+            raise CaseError(file, "output.field_phases", f"{phases} frames per period are {period / phases:.4g} s "
+                                                         f"apart, less than the time step {largest:g} s")
+        times = self.field_burst_times_s
+        for i, t in enumerate(times or ()):
+            if not 0 <= t < case.transient.end_time_s:
+                raise CaseError(file, f"output.field_burst_times_s[{i}]",
+                                f"{t:g} s is outside the run [0, end_time_s = {case.transient.end_time_s:g} s)")
+            if i and t < times[i - 1] + (period if phases > 1 else 0.0) * (1 - 1e-9):
+                raise CaseError(file, f"output.field_burst_times_s[{i}]",
+                                f"{t:g} s is not one drive period ({period:.4g} s) after the previous burst")
 
 
 @dataclass(frozen=True)
@@ -461,4 +502,5 @@ def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
     analyses = case.analyses if case.analyses is not None else default
     case = replace(case, materials=materials, analyses=analyses, source=str(path.resolve()), **extra)
     check_tier(case, file, written)
+    case.output.check_frames(case, file)
     return case

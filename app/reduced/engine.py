@@ -454,12 +454,12 @@ class ModalEngine:
         if not self.model.vertex_basis.size and self.comm.rank == 0:
             raise CaseError(self.case.source, "output.fields", "the reduced model holds no vertex basis")
         from app.transient.body_shapes import BodyMeshes
-        from app.transient.fields import FieldSeriesExport
+        from app.transient.fields import FieldSeriesExport, frame_schedule
 
         case, slices = self.case, dict(self.body_slices)
         vertex = ReducedVertexFields(self.model, self.comm, self.case.output.derived)
         return FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
-                                 lambda: self.q, self.cfg.output_interval_s,
+                                 lambda: self.q, frame_schedule(self.case),
                                  bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
                                  resume_from_s=resume_from_s)
 

@@ -11,6 +11,9 @@ tier that runs the case reports them under the same keys. A scene is an object o
 - ``table_rows(results)``: lines (label, value, unit) of the end-of-run table, one unit per row;
 - ``outputs(results, out_dir, title, plots)``: CSVs and (with ``plots``) plots it writes (file names), rank 0;
 - ``sweep_columns``: result paths (below the analysis: ``statistics.motor.speed_rpm``) a sweep plots first;
+- ``sweep_axis(key)``: how a sweep plots one of the scene's keys, as the user thinks of it: (label with unit,
+  component of a vector value or None, sign), e.g. the drill's ``transient.loads.fe_force_N`` as
+  "downforce [N]" = -F_z; None: the generic axis;
 - ``steady_floors(case)``: (speed [rad/s], torque [N m]) below which the steady-state stop counts a change as
   noise, when the case does not set them.
 

@@ -20,6 +20,8 @@ class Scene(Protocol):
 
     def steady_floors(self, case) -> tuple[float, float]: ...
 
+    def sweep_axis(self, key: str) -> tuple[str, int | None, float] | None: ...
+
 
 class SceneReport:
     """A scene that adds nothing: subclass it and override what the scene knows."""
@@ -41,6 +43,11 @@ class SceneReport:
 
     def steady_floors(self, case) -> tuple[float, float]:
         return 0.0, 0.0
+
+    def sweep_axis(self, key: str) -> tuple[str, int | None, float] | None:
+        """How a sweep plots swept key ``key`` of this scene: (axis label with unit, the component of a vector
+        value or None, the sign), x = sign * value[component] in the label's unit; None: the generic axis."""
+        return None
 
 
 SCENES: dict[str, Scene] = {}

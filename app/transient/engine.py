@@ -224,14 +224,14 @@ class FEEngine:
             return None
         from app.exports import VertexFields
         from app.transient.body_shapes import BodyMeshes
-        from app.transient.fields import FieldSeriesExport
+        from app.transient.fields import FieldSeriesExport, frame_schedule
 
         tm, system, case = self.tm, self.system, self.case
         slices = {b.name: tm.rigid.all_dofs(b.name) for b in tm.rigid.bodies}
         vertex = VertexFields(tm.model, self.case.output.derived)
         scalars = (lambda: self._pressure_fields(vertex)) if self.pressures else None
         export = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
-                                   lambda: system.solution_vector, self.cfg.output_interval_s,
+                                   lambda: system.solution_vector, frame_schedule(self.case),
                                    bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
                                    resume_from_s=resume_from_s, scalars=scalars)
         if resume_from_s is None:

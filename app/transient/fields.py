@@ -1,5 +1,6 @@
-"""XDMF time series of the FE fields and rigid bodies of a transient run (ParaView, meshio), at a chosen
-output interval.
+"""XDMF time series of the FE fields and rigid bodies of a transient run (ParaView, meshio), at frame times
+phase-locked to the drive (:func:`frame_schedule`: bursts of frames spread over a drive period, so an
+animation shows the vibration, not one phase of it).
 
 Layout: ``<stem>.xdmf`` (the XML, ours) and ``<stem>/mesh.h5`` (vertices, cells, region tags)
 plus one ``<stem>/step_<k>.h5`` per output (displacement [m], potential [V] at the vertices; see
@@ -41,26 +42,76 @@ from app.files import replace_file, write_h5_atomic
 from app.killpoint import kill_point
 
 BODY_GRID = "rigid_bodies"      # name of the bodies' grid in the companion file
+DEFAULT_PHASES = 8
+
+
+class FrameSchedule:
+    """The times of the field frames, phase-locked to the drive: bursts of ``phases`` frames evenly spaced over
+    one drive period (``period_s``), a burst starting every ``interval_periods`` periods from t = 0, or at each of
+    ``burst_times_s``. ``next_after(t)``: the first frame time after t (a frame at t itself counts as written);
+    ``spacing_s``: the smallest distance between frames (the loop's time tolerance scale)."""
+
+    def __init__(self, period_s: float, phases: int, interval_periods: float | None = None,
+                 burst_times_s=None):
+        self.period_s = float(period_s)
+        self.phases = int(phases)
+        self.step_s = self.period_s / self.phases
+        offsets = np.arange(self.phases) * self.step_s
+        if burst_times_s is not None:
+            self.interval_s = None
+            self.frames = np.unique(np.add.outer(np.asarray(burst_times_s, dtype=float), offsets).ravel())
+            gaps = np.diff(self.frames)
+            self.spacing_s = float(min(self.step_s, gaps.min())) if gaps.size else self.step_s
+        else:
+            self.interval_s = float(interval_periods) * self.period_s
+            self.frames = offsets
+            self.spacing_s = min(self.step_s, self.interval_s)
+
+    def next_after(self, t: float) -> float:
+        after = t + 1e-9 * self.spacing_s
+        if self.interval_s is None:
+            i = int(np.searchsorted(self.frames, after, side="right"))
+            return float(self.frames[i]) if i < self.frames.size else math.inf
+        k = math.floor(after / self.interval_s)       # bursts k and k + 1 hold the next frame (they do not overlap)
+        frames = np.concatenate([k * self.interval_s + self.frames, (k + 1) * self.interval_s + self.frames])
+        return float(frames[frames > after].min())
+
+
+def frame_schedule(case) -> FrameSchedule:
+    """The field frames of a transient case: ``output.field_phases`` per period (default 8) of
+    ``transient.drive.frequency_Hz``, bursts every ``output.field_interval_periods`` or at
+    ``output.field_burst_times_s``; by default every ``field_phases x output_interval_s`` rounded to whole
+    periods (at least one), so a run writes about as many frames as one per output_interval_s, at every phase."""
+    output, cfg = case.output, case.transient
+    period = 1.0 / cfg.drive.frequency_Hz
+    phases = output.field_phases or DEFAULT_PHASES
+    if output.field_burst_times_s is not None:
+        return FrameSchedule(period, phases, burst_times_s=output.field_burst_times_s)
+    interval = output.field_interval_periods
+    if interval is None:
+        interval = max(1, round(phases * cfg.output_interval_s / period))
+    return FrameSchedule(period, phases, interval_periods=interval)
 
 
 class FieldSeriesExport:
     """``write(t, body_positions)`` appends the current displacement [m] and electric potential [V]
     (``vertex.sample(solution())``: :class:`app.exports.VertexFields` of the FE model and a full u-phi PETSc
     vector, or the modal tier's vertex basis and its coordinates) and the rigid bodies' displacement
-    (``body_positions``: the packed body coordinates z [m, rad]) when t has reached the next multiple of
-    ``interval_s``. ``bodies``: None, or a function of the scene size [m] (the FE mesh's largest extent)
-    returning the :class:`app.transient.body_shapes.BodyMeshes` of the run (called on rank 0).
+    (``body_positions``: the packed body coordinates z [m, rad]) when t has reached the next frame time of
+    ``schedule`` (:class:`FrameSchedule`). ``bodies``: None, or a function of the scene size [m] (the FE mesh's
+    largest extent) returning the :class:`app.transient.body_shapes.BodyMeshes` of the run (called on rank 0).
     ``resume_from_s``: continue the existing series after that time (later steps are dropped).
     ``scalars``: a callable returning further vertex fields of the current state, {name: (values at the
     vertices on rank 0 (None elsewhere), units)}, e.g. ``contact_pressure_Pa`` (collective)."""
 
-    def __init__(self, path: Path, vertex, solution, interval_s: float, bodies=None,
+    def __init__(self, path: Path, vertex, solution, schedule: FrameSchedule, bodies=None,
                  resume_from_s: float | None = None, scalars=None):
         self.path = Path(path)
         self.dir = self.path.with_suffix("")
         self.bodies_path = self.path.with_name(self.path.stem.replace("_fields", "") + "_bodies.xdmf")
         self.solution = solution
-        self.interval_s = float(interval_s)
+        self.schedule = schedule
+        self.interval_s = schedule.spacing_s          # the loop's tolerance scale
         self.vertex = vertex
         self.scalars = scalars
         self.comm = vertex.comm
@@ -68,7 +119,7 @@ class FieldSeriesExport:
         self.bodies = None
         self.steps: list[bytes] = []         # each output's XML, serialised once
         self.body_steps: list[bytes] = []
-        self.next_s = 0.0
+        self.next_s = self._first()
         if resume_from_s is not None:
             self.next_s = self._next_after(resume_from_s)
         if self.rank0:
@@ -101,8 +152,11 @@ class FieldSeriesExport:
         # peaks per region over the frames written by this run (app.fe.derived.region_peaks), every rank
         self.peaks: dict | None = {} if getattr(vertex, "derived", ()) else None
 
+    def _first(self) -> float:
+        return float(self.schedule.frames[0])          # t = 0 for regular bursts, else the first burst
+
     def _next_after(self, t: float) -> float:
-        return (math.floor(t / self.interval_s * (1 + 1e-9) + 1e-9) + 1) * self.interval_s
+        return self.schedule.next_after(t)
 
     def files(self) -> list[str]:
         """Names of the files of the series, relative to the output directory."""

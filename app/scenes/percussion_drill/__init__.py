@@ -13,6 +13,10 @@ The tiers measure the rigid motion differently: the FE and modal tiers average t
 displacement over one drive period (the vibration averages out), the lumped tier has the rigid
 coordinate z and the exact take-off velocity of every flight (apex z + z'^2 / 2a). The lumped tier
 adds the flight-duration spread and histogram (``flight_durations.png``) and the rise per half run.
+
+Runs of at least ~0.11 s (every tier): ``statistics.interval_95`` holds the half-widths of the 95 %
+batch-means intervals of the time-mean statistics (:func:`batch_intervals`); a sweep draws them as error bars.
+A sweep of ``transient.loads.fe_force_N`` is plotted against the downforce, -F_z [N] (:meth:`sweep_axis`).
 """
 
 from __future__ import annotations
@@ -61,6 +65,80 @@ def transient_statistics(data: dict[str, np.ndarray], cfg) -> dict:
         "flight_apex_max_m": float(np.max(apexes)) if apexes else 0.0,
         "min_flight_rise_m": cfg.min_flight_rise_m,
     }}
+
+
+#: batch means: the run after its first tenth, cut into this many equal windows
+BATCHES = 10
+#: windows shorter than this are not long against the impact motion's correlation time (a few ms: the
+#: tiers' comparison in BENCHMARKS.md used 100 ms windows), so their means are not independent
+MIN_BATCH_S = 0.01
+#: the statistics that are means over time (rates, mean force and power), with a batch-means interval
+_BATCH_KEYS = ("impact_rate_per_s", "mean_force_N", "mean_power_W")
+
+
+def batch_intervals(data: dict[str, np.ndarray], cfg) -> dict:
+    """Half-widths of the 95 % confidence intervals of the run's time-mean statistics (impact rates per
+    contact, a foundation's mean force and power) from batch means: the run after its first tenth (the
+    start-up) in ``BATCHES`` equal windows, each statistic computed per window by the run's own code
+    (app.transient.impacts.run_statistics), interval = t_{0.975, B-1} s / sqrt(B). The impact motion is
+    chaotic, so one run's statistic is a sample: the interval says how far another run may land. Empty when
+    the windows would be shorter than ``MIN_BATCH_S``. Keys as in ``statistics`` (e.g.
+    ``impact_rate_per_s.stem_rock``), under ``statistics.interval_95``."""
+    from scipy import stats as sps
+
+    from app.transient.impacts import run_statistics
+
+    t = data.get(S.TIME)
+    if t is None or t.size < 2 * BATCHES:
+        return {}
+    edges = np.linspace(t[0] + 0.1 * (t[-1] - t[0]), t[-1], BATCHES + 1)
+    if edges[1] - edges[0] < MIN_BATCH_S:
+        return {}
+    samples: dict[tuple, list] = {}
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        rows = (t > lo) & (t <= hi)
+        window = run_statistics({name: array[rows] for name, array in data.items()
+                                 if getattr(array, "shape", ())[:1] == t.shape}, cfg)
+        for group, values in window.items():
+            if not isinstance(values, dict):
+                continue
+            for key, value in values.items():
+                if group in _BATCH_KEYS or key in _BATCH_KEYS:
+                    samples.setdefault((group, key), []).append(float(value))
+    t_crit = float(sps.t.ppf(0.975, BATCHES - 1))
+    out: dict = {}
+    for (group, key), values in samples.items():
+        if len(values) == BATCHES:
+            out.setdefault(group, {})[key] = t_crit * float(np.std(values, ddof=1)) / np.sqrt(BATCHES)
+    return out
+
+
+def lumped_batch_intervals(events: np.ndarray, duration_s: float) -> dict:
+    """As :func:`batch_intervals` for the lumped tier, from its exact event table (its samples are too coarse for
+    microsecond contacts): per window, the impact rates (closing events) per contact and the rock's mean force
+    (the impulses of the stem-rock contacts ending in the window over its width); the same windows and
+    t-interval (the method of bench/bench_tier_statistics.py)."""
+    from scipy import stats as sps
+
+    from app.lumped import kernel as K
+    from app.lumped.parameters import CONTACT_NAMES
+
+    edges = np.linspace(0.1 * duration_s, duration_s, BATCHES + 1)
+    if edges[1] - edges[0] < MIN_BATCH_S or events.size == 0:
+        return {}
+    ev = np.asarray(events)
+    closing = ev[:, K.EV_CLOSING] == 1.0
+    rates = {name: [] for name in CONTACT_NAMES}
+    force = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        inside = (ev[:, K.EV_TIME] > lo) & (ev[:, K.EV_TIME] <= hi)
+        for c, name in enumerate(CONTACT_NAMES):
+            rates[name].append(np.sum(inside & closing & (ev[:, K.EV_CONTACT] == c)) / (hi - lo))
+        rock_ends = inside & ~closing & (ev[:, K.EV_CONTACT] == CONTACT_NAMES.index("stem_rock"))
+        force.append(float(np.sum(ev[rock_ends, K.EV_IMPULSE])) / (hi - lo))
+    half = float(sps.t.ppf(0.975, BATCHES - 1)) / np.sqrt(BATCHES)
+    return {"impact_rate_per_s": {name: half * float(np.std(v, ddof=1)) for name, v in rates.items()},
+            "stem_rock_foundation": {"mean_force_N": half * float(np.std(force, ddof=1))}}
 
 
 def lumped_statistics(data: dict[str, np.ndarray], parameters: dict, duration_s: float, min_rise_m: float,
@@ -156,9 +234,17 @@ class PercussionDrill(SceneReport):
             section = case.lumped
             if "events" not in data or S.TIME not in data:
                 return {}
-            return lumped_statistics(data, results["parameters"], results["simulated_time_s"],
-                                     section.output.min_flight_rise_m, section.output.histogram_bins)
-        return transient_statistics(data, case.transient)
+            out = lumped_statistics(data, results["parameters"], results["simulated_time_s"],
+                                    section.output.min_flight_rise_m, section.output.histogram_bins)
+            intervals = lumped_batch_intervals(np.asarray(data["events"]), results["simulated_time_s"])
+            if intervals:
+                out["interval_95"] = intervals
+            return out
+        out = transient_statistics(data, case.transient)
+        intervals = batch_intervals(data, case.transient)
+        if intervals:
+            out["interval_95"] = intervals
+        return out
 
     def table_rows(self, results: dict) -> list[tuple[str, str, str]]:
         transducer = (results.get("statistics") or {}).get("transducer")
@@ -167,6 +253,12 @@ class PercussionDrill(SceneReport):
         return [("transducer: largest rise", f"{transducer['max_rise_m'] * 1e3:.4g}", "mm"),
                 ("transducer: flights", f"{transducer['flight_count']}", "1"),
                 ("transducer: flight rate", f"{transducer['flight_rate_per_s']:.4g}", "1/s")]
+
+    def sweep_axis(self, key: str):
+        """The FE force is a mesh-axis vector; a designer sweeps the downforce: -F along the last axis."""
+        if key == "transient.loads.fe_force_N":
+            return "downforce [N]", -1, -1.0
+        return None
 
     def outputs(self, results: dict, out_dir: Path, title: str, plots: bool = True) -> list[str]:
         return flight_histogram(results.get("statistics") or {}, out_dir, title) if plots else []
