@@ -27,6 +27,15 @@ def drive_weights(case) -> tuple[float, dict[str, float]]:
     return largest, {n: a / largest for n, a in nominal.items()}
 
 
+def is_driven(case) -> bool:
+    """Whether the transient has a time-harmonic excitation at ``transient.drive.frequency_Hz``: a driven
+    electrode with a nonzero amplitude, a target tip amplitude, or a base motion (the field frames lock to its
+    phase only then: app/transient/fields.py frame_schedule)."""
+    cfg = case.transient
+    largest, _ = drive_weights(case)
+    return largest > 0 or cfg.drive.tip_amplitude_m is not None or bool(cfg.base_motions)
+
+
 def electrode_amplitudes(case, names: list[str]) -> tuple[float, np.ndarray, np.ndarray]:
     """(drive amplitude [V] before a target scales it, weights and phases [rad] of the electrodes ``names``)."""
     largest, weights = drive_weights(case)

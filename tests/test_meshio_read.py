@@ -46,7 +46,7 @@ def test_every_transient_xdmf_reads_in_meshio(drill):
     files = sorted(p.name for p in out.glob("*.xdmf"))
     assert files == ["transient_bodies.xdmf", "transient_fields.xdmf"]
     n_outputs = summary["results"]["transient"]["field_outputs"]
-    assert n_outputs == 3                               # t = 0, 50 us, 100 us
+    assert n_outputs == 8           # phase-locked: one burst of 8 frames over the first 20.1 kHz period
     points, cells, frames = read_series(out / "transient_fields.xdmf")
     assert len(frames) == n_outputs and cells[0].type == "triangle"
     for _, point_data, cell_data in frames:

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.drive import is_driven
 from app.exports import (
     FE_GRID,
     data_item,
@@ -81,8 +82,15 @@ def frame_schedule(case) -> FrameSchedule:
     """The field frames of a transient case: ``output.field_phases`` per period (default 8) of
     ``transient.drive.frequency_Hz``, bursts every ``output.field_interval_periods`` or at
     ``output.field_burst_times_s``; by default every ``field_phases x output_interval_s`` rounded to whole
-    periods (at least one), so a run writes about as many frames as one per output_interval_s, at every phase."""
+    periods (at least one), so a run writes about as many frames as one per output_interval_s, at every phase.
+    A case with no drive (app.drive.is_driven) and none of these keys: a frame every output_interval_s."""
     output, cfg = case.output, case.transient
+    locked = any(getattr(output, k) is not None for k in ("field_phases", "field_interval_periods",
+                                                          "field_burst_times_s"))
+    if not locked and not is_driven(case):
+        # nothing oscillates at the drive frequency (a quasi-static press, a free fall): no phase to lock to, a
+        # frame at t = 0 and at every multiple of output_interval_s
+        return FrameSchedule(cfg.output_interval_s, 1, interval_periods=1)
     period = 1.0 / cfg.drive.frequency_Hz
     phases = output.field_phases or DEFAULT_PHASES
     if output.field_burst_times_s is not None:
