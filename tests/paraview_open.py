@@ -7,7 +7,10 @@ legacy XDMFReader) its blocks with their point, cell and field arrays, and after
 on ``displacement`` at the last time: the warped bounds, the potential's range on the warped FE
 grid and the warped rigid-body positions. Renders the warped result coloured by potential to
 OUT.png (rigid bodies as large points). An optional third argument picks the time (for a mode
-file: the frequency [Hz]) shown and rendered instead of the last.
+file: the frequency [Hz]) shown and rendered instead of the last ("last" for the last); an optional fourth
+names the point array to colour by instead of the potential (e.g. ``von_mises_Pa``). The report also holds
+the range of every point array of the FE grid at the time shown (``fe_ranges``: the largest magnitude of a
+vector or tensor array) and of the bodies' displacement (``body_displacement_range``).
 
 A transient field file's companion ``<stem minus _fields>_bodies.xdmf`` (the rigid bodies with their shapes,
 app/transient/fields.py) is opened with it when it exists: its blocks per reader, and after the same Warp By
@@ -88,7 +91,15 @@ def companion(path):
     return bodies if os.path.isfile(bodies) else None
 
 
-def main(path, png, at=None):
+def point_ranges(block):
+    """{array: [min, max]} of a block's point arrays (a vector's or tensor's magnitude, as ParaView's -1)."""
+    data = block.GetPointData()
+    return {data.GetArrayName(i): list(data.GetArray(i).GetRange(-1 if data.GetArray(i).GetNumberOfComponents() > 1
+                                                                    else 0))
+            for i in range(data.GetNumberOfArrays())}
+
+
+def main(path, png, at=None, colour="potential"):
     report = {}
     readers = {"Xdmf3ReaderT": Xdmf3ReaderT(FileName=[path]), "Xdmf3ReaderS": Xdmf3ReaderS(FileName=[path]),
                "XDMFReader": XDMFReader(FileNames=[path])}
@@ -138,6 +149,7 @@ def main(path, png, at=None):
             bodies[name] = list(block.GetPoint(0))
     fe_warped = max(warped, key=lambda item: item[1].GetNumberOfPoints())[1]
     potential = fe_warped.GetPointData().GetArray("potential")
+    report["fe_ranges"] = point_ranges(fe)
     report["warped"] = {"scale": scale, "u_max": u_max, "fe_bounds_before": list(b),
                         "fe_bounds_after": list(fe_warped.GetBounds()),
                         "potential_range": list(potential.GetRange()) if potential is not None else None,
@@ -152,24 +164,40 @@ def main(path, png, at=None):
         body_warp.ScaleFactor = scale
         body_warp.UpdatePipeline(show)
         report["warped"]["body_bounds"] = body_bounds(sm.Fetch(body_warp))
+        body_blocks = [blk for _, blk in leaves(sm.Fetch(body_readers["Xdmf3ReaderT"])) if blk.GetNumberOfCells()]
+        report["body_displacement_range"] = (point_ranges(body_blocks[0]).get("displacement") if body_blocks
+                                             else None)
     view = GetActiveViewOrCreate("RenderView")
     view.ViewSize = [900, 700]
     view.ViewTime = show
     view.OrientationAxesVisibility = 0
     display = Show(warp, view)
-    ColorBy(display, ("POINTS", "potential"))
+    ColorBy(display, ("POINTS", colour))
     display.RescaleTransferFunctionToDataRange(True, False)
     display.SetScalarBarVisibility(view, True)
     display.PointSize = 14
     display.RenderPointsAsSpheres = 1
-    GetColorTransferFunction("potential").NanColor = [0.85, 0.2, 0.1]     # the rigid bodies (no potential)
+    GetColorTransferFunction(colour).NanColor = [0.85, 0.2, 0.1]     # the rigid bodies (no such array)
     if body_warp is not None:
         body_display = Show(body_warp, view)
         ColorBy(body_display, ("CELLS", "body"))                        # each body its own grey
-        GetColorTransferFunction("body").ApplyPreset("Grayscale", True)
+        body_colours = GetColorTransferFunction("body")
+        body_colours.ApplyPreset("Grayscale", True)
+        n_bodies = max(len(report.get("body_bounds_before", {})), 1)
+        body_colours.RescaleTransferFunction(-1.5, float(n_bodies))    # light greys, none black
+        if b[5] - b[4] > 1e-9:
+            body_display.Opacity = 0.45                 # a 3D rotor over the stator: see the contact through it
     label = (f"mode at {frequency:.1f} Hz" if frequency is not None else f"t = {show * 1e3:.4g} ms")
-    Show(Text(Text=f"{path.rsplit('/', 1)[-1]}: {label}, displacement x {scale:.3g}, colour: potential [V]"), view)
+    units = "potential [V]" if colour == "potential" else colour
+    Show(Text(Text=f"{path.rsplit('/', 1)[-1]}: {label}, displacement x {scale:.3g}, colour: {units}"), view)
     view.ResetCamera()
+    if b[5] - b[4] > 1e-9:                              # a 3D body: an oblique view from above, z up
+        centre = [(b[0] + b[1]) / 2, (b[2] + b[3]) / 2, (b[4] + b[5]) / 2]
+        camera = GetActiveCamera()
+        camera.SetFocalPoint(*centre)
+        camera.SetPosition(centre[0] + 1.3 * size, centre[1] - 1.6 * size, centre[2] + 1.5 * size)
+        camera.SetViewUp(0.0, 0.0, 1.0)
+        view.ResetCamera()
     GetActiveCamera().Zoom(0.8)
     Render(view)
     SaveScreenshot(png, view, ImageResolution=[900, 700])
@@ -177,4 +205,6 @@ def main(path, png, at=None):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2], float(sys.argv[3]) if len(sys.argv) > 3 else None)
+    when = sys.argv[3] if len(sys.argv) > 3 else "last"
+    main(sys.argv[1], sys.argv[2], None if when == "last" else float(when),
+         sys.argv[4] if len(sys.argv) > 4 else "potential")

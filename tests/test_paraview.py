@@ -58,7 +58,7 @@ def x_display():
     server.wait(timeout=30)
 
 
-def open_in_paraview(display: str, xdmf: Path, png: Path, at: float | None = None) -> dict:
+def open_in_paraview(display: str, xdmf: Path, png: Path, at: float | None = None, colour: str = "potential") -> dict:
     """Run tests/paraview_open.py; its JSON report. A render window that cannot connect to the X
     server (pvpython aborts in vtkXOpenGLRenderWindow::CreateAWindow before reading anything) is
     retried: on this shared machine at load ~20 the first connection to a fresh Xvfb failed now and
@@ -67,9 +67,10 @@ def open_in_paraview(display: str, xdmf: Path, png: Path, at: float | None = Non
     Any other failure fails the test at once."""
     import time
 
-    cmd = ["pvpython", str(ROOT / "tests" / "paraview_open.py"), str(xdmf), str(png)]
+    cmd = ["pvpython", str(ROOT / "tests" / "paraview_open.py"), str(xdmf), str(png),
+           "last" if at is None else repr(at), colour]
     for attempt in range(5):
-        result = subprocess.run(cmd + ([repr(at)] if at is not None else []), capture_output=True, text=True,
+        result = subprocess.run(cmd, capture_output=True, text=True,
                                 timeout=300, cwd=xdmf.parent, env=dict(os.environ, MPLBACKEND="Agg", DISPLAY=display))
         x_failure = "CreateAWindow" in result.stderr or "bad X server connection" in result.stderr
         if result.returncode == 0 or not x_failure:
@@ -151,6 +152,96 @@ def test_transient_result_in_paraview(x_display, transient_result):
     report = open_in_paraview(x_display, transient_result / "transient_fields.xdmf",
                               transient_result / "paraview_transient.png")
     check_transient(report, transient_result)
+
+
+def frame_times(xdmf: Path) -> list[float]:
+    return [float(v) for v in re.findall(r'<Time Value="([^"]+)"', xdmf.read_text())]
+
+
+def step_file(out: Path, k: int) -> Path:
+    return out / "transient_fields" / f"step_{k:06d}.h5"
+
+
+@needs_paraview
+def test_drill_at_an_impact_in_paraview(x_display, transient_result):
+    """The drill at the frame where the tip strikes the ball hardest (docs/figures/paraview_drill_impact.png),
+    coloured by von Mises stress: the frame is inside a tip-ball impact (the series says the contact is closed
+    and carries tens of newtons), and the stress ParaView reads there is the step file's (the same numbers
+    through another reader: XDMF + HDF5 in ParaView against h5py)."""
+    import h5py
+
+    out = transient_result
+    times = frame_times(out / "transient_fields.xdmf")
+    with h5py.File(out / "transient.h5", "r") as f:
+        t = f["time_s"][:]
+        rows = [int(np.argmin(np.abs(t - tf))) for tf in times]
+        force = [float(np.linalg.norm(f["tip_ball_force_N"][r])) for r in rows]
+        closed = [bool(f["tip_ball_closed"][r]) for r in rows]
+    k = int(np.argmax(force))
+    assert closed[k] and force[k] > 10.0, (times, force)      # an impact frame (81 N measured)
+    report = open_in_paraview(x_display, out / "transient_fields.xdmf", out / "paraview_drill_impact.png",
+                              at=times[k], colour="von_mises_Pa")
+    assert report["warped"]["time"] == pytest.approx(times[k], rel=1e-12)
+    with h5py.File(step_file(out, k), "r") as f:
+        von_mises = f["von_mises_Pa"][:]
+    assert report["fe_ranges"]["von_mises_Pa"] == pytest.approx([von_mises.min(), von_mises.max()], rel=1e-9)
+    assert von_mises.max() > 1e6                        # the horn carries MPa under a 15 um drive
+
+
+# the tests' coarse stator (3 mm, 1 mm at the tip) in the FE tier for one drive period of 36.065 kHz from the
+# harmonic steady state, the rotor seated: 8 phase-locked frames of the travelling wave
+MOTOR_ONE_PERIOD = ["geometry.parameters.mesh_size_m=0.003", "geometry.parameters.tip_mesh_size_m=0.001",
+                    'tier="fe"', "transient.end_time_s=2.8e-5", "output.plots=false"]
+
+
+@needs_paraview
+def test_motor_result_in_paraview(x_display, tmp_path):
+    """The motor (docs/figures/paraview_motor.png: the stator's wave and the rotor, coloured by von Mises): the
+    three readers show one FE grid carrying displacement, potential and the default derived fields with their
+    units in the names, the regions, and the companion file's rotor as triangles at the same times. The von Mises
+    and electric field ParaView reads at the last frame are the step file's (h5py) and below the run's peaks per
+    region in summary.json (field_peaks: the maxima over the frames); the rotor's vertices move. Region names:
+    summary.json ``regions`` and the file's ``region_names`` Information give the same table, and the tags
+    ParaView reads are exactly its keys (ParaView 5.11's XDMF readers do not expose Information elements:
+    docs/fields.md)."""
+    import xml.etree.ElementTree as ET
+
+    import h5py
+
+    result = run_cli("run", CASES / "wwusm-motor.toml", "--out", tmp_path, "--quiet",
+                     *[a for o in MOTOR_ONE_PERIOD for a in ("--set", o)])
+    assert result.returncode == 0, result.stderr[-2000:]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    n_outputs = summary["results"]["transient"]["field_outputs"]
+    assert n_outputs == 8                               # one burst of 8 phases over the period
+    report = open_in_paraview(x_display, tmp_path / "transient_fields.xdmf", tmp_path / "paraview_motor.png",
+                              colour="von_mises_Pa")
+    for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
+        (fe,) = report[reader]["blocks"]
+        assert len(report[reader]["times"]) == n_outputs
+        assert set(fe["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
+        assert fe["cell_arrays"] == ["region"]
+        (rotor,) = report[reader]["body_blocks"]
+        assert report[reader]["body_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
+        assert rotor["cells"] > 40 and set(rotor["cell_arrays"]) == {"body", "sector"}
+    with h5py.File(step_file(tmp_path, n_outputs - 1), "r") as f:
+        von_mises = f["von_mises_Pa"][:]
+        field = np.linalg.norm(f["electric_field_V_per_m"][:], axis=1)
+        rotor_moved = np.linalg.norm(f["bodies/displacement"][:], axis=1).max()
+    ranges = report["fe_ranges"]
+    assert ranges["von_mises_Pa"] == pytest.approx([von_mises.min(), von_mises.max()], rel=1e-9)
+    assert ranges["electric_field_V_per_m"][1] == pytest.approx(field.max(), rel=1e-9)
+    peaks = summary["results"]["transient"]["field_peaks"]
+    assert von_mises.max() <= max(p["von_mises_Pa"] for p in peaks.values()) * (1 + 1e-12)
+    assert field.max() <= peaks["tube"]["electric_field_V_per_m"] * (1 + 1e-12)
+    # 400 Vpp across the PZT tube's wall: a field of order 100 kV/m, stresses of MPa in the wave
+    assert field.max() > 1e5 and von_mises.max() > 1e6
+    assert report["body_displacement_range"][1] == pytest.approx(rotor_moved, rel=1e-9) and rotor_moved > 0
+    names = {int(k): v for k, v in summary["regions"].items()}
+    info = ET.parse(tmp_path / "transient_fields.xdmf").find("Domain/Information[@Name='region_names']")
+    assert info is not None
+    assert {int(k): v.strip() for k, v in (item.split(":") for item in info.get("Value").split(";"))} == names
+    assert report["warped"]["region_range"] == [min(names), max(names)]
 
 
 @needs_paraview
