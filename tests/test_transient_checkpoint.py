@@ -87,6 +87,10 @@ def test_resume_from_half_time_equals_one_run(one_go, shared_tmp):
     assert res["resumed_from_s"] == pytest.approx(t_half, rel=1e-15)
     for key in ("steps", "attempts", "cutbacks", "event_refinements", "newton_iterations"):
         assert res[key] == res_ref[key], key
+    assert sorted(res["field_peaks"]) == sorted(res_ref["field_peaks"]) and res_ref["field_peaks"]
+    for region, ref in res_ref["field_peaks"].items():            # over the frames of both runs
+        assert res["field_peaks"][region] == pytest.approx(ref, rel=SERIAL_RTOL if MPI.COMM_WORLD.size == 1
+                                                           else PARALLEL_RTOL), region
     assert sorted(res["contacts"]) == sorted(res_ref["contacts"])
     for name, ref in res_ref["contacts"].items():
         rel = SERIAL_RTOL if MPI.COMM_WORLD.size == 1 else 1e-6
@@ -383,6 +387,12 @@ def kill_and_resume(point: str, out: Path, reference: Path, mpi: int = 0) -> Non
     summary = json.loads((out / "summary.json").read_text())
     for name in summary["outputs"]:
         assert (out / name).is_file(), f"{point}: {name}"
+    # the peaks per region cover every frame of the series, those written before the kill too
+    peaks_ref = json.loads((reference / "summary.json").read_text())["results"]["transient"]["field_peaks"]
+    peaks = summary["results"]["transient"]["field_peaks"]
+    assert sorted(peaks) == sorted(peaks_ref) and peaks_ref, point
+    for region, ref in peaks_ref.items():
+        assert peaks[region] == pytest.approx(ref, rel=SERIAL_RTOL if not mpi else PARALLEL_RTOL), (point, region)
     assert len(list((out / "transient_fields").glob("step_*"))) == len(xdmf_times(reference))
 
 

@@ -23,6 +23,7 @@ steps after the checkpoint's time (XML entries and their files) and continues th
 
 from __future__ import annotations
 
+import json
 import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -43,6 +44,7 @@ from app.files import replace_file, write_h5_atomic
 from app.killpoint import kill_point
 
 BODY_GRID = "rigid_bodies"      # name of the bodies' grid in the companion file
+FRAME_PEAKS = "region_peaks_json"       # attribute of a step file's displacement: that frame's peaks per region
 DEFAULT_PHASES = 8
 
 
@@ -157,8 +159,28 @@ class FieldSeriesExport:
             self._replace_documents()
         self.written = self.comm.bcast(len(self.steps), root=0)
         self.has_bodies = self.comm.bcast(self.bodies is not None, root=0)
-        # peaks per region over the frames written by this run (app.fe.derived.region_peaks), every rank
-        self.peaks: dict | None = {} if getattr(vertex, "derived", ()) else None
+        # peaks per region over the frames of the series (app.fe.derived.region_peaks), every rank; a resumed run
+        # starts from the kept frames' own peaks (each step file keeps its frame's), so a kill changes nothing
+        self.peaks: dict | None = None
+        if getattr(vertex, "derived", ()):
+            self.peaks = self.comm.bcast(self._kept_peaks() if self.rank0 else None, root=0)
+
+    def _kept_peaks(self) -> dict:
+        """The running peaks of the frames kept on resume (rank 0): the merge of each step file's own."""
+        import h5py
+
+        from app.fe.derived import merge_peaks
+
+        peaks: dict = {}
+        for k in range(len(self.steps)):
+            try:
+                with h5py.File(self.dir / f"step_{k:06d}.h5", "r") as f:
+                    frame = f["displacement"].attrs.get(FRAME_PEAKS)
+            except OSError:
+                frame = None
+            if frame is not None:
+                merge_peaks(peaks, json.loads(frame))
+        return peaks
 
     def _first(self) -> float:
         return float(self.schedule.frames[0])          # t = 0 for regular bursts, else the first burst
@@ -186,7 +208,7 @@ class FieldSeriesExport:
             return
         x = self.solution()
         sampled = self.vertex.sample(x)
-        derived = self._derived(x)
+        derived, frame_peaks = self._derived(x)
         scalars = self.scalars() if self.scalars is not None else {}
         if self.rank0:
             u, phi = sampled
@@ -196,6 +218,8 @@ class FieldSeriesExport:
                         **{key: v for key, (v, _) in scalars.items()}}
             attrs = {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t},
                      **{key: {"units": units, "time_s": t} for key, (_, units) in scalars.items()}}
+            if frame_peaks is not None:
+                attrs["displacement"][FRAME_PEAKS] = json.dumps(frame_peaks)
             if self.bodies is not None:
                 datasets["bodies/displacement"] = self.bodies.displacement(body_positions)
                 attrs["bodies/displacement"] = {"units": "m", "time_s": t}
@@ -231,15 +255,17 @@ class FieldSeriesExport:
             data_item(attr, source, shape, number, 8 if number == "Float" else 4)
         return grid
 
-    def _derived(self, x) -> dict:
-        """The output's derived vertex fields (rank 0; name -> array) and the running peaks. Collective."""
+    def _derived(self, x) -> tuple[dict, dict | None]:
+        """The output's derived vertex fields (rank 0; name -> array) and this frame's peaks per region (every
+        rank), merged into the running peaks. Collective."""
         if self.peaks is None:
-            return {}
+            return {}, None
         from app.fe.derived import merge_peaks
 
         fields, peaks = self.vertex.derived_frame(x)
-        merge_peaks(self.peaks, self.comm.bcast(peaks, root=0))
-        return fields or {}
+        peaks = self.comm.bcast(peaks, root=0)
+        merge_peaks(self.peaks, peaks)
+        return fields or {}, peaks
 
     def close(self) -> None:
         """Nothing stays open between outputs."""
