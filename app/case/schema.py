@@ -321,8 +321,10 @@ class OutputSection:
                  if getattr(self, k) is not None]
         if not given:
             return
-        if case.transient is None or "transient" not in (case.analyses or ()):
-            raise CaseError(file, f"output.{given[0]}", "sets the transient field output: the case runs no transient")
+        if case.transient is None:
+            raise CaseError(file, f"output.{given[0]}", "sets the transient field output: the case has no [transient]")
+        if "transient" not in (case.analyses or ()):
+            return                      # the case's transient is not run this time (e.g. --set analyses=["modal"])
         if self.field_interval_periods is not None and self.field_burst_times_s is not None:
             raise CaseError(file, "output.field_burst_times_s", "give field_burst_times_s or "
                                                                 "field_interval_periods, not both")
