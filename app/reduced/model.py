@@ -11,8 +11,11 @@ wave is their combination with time functions, app/reduced/loop_kernel.py).
 What the model depends on, and only that, keys its cache (``PIEZODYN_CACHE_DIR``, default
 ~/.cache/piezodyn): the mesh and materials, electrodes' kinds and facets (not their voltages or phases),
 supports, damping, the basis settings, the contacts' surfaces and sampling, the base motions' geometry, the
-points, and the enrichment's frequency. So a sweep over voltage, load, preload, friction, rotor or step
-sizes builds it once.
+points, the enrichment's frequency, and the damping's reference frequency where material quality factors
+use it. So a sweep over voltage, load, preload, friction, rotor or step sizes builds it once; a sweep over the
+drive frequency builds it once where the basis does not follow that frequency (``reduction.cutoff_Hz`` or
+``n_modes`` given, no enrichment or ``enrich_near_Hz`` given, no material-quality damping or its
+``reference_frequency_Hz`` given): tests/test_reduced_cache.py counts the builds.
 """
 
 from __future__ import annotations
@@ -136,7 +139,9 @@ def cache_key(case) -> str:
                 "motions": motions, "points": data["points"], "fields": bool(case.output.fields),
                 "enrich_near_Hz": (case.reduction.enrich_near_Hz or cfg["drive"]["frequency_Hz"])
                 if case.reduction.enrich_modes else None,
-                "damping_Hz": case.damping.reference_frequency_Hz or cfg["drive"]["frequency_Hz"]}
+                # the reference frequency sets the material-quality terms beta_j = 1 / (omega Q_j) only
+                "damping_Hz": (case.damping.reference_frequency_Hz or cfg["drive"]["frequency_Hz"])
+                if case.damping.material_quality else None}
     text = json.dumps(relevant, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
