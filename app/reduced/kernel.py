@@ -24,8 +24,8 @@ A failed step is cut back and retried; steps by contact state (open / closed / c
 approach to a predicted closure) as the FE tier (app/transient/control.py).
 
 Every argument travels as a structured record (NamedTuple of arrays, :func:`make_records`); the state
-arrays (q, v, a, z, zd, zdd, istate, fstate, sums, site_force) hold everything the next call needs, so where a run is split
-into calls (checkpoints, field outputs) does not change it.
+arrays (q, v, a, z, zd, zdd, istate, fstate, sums, site_force) hold everything the next call needs, so where a
+run is split into calls (checkpoints, field outputs) does not change it.
 """
 
 from __future__ import annotations
@@ -372,8 +372,9 @@ def _body_kinematics(xi, state, dt, model, wk):
 @njit(cache=True)
 def _evaluate(dd, xi, wk, cp, state, dt, model, want):
     """Site forces at the iterate (site increments ``dd``, body corrections ``xi``), the site residuals
-    R = dd - dw - H f (``cp``: the step's :class:`Compliance`; cp.u gets G f), the body residuals rz, and (``want``) the derivatives of the active sites and the
-    bodies' load derivative dQ. Returns the number of active sites (listed in wk.active)."""
+    R = dd - dw - H f (``cp``: the step's :class:`Compliance`; cp.u gets G f), the body residuals rz, and
+    (``want``) the derivatives of the active sites and the bodies' load derivative dQ. Returns the number of
+    active sites (listed in wk.active)."""
     bodies, sites, contacts, links = model.bodies, model.sites, model.contacts, model.links
     z0, zdd0 = state.z, state.zdd
     z_mid, zd_mid = wk.z_mid, wk.zd_mid

@@ -201,14 +201,21 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
     start = time.perf_counter()
     cfg = case.transient
     file = case.source
+    phases = {}                    # wall time of each phase [s], logged (BENCHMARKS.md, issue 27)
+    mark = time.perf_counter()
     model = build_model(case, comm)
+    phases["mesh and FE model"] = time.perf_counter() - mark
     if model.electrodes_of("floating"):
         raise CaseError(file, "electrodes", "floating electrodes are not supported by the transient analysis")
     gdim = model.mesh.geometry.dim
+    mark = time.perf_counter()
     sets, interface, areas = contact_site_sets(case, model)
+    phases["contact sites"] = time.perf_counter() - mark
     damping_Hz = case.damping.reference_frequency_Hz or cfg.drive.frequency_Hz
     log(f"modal tier: assembling {model.W.dofmap.index_map.size_global * model.W.dofmap.index_map_bs} DOFs")
+    mark = time.perf_counter()
     ops = assemble_operators(model, damping_frequency_Hz=damping_Hz)
+    phases["assembly"] = time.perf_counter() - mark
     fixed = np.concatenate([model.support_dofs, model.grounded_dofs]
                            + [model.electrode_dofs[n] for n in model.electrodes_of("ground")])
     electrodes = {n: model.electrode_dofs[n] for n in model.electrodes_of("voltage")}
@@ -219,9 +226,12 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
     log(f"modal tier: Craig-Bampton basis: {interface.size} interface DOFs, {len(electrodes)} electrodes, "
         f"{len(patterns)} base-motion patterns, fixed-interface modes "
         + (f"up to {cutoff:.0f} Hz" if cutoff is not None else f"{red.n_modes}"))
+    mark = time.perf_counter()
     basis = reduce_model(ops.K, ops.M, ops.C, model.W, fixed, interface, electrodes, n_modes=red.n_modes,
                          cutoff_Hz=cutoff, n_enrich=red.enrich_modes,
                          enrich_near_Hz=red.enrich_near_Hz or cfg.drive.frequency_Hz, patterns=patterns)
+    phases["reduction (static modes, eigen, enrichment, projection)"] = time.perf_counter() - mark
+    mark = time.perf_counter()
     n = basis.size
     # load projections: T^T M t_k per axis (gravity and the downforce act like the body's mass)
     loads = np.zeros((gdim, n))
@@ -243,11 +253,15 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
         values = model.point_values(column)
         for i, name in enumerate(sample_names):
             samples[i, j] = values[name]
+    phases["loads, site and point rows"] = time.perf_counter() - mark
+    mark = time.perf_counter()
     vertex, geometry, topology, region, topology_type = _vertex_basis(model, basis) if case.output.fields else (
         np.zeros((0, n)), np.zeros((0, 3)), np.zeros((0, 0), np.int64), np.zeros(0, np.int32), "")
     n_el = len(electrodes)
     charge = np.array([basis.charge_rows[name] for name in list(electrodes)]).reshape(n_el, n)
+    phases["vertex basis and charges"] = time.perf_counter() - mark
     wall = time.perf_counter() - start
+    log("modal tier: build phases: " + ", ".join(f"{name} {seconds:.1f} s" for name, seconds in phases.items()))
     points = np.concatenate([s.points_m for s in sets]) if sets else np.zeros((0, 3))
     weights = np.concatenate([s.weight for s in sets]) if sets else np.zeros(0)
     contact = np.concatenate([np.full(s.points_m.shape[0], s.contact) for s in sets]) if sets else np.zeros(0, int)
