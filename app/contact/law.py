@@ -106,7 +106,7 @@ def _dot3(a, b):
 
 
 # ------------------------------------------------------------------ obstacle shapes
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def shape_gap(shape, vector, radius, half_angle, d, n, Dn):
     """Gap [m] of a point at ``d`` (3-vector relative to the obstacle's reference point; for a sphere with a
     pole, relative to centre + R pole) and the obstacle's outward unit normal ``n`` there; ``Dn`` = dn/dd.
@@ -171,9 +171,7 @@ def friction_tangent(T, dT_dfn, dT_dspeed, s, reg, speed, A, b):
                 - s[r] / reg * dT_dspeed * s[k] / speed
 
 
-# inlined into its callers (the modal kernel's per-site loops): a call passes some fifty array descriptors of the
-# records and takes ~3x the time of the site's arithmetic (bench/bench_modal_step.py, issue 27)
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def site_force(i, y, v_site, z_mid, zd_mid, sites, contacts, bodies, c_vel, w_f, want, out):
     """Force of site i on the structure (``out.f``, 3) at the mid-point state: the site's displacement ``y`` and
     velocity ``v_site`` (3-vectors), the bodies' mid-point coordinates and rates. With ``want``, the
