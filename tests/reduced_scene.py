@@ -143,7 +143,8 @@ def run(K, M, C, q, v, a, bodies: list[Body], gdim: int, sites: law.Sites | None
     fstate[kr.F_CAP] = np.inf
     fstate[kr.F_STOP] = np.inf
     cache = kr.make_cache(n, sites.rows.shape[0])
-    state = kr.State(np.array(q, float), np.array(v, float), np.array(a, float), z, zd, zdd, istate, fstate, sums)
+    state = kr.State(np.array(q, float), np.array(v, float), np.array(a, float), z, zd, zdd, istate, fstate, sums,
+                     np.zeros((sites.contact.size, 3)))
     model = kr.Model(structure, inputs, kr.Scheme(scheme.beta, scheme.gamma, scheme.alpha_m, scheme.alpha_f), control,
                      B, sites, Cr, L, np.zeros((0, n)))
     code, rows = kr.run(t_end, state, model, cache, out, False)

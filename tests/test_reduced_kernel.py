@@ -169,22 +169,23 @@ def test_newton_matrix_equals_differences_of_the_residual():
     wk.dw[:] = rng.normal(size=nr) * 1e-10
     z0, zd0, zdd0 = np.zeros(m), np.array([0.0, 0.0, 1e-4, 3.0]), np.array([0.0, 0.0, -50.0, 0.0])
     state = kr.State(np.zeros(0), np.zeros(0), np.zeros(0), z0, zd0, zdd0, np.zeros(kr.N_ISTATE, np.int64),
-                     np.zeros(kr.N_FSTATE), kr.Sums(np.zeros(1), np.zeros(1), np.zeros(2)))
+                     np.zeros(kr.N_FSTATE), kr.Sums(np.zeros(1), np.zeros(1), np.zeros(2)), np.zeros((n_sites, 3)))
     empty = np.zeros((0, 0))
     model = kr.Model(kr.Structure(empty, empty, empty, np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64)),
                      kr.Inputs(np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0), 1.0, False),
                      kr.Scheme(*scheme), kr.Control(dt, dt, dt, 1e-14, 2.0), B, S, C, L, np.zeros((0, 0)))
     free_body = np.array([2, 3], np.int64)
+    compliance = kr.dense_compliance(H)          # the sites are the coordinates: H f = G f
 
     def residual(dd, xi, want=False):
-        n_active = kr._evaluate(dd, xi, wk, H, state, dt, model, want)
+        n_active = kr._evaluate(dd, xi, wk, compliance, state, dt, model, want)
         return n_active, wk.R.copy(), wk.rz.copy()
 
     dd0 = wk.dw + rng.normal(size=nr) * 1e-10
     xi0 = np.array([0.0, 0.0, 2e-12, 1e-10])
     n_active, R, rz = residual(dd0, xi0, True)
     assert 0 < n_active < n_sites
-    J, rhs = kr._newton_matrix(n_active, wk, H, model, free_body, dt)
+    J, rhs = kr._newton_matrix(n_active, wk, compliance, model, free_body, dt)
     active = wk.active[:n_active].copy()
     rows = np.concatenate([np.r_[3 * i:3 * i + 3] for i in active])
 
@@ -213,3 +214,27 @@ def test_newton_matrix_equals_differences_of_the_residual():
         numeric[:, col] = (up - down) / (2 * h)
     column_scale = np.abs(numeric).max(axis=0)
     assert np.max(np.abs(J - numeric) / column_scale) < 1e-3
+
+    # The same Newton system solved in the structure's coordinates (app/reduced/kernel.py:_woodbury, taken when
+    # many sites are active) on a compliance with sparse site rows, R_F (nr x 10, three entries a row), and
+    # K_eff^-1 SPD: against the contact-space LU of the same J. Both are exact algebra on a system of condition
+    # ~1e2, so they agree to round-off; 1e-9 catches a wrong sign or a missed block (of order one).
+    nf = 10
+    RF = np.zeros((nr, nf))
+    for r in range(nr):
+        RF[r, rng.choice(nf, 3, replace=False)] = rng.normal(size=3)
+    B_ = rng.normal(size=(nf, nf))
+    K_inv = 1e-9 * (B_ @ B_.T / nf + np.eye(nf))
+    GT = RF @ K_inv
+    sparse = kr.compliance_of(GT @ RF.T, GT, RF)
+    n_active = kr._evaluate(dd0, xi0, wk, sparse, state, dt, model, True)
+    assert 0 < n_active < n_sites
+    J, rhs = kr._newton_matrix(n_active, wk, sparse, model, free_body, dt)
+    body_rows, rhs_b = kr._newton_matrix(n_active, wk, sparse, model, free_body, dt, False)
+    np.testing.assert_array_equal(body_rows, J[n_active * gdim:])
+    S_inv, D = kr._woodbury(n_active, wk, sparse, model, free_body, body_rows)
+    x = kr._woodbury_solve(S_inv, D, wk.active[:n_active].copy(), n_active, gdim, sparse, body_rows, rhs_b)
+    reference = np.linalg.solve(J, rhs)
+    scale = np.concatenate([np.full(n_active * gdim, np.abs(reference[:n_active * gdim]).max()),
+                            np.abs(reference[n_active * gdim:])])
+    assert np.max(np.abs(x - reference) / scale) < 1e-9

@@ -151,6 +151,7 @@ class ModalEngine:
         self.fstate = np.zeros(lk.N_FSTATE)
         self.fstate[lk.F_CAP] = np.inf
         self.sums = lk.Sums(np.zeros(n_c + n_l), np.full(n_c + n_l, np.nan), np.zeros(2))   # power: none yet
+        self.site_force = np.zeros((ns, 3))
 
     def _harmonic(self, scale: float) -> np.ndarray:
         """Complex steady-state coordinates for the electrodes' phasors (amplitude ``scale`` x weight,
@@ -292,6 +293,8 @@ class ModalEngine:
             getattr(self, key)[:] = data[key]
         for name in ("dissipated", "power", "damping"):
             getattr(self.sums, name)[:] = data[f"sums_{name}"]
+        if "site_force" in data:       # a checkpoint of an older version: its next step starts from no force
+            self.site_force[:] = data["site_force"]
         self.tables.restore(data, found.engine)
         self.scale_V = float(found.engine["drive_voltage_V"])
         _, self._weights, self._phases = electrode_amplitudes(self.case, self.electrodes)
@@ -313,7 +316,8 @@ class ModalEngine:
         self._loop_wall = 0.0
 
     def _state(self) -> lk.State:
-        return lk.State(self.q, self.v, self.a, self.z, self.zd, self.zdd, self.istate, self.fstate, self.sums)
+        return lk.State(self.q, self.v, self.a, self.z, self.zd, self.zdd, self.istate, self.fstate, self.sums,
+                        self.site_force)
 
     def _model(self) -> lk.Model:
         return lk.Model(self.structure, self.inputs_record, self.scheme, self.control, self.bodies_record,
@@ -441,7 +445,8 @@ class ModalEngine:
         site_arrays, site_record = self.tables.snapshot()
         arrays = {"q": self.q, "v": self.v, "a": self.a, "z": self.z, "zd": self.zd, "zdd": self.zdd,
                   "istate": self.istate, "fstate": self.fstate, "sums_dissipated": self.sums.dissipated,
-                  "sums_power": self.sums.power, "sums_damping": self.sums.damping, **site_arrays}
+                  "sums_power": self.sums.power, "sums_damping": self.sums.damping, "site_force": self.site_force,
+                  **site_arrays}
         record = {"drive_voltage_V": self.scale_V, **site_record}
         return (arrays if self.comm.rank == 0 else None), record
 

@@ -24,8 +24,8 @@ A failed step is cut back and retried; steps by contact state (open / closed / c
 approach to a predicted closure) as the FE tier (app/transient/control.py).
 
 Every argument travels as a structured record (NamedTuple of arrays, :func:`make_records`); the state
-arrays (q, v, a, z, zd, zdd, istate, fstate) hold everything the next call needs, so where a run is split
-into calls (checkpoints, field outputs) does not change it.
+arrays (q, v, a, z, zd, zdd, istate, fstate, sums, site_force) hold everything the next call needs, so where a
+run is split into calls (checkpoints, field outputs) does not change it.
 """
 
 from __future__ import annotations
@@ -84,6 +84,9 @@ RATE_SCALE_RAD_PER_S = 1e-4
 #: absolute displacement tolerance of a site equation [m]; relative one on its increment
 SITE_TOL_M = 1e-14
 SITE_RTOL = 1e-9
+#: the Newton system goes to the structure's coordinates (Woodbury) when gdim x active sites exceed this multiple
+#: of the free coordinates: there its inverse (nf^3) costs less than the contact-space LU ((gdim n_active)^3 / 3)
+WOODBURY_FACTOR = 1.5
 FORCE_RTOL = 1e-10
 EPS = 2.220446049250313e-16
 
@@ -184,6 +187,90 @@ class State(NamedTuple):
     istate: np.ndarray
     fstate: np.ndarray
     sums: Sums
+    site_force: np.ndarray    # (n_sites, 3) the sites' forces on the structure at the last accepted step [N]: the
+    #                           next step's Newton starts from them (a state: a run split into calls is unchanged)
+
+
+class SparseRows(NamedTuple):
+    """Rows of a matrix by their nonzero entries (a contact site's row touches a few interface coordinates):
+    row r is sum_j value[r, j] x[index[r, j]] over j < count[r]."""
+
+    index: np.ndarray         # (rows, width) int64
+    value: np.ndarray         # (rows, width)
+    count: np.ndarray         # (rows,) int64
+
+
+class Compliance(NamedTuple):
+    """The contact space of one step size: H = R_F K_eff^-1 R_F^T (site increments per unit site force), its
+    factor G^T = R_F K_eff^-1 (nr x nf) and the site rows on the free coordinates, so a force on a few active
+    sites costs n_active x nf + nnz(R_F) (u = G f, H f = R_F u) instead of n_active x nr of H's columns."""
+
+    H: np.ndarray             # (nr, nr)
+    GT: np.ndarray            # (nr, nf)
+    RF: SparseRows            # the site rows on the free coordinates (free numbering)
+    u: np.ndarray             # (nf,) K_eff^-1 R_F^T f of the last evaluation: the structure's response
+    du: np.ndarray            # (nf,) work
+
+
+@njit(cache=True)
+def sparse_rows(rows, columns):
+    """The nonzero entries of ``rows[:, columns]`` (``columns`` in the new numbering's order)."""
+    width = 0
+    for r in range(rows.shape[0]):
+        count = 0
+        for j in range(columns.size):
+            if rows[r, columns[j]] != 0.0:
+                count += 1
+        width = max(width, count)
+    index = np.zeros((rows.shape[0], max(width, 1)), np.int64)
+    value = np.zeros((rows.shape[0], max(width, 1)))
+    count = np.zeros(rows.shape[0], np.int64)
+    for r in range(rows.shape[0]):
+        for j in range(columns.size):
+            x = rows[r, columns[j]]
+            if x != 0.0:
+                index[r, count[r]] = j
+                value[r, count[r]] = x
+                count[r] += 1
+    return SparseRows(index, value, count)
+
+
+@njit(cache=True)
+def _row_dot(rows, r, x):
+    value = 0.0
+    for j in range(rows.count[r]):
+        value += rows.value[r, j] * x[rows.index[r, j]]
+    return value
+
+
+def compliance_of(H: np.ndarray, GT: np.ndarray, RF: np.ndarray) -> Compliance:
+    """The compliance record of H = R_F G, G^T and dense site rows R_F (nr x nf): for tests of the condensed step."""
+    nf = RF.shape[1]
+    return Compliance(np.ascontiguousarray(H), np.ascontiguousarray(GT), sparse_rows(RF, np.arange(nf, dtype=np.int64)),
+                      np.zeros(nf), np.zeros(nf))
+
+
+def dense_compliance(H: np.ndarray) -> Compliance:
+    """The compliance of sites that are the coordinates themselves (R_F = I, K_eff^-1 = H symmetric): for tests of
+    the condensed step with a given H."""
+    return compliance_of(H, H.T, np.eye(H.shape[0]))
+
+
+@njit(cache=True)
+def _respond(compliance, active, n_active, gdim, x, out):
+    """out = G x (nf) for site forces ``x`` (n_sites, 3) on the active sites (the rest carry none); H x = R_F out."""
+    GT = compliance.GT
+    nf = GT.shape[1]
+    for j in range(nf):
+        out[j] = 0.0
+    for a in range(n_active):
+        i = active[a]
+        for k in range(gdim):
+            xk = x[i, k]
+            if xk != 0.0:
+                row = GT[i * gdim + k]
+                for j in range(nf):
+                    out[j] += row[j] * xk
 
 
 @njit(cache=True)
@@ -283,10 +370,11 @@ def _body_kinematics(xi, state, dt, model, wk):
 
 
 @njit(cache=True)
-def _evaluate(dd, xi, wk, H, state, dt, model, want):
+def _evaluate(dd, xi, wk, cp, state, dt, model, want):
     """Site forces at the iterate (site increments ``dd``, body corrections ``xi``), the site residuals
-    R = dd - dw - H f, the body residuals rz, and (``want``) the derivatives of the active sites and the
-    bodies' load derivative dQ. Returns the number of active sites (listed in wk.active)."""
+    R = dd - dw - H f (``cp``: the step's :class:`Compliance`; cp.u gets G f), the body residuals rz, and
+    (``want``) the derivatives of the active sites and the bodies' load derivative dQ. Returns the number of
+    active sites (listed in wk.active)."""
     bodies, sites, contacts, links = model.bodies, model.sites, model.contacts, model.links
     z0, zdd0 = state.z, state.zdd
     z_mid, zd_mid = wk.z_mid, wk.zd_mid
@@ -427,17 +515,9 @@ def _evaluate(dd, xi, wk, H, state, dt, model, want):
                         wk.dQ[jj, j] += value
     # site residuals R = dd - dw - H f
     nr = ns * gdim
+    _respond(cp, wk.active, n_active, gdim, wk.f, cp.u)
     for r in range(nr):
-        wk.Hf[r] = 0.0
-    for a in range(n_active):
-        i = wk.active[a]
-        for k in range(gdim):
-            fk = wk.f[i, k]
-            if fk != 0.0:
-                col = i * gdim + k
-                for r in range(nr):
-                    wk.Hf[r] += H[r, col] * fk
-    for r in range(nr):
+        wk.Hf[r] = _row_dot(cp.RF, r, cp.u)
         wk.R[r] = dd[r] - wk.dw[r] - wk.Hf[r]
     # body residuals: m (zdd0 + (1 - am) c_acc xi) - load + brake zd_mid - Q
     for j in range(m):
@@ -465,17 +545,20 @@ def _scales(dd, xi, wk, bodies, dt, scheme):
 
 
 @njit(cache=True)
-def _newton_matrix(n_active, wk, H, model, free_body, dt):
-    """J and -R of the Newton system on the active sites' increments and the free body corrections."""
+def _newton_matrix(n_active, wk, cp, model, free_body, dt, site_block=True):
+    """J and -R of the Newton system on the active sites' increments and the free body corrections. Without
+    ``site_block``, J holds the body rows only (nfb x N: what :func:`_woodbury` needs besides the compliance)."""
     bodies, contacts, sites = model.bodies, model.contacts, model.sites
     gdim = bodies.gdim
     beta, gamma, am, af = model.scheme
     c_acc = 1.0 / (beta * dt * dt)
     c_vel = gamma / (beta * dt)
     w_f = 1.0 - af
+    H = cp.H
     nfb = free_body.size
     N = n_active * gdim + nfb
-    J = np.zeros((N, N))
+    row0 = 0 if site_block else n_active * gdim
+    J = np.zeros((N - row0, N))
     rhs = np.zeros(N)
     body_pos = np.full(wk.xi.size, -1, np.int64)
     for q in range(nfb):
@@ -495,7 +578,7 @@ def _newton_matrix(n_active, wk, H, model, free_body, dt):
         s0, n_rot = _body_rotations(bodies, b)
         nb = gdim + n_rot
         # site rows: J[i, k] = delta_ik I - H_ik Fd_k ; J[i, body] = - H_ik Fz_k
-        for a2 in range(n_active):
+        for a2 in range(n_active if site_block else 0):
             i = wk.active[a2]
             for r in range(gdim):
                 row = a2 * gdim + r
@@ -518,7 +601,7 @@ def _newton_matrix(n_active, wk, H, model, free_body, dt):
             if row < 0:
                 continue
             for cc in range(gdim):
-                J[row, a * gdim + cc] += wk.Fd[k, r, cc]
+                J[row - row0, a * gdim + cc] += wk.Fd[k, r, cc]
         for q in range(n_rot):
             j = s0 + gdim + q
             row = body_pos[j]
@@ -529,22 +612,114 @@ def _newton_matrix(n_active, wk, H, model, free_body, dt):
             fk = wk.f[k]
             _cross(fk, bodies.axis[j], fxa)
             for cc in range(gdim):
-                J[row, a * gdim + cc] += axl[0] * wk.Fd[k, 0, cc] + axl[1] * wk.Fd[k, 1, cc] \
+                J[row - row0, a * gdim + cc] += axl[0] * wk.Fd[k, 0, cc] + axl[1] * wk.Fd[k, 1, cc] \
                     + axl[2] * wk.Fd[k, 2, cc] + w_f * fxa[cc]
-    for a in range(n_active):
+    for a in range(n_active if site_block else 0):
         for r in range(gdim):
             J[a * gdim + r, a * gdim + r] += 1.0
     for q in range(nfb):
         j = free_body[q]
         row = n_active * gdim + q
-        J[row, row] += bodies.mass[j] * (1.0 - am) * c_acc + bodies.brake[j] * w_f * c_vel
+        J[row - row0, row] += bodies.mass[j] * (1.0 - am) * c_acc + bodies.brake[j] * w_f * c_vel
         for q2 in range(nfb):
-            J[row, n_active * gdim + q2] -= wk.dQ[j, free_body[q2]]
+            J[row - row0, n_active * gdim + q2] -= wk.dQ[j, free_body[q2]]
     return J, rhs
 
 
 @njit(cache=True)
-def _newton(wk, H, state, dt, model, free_body):
+def _woodbury(n_active, wk, cp, model, free_body, body_rows):
+    """The Newton system of many active sites in the structure's free coordinates (Woodbury): with the site
+    block I - H_AA D - H_AA E = I - G_A^T R_A^T (D, E) (G^T = R_F K_eff^-1, R_A the active rows; D, E the
+    sites' derivatives), y = R_A^T (D x_A + E x_b) and x_A = rhs_A + G_A^T y turn it into
+    [[I - R_A^T D G_A^T, -R_A^T E], [P G_A^T, Q]] [y, x_b] = [R_A^T D rhs_A, rhs_b - P rhs_A]
+    (``body_rows`` = [P, Q]), of size nf + nfb instead of gdim n_active + nfb. Returns that matrix's inverse
+    and the active sites' D (the next evaluation overwrites wk.Fd)."""
+    bodies, contacts, sites = model.bodies, model.contacts, model.sites
+    gdim = bodies.gdim
+    GT, RF = cp.GT, cp.RF
+    nf = GT.shape[1]
+    nfb = free_body.size
+    S = np.zeros((nf + nfb, nf + nfb))
+    for j in range(nf):
+        S[j, j] = 1.0
+    pos = np.full(wk.xi.size, -1, np.int64)
+    for q in range(nfb):
+        pos[free_body[q]] = q
+    FG = np.zeros((3, nf))
+    D = np.zeros((n_active, 3, 3))
+    for a in range(n_active):
+        k = wk.active[a]
+        s0, n_rot = _body_rotations(bodies, contacts.body[sites.contact[k]])
+        for r in range(gdim):
+            for cc in range(gdim):
+                D[a, r, cc] = wk.Fd[k, r, cc]
+            for j in range(nf):
+                value = 0.0
+                for cc in range(gdim):
+                    value += wk.Fd[k, r, cc] * GT[k * gdim + cc, j]
+                FG[r, j] = value
+        for r in range(gdim):
+            row = k * gdim + r
+            for e in range(RF.count[row]):
+                idx = RF.index[row, e]
+                val = RF.value[row, e]
+                for j in range(nf):
+                    S[idx, j] -= val * FG[r, j]
+                for kk in range(gdim + n_rot):
+                    q = pos[s0 + kk]
+                    if q >= 0:
+                        S[idx, nf + q] -= val * wk.Fz[k, r, kk]
+        for q in range(nfb):
+            for cc in range(gdim):
+                p = body_rows[q, a * gdim + cc]
+                if p != 0.0:
+                    for j in range(nf):
+                        S[nf + q, j] += p * GT[k * gdim + cc, j]
+    for q in range(nfb):
+        for q2 in range(nfb):
+            S[nf + q, nf + q2] = body_rows[q, n_active * gdim + q2]
+    return np.linalg.inv(S), D
+
+
+@njit(cache=True)
+def _woodbury_solve(S_inv, D, active, n_active, gdim, cp, body_rows, rhs):
+    """x of J x = rhs through :func:`_woodbury`'s matrix (its inverse ``S_inv``, the sites' ``D``)."""
+    GT, RF = cp.GT, cp.RF
+    nf = GT.shape[1]
+    na = n_active * gdim
+    nfb = rhs.size - na
+    small = np.zeros(nf + nfb)
+    for a in range(n_active):
+        k = active[a]
+        for r in range(gdim):
+            value = 0.0
+            for cc in range(gdim):
+                value += D[a, r, cc] * rhs[a * gdim + cc]
+            row = k * gdim + r
+            for e in range(RF.count[row]):
+                small[RF.index[row, e]] += RF.value[row, e] * value
+    for q in range(nfb):
+        value = rhs[na + q]
+        for col in range(na):
+            value -= body_rows[q, col] * rhs[col]
+        small[nf + q] = value
+    sol = S_inv @ small
+    x = np.empty(rhs.size)
+    for a in range(n_active):
+        k = active[a]
+        for r in range(gdim):
+            row = GT[k * gdim + r]
+            value = rhs[a * gdim + r]
+            for j in range(nf):
+                value += row[j] * sol[j]
+            x[a * gdim + r] = value
+    for q in range(nfb):
+        x[na + q] = sol[nf + q]
+    return x
+
+
+@njit(cache=True)
+def _newton(wk, cp, state, dt, model, free_body):
     """Newton on the condensed step; True when converged (wk.dd, wk.xi hold the solution). Returns
     (converged, iterations)."""
     bodies, sites, contacts = model.bodies, model.sites, model.contacts
@@ -556,7 +731,7 @@ def _newton(wk, H, state, dt, model, free_body):
     tol_site = SITE_TOL_M
     for r in range(nr):
         tol_site = max(tol_site, SITE_RTOL * abs(wk.dw[r]))
-    n_active = _evaluate(wk.dd, wk.xi, wk, H, state, dt, model, True)
+    n_active = _evaluate(wk.dd, wk.xi, wk, cp, state, dt, model, True)
     scale_b = _scales(wk.dd, wk.xi, wk, bodies, dt, scheme)
     its = 0
     for its in range(1, MAX_NEWTON + 1):
@@ -571,13 +746,21 @@ def _newton(wk, H, state, dt, model, free_body):
             res = max(res, abs(wk.rz[j]) / tol)
         if res <= 1.0:
             return True, its
-        J, rhs = _newton_matrix(n_active, wk, H, model, free_body, dt)
+        # many active sites (a rotor lying on the ring): the system in the structure's coordinates is smaller
+        woodbury = n_active * gdim > WOODBURY_FACTOR * cp.GT.shape[1]
+        active_rows = wk.active[:n_active].copy()
+        J, rhs = _newton_matrix(n_active, wk, cp, model, free_body, dt, not woodbury)
         N = rhs.size
-        dy = np.linalg.solve(J, rhs)
+        if woodbury:
+            S_inv, D = _woodbury(n_active, wk, cp, model, free_body, J)
+            dy = _woodbury_solve(S_inv, D, active_rows, n_active, gdim, cp, J, rhs)
+        else:
+            S_inv, D = np.zeros((0, 0)), np.zeros((0, 3, 3))
+            dy = np.linalg.solve(J, rhs)
         # the correction of every site: active ones from dy; a separated one follows from the others
         # (its force is zero): du_I = -R_I + H_IA (Fd_A du_A + Fz_A dxi)
         du = -wk.R.copy()
-        df = np.zeros(nr)
+        df = np.zeros((nr // gdim, 3))
         for a in range(n_active):
             k = wk.active[a]
             c = sites.contact[k]
@@ -591,14 +774,10 @@ def _newton(wk, H, state, dt, model, free_body):
                     for q in range(free_body.size):
                         if free_body[q] == s0 + kk:
                             value += wk.Fz[k, r, kk] * dy[n_active * gdim + q]
-                df[k * gdim + r] = value
+                df[k, r] = value
+        _respond(cp, wk.active, n_active, gdim, df, cp.du)
         for r in range(nr):
-            value = 0.0
-            for a in range(n_active):
-                k = wk.active[a]
-                for cc in range(gdim):
-                    value += H[r, k * gdim + cc] * df[k * gdim + cc]
-            du[r] += value
+            du[r] += _row_dot(cp.RF, r, cp.du)
         for a in range(n_active):
             k = wk.active[a]
             for r in range(gdim):
@@ -616,13 +795,12 @@ def _newton(wk, H, state, dt, model, free_body):
         size0 = np.sqrt(np.sum((dy / scale) ** 2))
         lam = 1.0
         n_trial = n_active
-        active_rows = wk.active[:n_active].copy()
         for _ in range(14):
             for r in range(nr):
                 wk.dd_try[r] = wk.dd[r] + lam * du[r]
             for j in range(m):
                 wk.xi_try[j] = wk.xi[j] + lam * dxi[j]
-            n_trial = _evaluate(wk.dd_try, wk.xi_try, wk, H, state, dt, model, True)
+            n_trial = _evaluate(wk.dd_try, wk.xi_try, wk, cp, state, dt, model, True)
             r_trial = np.zeros(N)
             for a in range(n_active):
                 i = active_rows[a]
@@ -630,7 +808,10 @@ def _newton(wk, H, state, dt, model, free_body):
                     r_trial[a * gdim + r] = -wk.R[i * gdim + r]
             for q in range(free_body.size):
                 r_trial[n_active * gdim + q] = -wk.rz[free_body[q]]
-            simplified = np.linalg.solve(J, r_trial)
+            if woodbury:
+                simplified = _woodbury_solve(S_inv, D, active_rows, n_active, gdim, cp, J, r_trial)
+            else:
+                simplified = np.linalg.solve(J, r_trial)
             if np.sqrt(np.sum((simplified / scale) ** 2)) <= (1.0 - 0.5 * lam) * size0 + 1e-300:
                 break
             lam *= 0.5
@@ -646,12 +827,13 @@ def _newton(wk, H, state, dt, model, free_body):
 
 # ------------------------------------------------------------------ the loop
 class Cache(NamedTuple):
-    """Per step size: K_eff^-1 of the free coordinates, G = K_eff^-1 R_F^T and H = R_F G (kept between calls;
-    a function of dt alone, so they change the cost of a call, never its result)."""
+    """Per step size: K_eff^-1 of the free coordinates, G = K_eff^-1 R_F^T (kept as G^T: its rows are the sites')
+    and H = R_F G (kept between calls; a function of dt alone, so they change the cost of a call, never its
+    result)."""
 
     dt: np.ndarray            # (slots,), -1 = empty
     inv: np.ndarray           # (slots, nf, nf)
-    G: np.ndarray             # (slots, nf, nr)
+    GT: np.ndarray            # (slots, nr, nf)
     H: np.ndarray             # (slots, nr, nr)
     next: np.ndarray          # (1,) the slot to fill next
 
@@ -659,7 +841,7 @@ class Cache(NamedTuple):
 def make_cache(nf: int, nr: int, budget_bytes: float = 3e8) -> Cache:
     per_slot = 8.0 * (nf * nf + nf * nr + nr * nr) + 8
     slots = int(max(2, min(24, budget_bytes // per_slot)))
-    return Cache(np.full(slots, -1.0), np.zeros((slots, nf, nf)), np.zeros((slots, nf, nr)),
+    return Cache(np.full(slots, -1.0), np.zeros((slots, nf, nf)), np.zeros((slots, nr, nf)),
                  np.zeros((slots, nr, nr)), np.zeros(1, np.int64))
 
 
@@ -689,7 +871,7 @@ def _effective(structure, rows, dt, scheme, cache):
         for i in range(nf):
             RF[r, i] = rows[r, free[i]]
     G = cache.inv[slot] @ RF.T
-    cache.G[slot] = G
+    cache.GT[slot] = G.T
     cache.H[slot] = RF @ G
     return slot
 
@@ -733,7 +915,7 @@ def run(t_end, state, model, cache, out, track_energy):
     """Advance ``state`` (in place) until ``t_end``, until the output buffers are full, or until the first
     accepted step at or after ``state.fstate[F_STOP]``. Returns (code, rows written): one output row per accepted
     step (``out``), the per-site diagnostics integrated into ``out.site_sums``."""
-    q, v, a, z, zd, zdd, istate, fstate, sums = state
+    q, v, a, z, zd, zdd, istate, fstate, sums, f_last = state
     structure, inputs, scheme, control, bodies, sites, contacts, links, sample_rows = model
     gdim = bodies.gdim
     free = structure.free
@@ -761,6 +943,11 @@ def run(t_end, state, model, cache, out, track_energy):
             free_body[free_count] = j
             free_count += 1
     pq = np.zeros(P.size)
+    # the site rows by their nonzeros: on every coordinate (site values) and on the free ones (the compliance)
+    site_rows = sparse_rows(rows_R, np.arange(q.size))
+    free_rows = sparse_rows(rows_R, free)
+    u = np.zeros(nf)
+    u_work = np.zeros(nf)
     y_end = np.zeros((ns, 3))
     v_end = np.zeros((ns, 3))
     closed_sites = np.zeros(ns, np.bool_)
@@ -770,8 +957,8 @@ def run(t_end, state, model, cache, out, track_energy):
     # the status of the current state
     for i in range(ns):
         for k in range(gdim):
-            y_end[i, k] = rows_R[i * gdim + k] @ q
-            v_end[i, k] = rows_R[i * gdim + k] @ v
+            y_end[i, k] = _row_dot(site_rows, i * gdim + k, q)
+            v_end[i, k] = _row_dot(site_rows, i * gdim + k, v)
     closure = _status(y_end, v_end, z, zd, wk, model, closed_sites, closed)
     beta, gamma, am, af = scheme
     rows = 0
@@ -802,8 +989,7 @@ def run(t_end, state, model, cache, out, track_energy):
             t1 = t + dt_try
             slot = _effective(structure, rows_R, dt_try, scheme, cache)
             A_inv = cache.inv[slot]
-            G = cache.G[slot]
-            H = cache.H[slot]
+            cp = Compliance(cache.H[slot], cache.GT[slot], free_rows, u, u_work)
             c_acc = 1.0 / (beta * dt_try * dt_try)
             input_values(t1, inputs, pq)
             # contact-free increments: predictor, the prescribed inputs at t1, w = -K_eff^-1 r0
@@ -823,16 +1009,23 @@ def run(t_end, state, model, cache, out, track_energy):
             # the sites' start values and contact-free increments
             for i in range(ns):
                 for k in range(gdim):
-                    row = rows_R[i * gdim + k]
-                    wk.y0[i, k] = row @ q
-                    wk.v0[i, k] = row @ v
-                    wk.a0[i, k] = row @ a
-                    wk.dw[i * gdim + k] = row @ dq
+                    r = i * gdim + k
+                    wk.y0[i, k] = _row_dot(site_rows, r, q)
+                    wk.v0[i, k] = _row_dot(site_rows, r, v)
+                    wk.a0[i, k] = _row_dot(site_rows, r, a)
+                    wk.dw[r] = _row_dot(site_rows, r, dq)
+            # Newton starts from the last step's site forces: dd = dw + H f_last (the separated sites included)
+            n_loaded = 0
+            for i in range(ns):
+                if f_last[i, 0] != 0.0 or f_last[i, 1] != 0.0 or f_last[i, 2] != 0.0:
+                    wk.active[n_loaded] = i
+                    n_loaded += 1
+            _respond(cp, wk.active, n_loaded, gdim, f_last, u_work)
             for r in range(nr):
-                wk.dd[r] = wk.dw[r]
+                wk.dd[r] = wk.dw[r] + (_row_dot(free_rows, r, u_work) if n_loaded else 0.0)
             for j in range(m):
                 wk.xi[j] = 0.0
-            converged, its = _newton(wk, H, state, dt_try, model, free_body)
+            converged, its = _newton(wk, cp, state, dt_try, model, free_body)
             istate[I_NEWTON] += max(its, 1)
             if not converged:
                 istate[I_CUTBACKS] += 1
@@ -842,21 +1035,17 @@ def run(t_end, state, model, cache, out, track_energy):
                     return STEP_FAILED, rows
                 fstate[F_CAP] = dt
                 continue
-            # the structure's increments for the converged site forces: dq_F += G f
-            fflat = np.zeros(nr)
-            for i in range(ns):
-                for k in range(gdim):
-                    fflat[i * gdim + k] = wk.f[i, k]
-            corr = G @ fflat
+            # the structure's increments for the converged site forces: dq_F += G f (cp.u: the Newton iteration
+            # evaluated the forces last at its solution)
             for i in range(nf):
-                dq[free[i]] += corr[i]
+                dq[free[i]] += u[i]
             a1 = (dq - dt_try * v) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a
             v1 = v + dt_try * ((1.0 - gamma) * a + gamma * a1)
             q1 = q + dq
             for i in range(ns):
                 for k in range(gdim):
                     y_end[i, k] = wk.y0[i, k] + wk.dd[i * gdim + k]
-                    v_end[i, k] = rows_R[i * gdim + k] @ v1
+                    v_end[i, k] = _row_dot(site_rows, i * gdim + k, v1)
             new_closure = _status(y_end, v_end, wk.z1, wk.zd1, wk, model, closed_new_sites, closed_new)
             changed = False
             for c in range(n_c + n_l):
@@ -872,6 +1061,9 @@ def run(t_end, state, model, cache, out, track_energy):
         q[:] = q1
         v[:] = v1
         a[:] = a1
+        for i in range(ns):
+            for k in range(3):
+                f_last[i, k] = wk.f[i, k] if wk.fn[i] > 0.0 else 0.0
         z[:] = wk.z1
         zd[:] = wk.zd1
         zdd[:] = wk.zdd1

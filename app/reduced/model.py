@@ -11,8 +11,11 @@ wave is their combination with time functions, app/reduced/loop_kernel.py).
 What the model depends on, and only that, keys its cache (``PIEZODYN_CACHE_DIR``, default
 ~/.cache/piezodyn): the mesh and materials, electrodes' kinds and facets (not their voltages or phases),
 supports, damping, the basis settings, the contacts' surfaces and sampling, the base motions' geometry, the
-points, and the enrichment's frequency. So a sweep over voltage, load, preload, friction, rotor or step
-sizes builds it once.
+points, the enrichment's frequency, and the damping's reference frequency where material quality factors
+use it. So a sweep over voltage, load, preload, friction, rotor or step sizes builds it once; a sweep over the
+drive frequency builds it once where the basis does not follow that frequency (``reduction.cutoff_Hz`` or
+``n_modes`` given, no enrichment or ``enrich_near_Hz`` given, no material-quality damping or its
+``reference_frequency_Hz`` given): tests/test_reduced_cache.py counts the builds.
 """
 
 from __future__ import annotations
@@ -150,7 +153,9 @@ def cache_key(case) -> str:
                 "derived": list(case.output.derived) if case.output.fields else [],
                 "enrich_near_Hz": (case.reduction.enrich_near_Hz or cfg["drive"]["frequency_Hz"])
                 if case.reduction.enrich_modes else None,
-                "damping_Hz": case.damping.reference_frequency_Hz or cfg["drive"]["frequency_Hz"]}
+                # the reference frequency sets the material-quality terms beta_j = 1 / (omega Q_j) only
+                "damping_Hz": (case.damping.reference_frequency_Hz or cfg["drive"]["frequency_Hz"])
+                if case.damping.material_quality else None}
     text = json.dumps(relevant, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
@@ -210,14 +215,21 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
     start = time.perf_counter()
     cfg = case.transient
     file = case.source
+    phases = {}                    # wall time of each phase [s], logged (BENCHMARKS.md, issue 27)
+    mark = time.perf_counter()
     model = build_model(case, comm)
+    phases["mesh and FE model"] = time.perf_counter() - mark
     if model.electrodes_of("floating"):
         raise CaseError(file, "electrodes", "floating electrodes are not supported by the transient analysis")
     gdim = model.mesh.geometry.dim
+    mark = time.perf_counter()
     sets, interface, areas = contact_site_sets(case, model)
+    phases["contact sites"] = time.perf_counter() - mark
     damping_Hz = case.damping.reference_frequency_Hz or cfg.drive.frequency_Hz
     log(f"modal tier: assembling {model.W.dofmap.index_map.size_global * model.W.dofmap.index_map_bs} DOFs")
+    mark = time.perf_counter()
     ops = assemble_operators(model, damping_frequency_Hz=damping_Hz)
+    phases["assembly"] = time.perf_counter() - mark
     fixed = np.concatenate([model.support_dofs, model.grounded_dofs]
                            + [model.electrode_dofs[n] for n in model.electrodes_of("ground")])
     electrodes = {n: model.electrode_dofs[n] for n in model.electrodes_of("voltage")}
@@ -228,9 +240,12 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
     log(f"modal tier: Craig-Bampton basis: {interface.size} interface DOFs, {len(electrodes)} electrodes, "
         f"{len(patterns)} base-motion patterns, fixed-interface modes "
         + (f"up to {cutoff:.0f} Hz" if cutoff is not None else f"{red.n_modes}"))
+    mark = time.perf_counter()
     basis = reduce_model(ops.K, ops.M, ops.C, model.W, fixed, interface, electrodes, n_modes=red.n_modes,
                          cutoff_Hz=cutoff, n_enrich=red.enrich_modes,
                          enrich_near_Hz=red.enrich_near_Hz or cfg.drive.frequency_Hz, patterns=patterns)
+    phases["reduction (static modes, eigen, enrichment, projection)"] = time.perf_counter() - mark
+    mark = time.perf_counter()
     n = basis.size
     # load projections: T^T M t_k per axis (gravity and the downforce act like the body's mass)
     loads = np.zeros((gdim, n))
@@ -252,13 +267,17 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
         values = model.point_values(column)
         for i, name in enumerate(sample_names):
             samples[i, j] = values[name]
+    phases["loads, site and point rows"] = time.perf_counter() - mark
+    mark = time.perf_counter()
     vertex, geometry, topology, region, topology_type, derived = _vertex_basis(model, basis) if case.output.fields \
         else (np.zeros((0, n)), np.zeros((0, 3)), np.zeros((0, 0), np.int64), np.zeros(0, np.int32), "",
               np.zeros((0, n)))
     region_table = [f"{r.tag}|{r.name}|{int(r.e is not None)}" for r in model.regions]
     n_el = len(electrodes)
     charge = np.array([basis.charge_rows[name] for name in list(electrodes)]).reshape(n_el, n)
+    phases["vertex basis and charges"] = time.perf_counter() - mark
     wall = time.perf_counter() - start
+    log("modal tier: build phases: " + ", ".join(f"{name} {seconds:.1f} s" for name, seconds in phases.items()))
     points = np.concatenate([s.points_m for s in sets]) if sets else np.zeros((0, 3))
     weights = np.concatenate([s.weight for s in sets]) if sets else np.zeros(0)
     contact = np.concatenate([np.full(s.points_m.shape[0], s.contact) for s in sets]) if sets else np.zeros(0, int)
