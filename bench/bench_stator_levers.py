@@ -5,6 +5,7 @@ the pair's travelling-wave ratio and the mean field in the PZT.
 
     .venv/bin/python bench/bench_stator_levers.py --out results/levers [--designs base all-segment ...]
         [--offset-Hz 25.0] [--set KEY=VALUE ...]   (extra overrides for the 3D runs, e.g. a mesh)
+        [--geometry KEY=VALUE ...]   (geometry overrides of every design, in the Fourier tuning and the 3D run)
 
 --offset-Hz is F(1,4) of the converged 3D segmented stator minus that of its Fourier model at
 mesh_refinement 4 (measured for the baseline by bench_stator_mesh.py; docs/motor-stator.md). A finished design
@@ -23,8 +24,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_HZ = 36065.0
-STATOR = ROOT / "cases" / "wwusm-stator.toml"
-FOURIER = ROOT / "cases" / "wwusm-stator-fourier.toml"
+# the designs are overrides of the stator before issue 24 (one 2 mm layer, A/B segments, guards, full-height
+# sensors); cases/wwusm-stator.toml is the design chosen from this bench (all-segment-multilayer-3)
+STATOR = ROOT / "bench" / "cases" / "wwusm-stator-two-phase.toml"
+FOURIER = ROOT / "bench" / "cases" / "wwusm-stator-two-phase-fourier.toml"
 PZT_LIMIT_V_PER_MM = 354.0   # APC: 9 V AC per mil for Navy type I (PZT-4), the low end of 9-11 V/mil
 
 TWO_PHASE = []
@@ -68,9 +71,29 @@ def run(case: Path, out: Path, sets: list[str]) -> dict:
     return json.loads(summary.read_text())
 
 
+def circle_sets(geometry: list[str], wedge_m: float, three_d: bool) -> list[str]:
+    """The sampling circles and the generatrix of this design: the contact circle 1.26 mm below its tip (the case's
+    circle_height_m and circle_radius_m are the 3.0 mm wedge's), 80 um inside the inclined face as in the case."""
+    from geometry.stator import StatorParameters
+
+    prefix = "geometry.parameters."
+    kw = {k[len(prefix):]: float(v) for k, v in (g.split("=", 1) for g in geometry if g.startswith(prefix))
+          if k[len(prefix):] in ("tip_width_m", "tube_height_m", "tube_inner_radius_m", "collar_height_m",
+                                 "base_height_m")}
+    params = StatorParameters(**kw, wedge_height_m=wedge_m)
+    r_c, z_c = params.contact_point()
+    r_s = r_c + 0.00008
+    sets = [f"modal.identify.circle_radius_m={r_s:.7f}", f"modal.identify.circle_height_m={z_c:.7f}",
+            f"modal.identify.line_z_stop_m={params.tip_z_m - 0.00005:.7f}"]
+    if three_d:
+        sets += [f"modal.contact_force.circle_radius_m={r_s:.7f}", f"modal.contact_force.circle_height_m={z_c:.7f}",
+                 f"harmonic.wave.circle_radius_m={r_s:.7f}", f"harmonic.wave.circle_height_m={z_c:.7f}"]
+    return sets
+
+
 def fourier_f14(out: Path, geometry: list[str], wedge_m: float) -> float:
     sets = [*[s for s in geometry if not s.startswith("regions=")], f"geometry.parameters.wedge_height_m={wedge_m:.7f}",
-            "output.fields=false", "output.plots=false"]
+            *circle_sets(geometry, wedge_m, False), "output.fields=false", "output.plots=false"]
     if any(s.startswith("regions=") for s in geometry):
         sets.append(next(s for s in geometry if s.startswith("regions=")))
     return run(FOURIER, out / f"2d-{wedge_m * 1e3:.5f}mm", sets)["results"]["modal"]["working_resonance_Hz"]
@@ -94,16 +117,21 @@ def main(argv=None):
     parser.add_argument("--designs", nargs="+", default=list(DESIGNS))
     parser.add_argument("--offset-Hz", type=float, required=True)
     parser.add_argument("--set", dest="overrides", action="append", default=[])
+    parser.add_argument("--geometry", dest="common", action="append", default=[],
+                        help="a geometry override of every design (e.g. geometry.parameters.wedge_root_fillet_m=0.0003)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     rows = []
     for name in args.designs:
         text, geometry, electrodes = DESIGNS[name]
+        geometry = [*args.common, *geometry]
         start = time.perf_counter()
         d_out = out / name
         d_out.mkdir(parents=True, exist_ok=True)
         wedge, f2d = tune(d_out, geometry, TARGET_HZ - args.offset_Hz)
-        s = run(STATOR, d_out / "3d", [*geometry, *electrodes, f"geometry.parameters.wedge_height_m={wedge}",
+        s = run(STATOR, d_out / "3d", ["geometry.parameters.mesh_method=swept", *geometry, *electrodes,
+                                       f"geometry.parameters.wedge_height_m={wedge}",
+                                       *circle_sets(geometry, wedge, True),
                                        "output.fields=false", "output.plots=false", *args.overrides])
         modal = s["results"]["modal"]
         cf = modal["contact_force"]
