@@ -118,7 +118,8 @@ def main(argv=None):
     parser.add_argument("--offset-Hz", type=float, required=True)
     parser.add_argument("--set", dest="overrides", action="append", default=[])
     parser.add_argument("--geometry", dest="common", action="append", default=[],
-                        help="a geometry override of every design (e.g. geometry.parameters.wedge_root_fillet_m=0.0003)")
+                        help="a geometry override of every design "
+                             "(e.g. geometry.parameters.wedge_root_fillet_m=0.0003)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     rows = []

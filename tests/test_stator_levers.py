@@ -13,7 +13,8 @@ from conftest import ROOT
 
 # the stator before issue 24 (one layer, A/B segments and guards), on its swept mesh: the levers act on it
 CASE = ROOT / "bench" / "cases" / "wwusm-stator-two-phase.toml"
-COARSE = ["geometry.parameters.mesh_method=swept", "geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
+COARSE = ["geometry.parameters.mesh_method=swept", "geometry.parameters.mesh_size_m=0.004",
+          "geometry.parameters.tip_mesh_size_m=0.002",
           "geometry.parameters.arc_mesh_size_m=0.002", "output.fields=false", "output.plots=false",
           # the coarse faceted faces sag: sample further inside
           "modal.identify.line_radius_m=0.0133", "modal.identify.circle_radius_m=0.01305",
