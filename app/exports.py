@@ -83,6 +83,7 @@ class VertexFields:
         self.mesh_arrays = None
         self.derived = tuple(derived)
         self._evaluator = None
+        self._scalar_target = None         # the P1 function sample_scalar interpolates into, made once
         self.region_names = {int(r.tag): r.name for r in model.regions}
         if comm.rank == 0:
             all_inputs = np.unique(np.concatenate([p[0] for p in parts]))
@@ -150,7 +151,9 @@ class VertexFields:
         """A scalar field (any dolfinx Function or Expression of one value on this mesh, e.g. the contact
         pressure [Pa]) interpolated to P1 at the vertices, gathered on rank 0 in the mesh's input order
         (None elsewhere). Collective."""
-        target = fem.Function(self.S1)
+        if self._scalar_target is None:
+            self._scalar_target = fem.Function(self.S1)
+        target = self._scalar_target
         target.interpolate(function)
         target.x.scatter_forward()
         parts = self.comm.gather(target.x.array[self._phi_dofs], root=0)

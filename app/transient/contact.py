@@ -121,7 +121,6 @@ class SurfaceContact(ForceColumns):
         mesh = fe.space.mesh
         gdim = fe.gdim
         facets = facet_tags.find(tag)
-        self.facet_tags, self.tag = facet_tags, tag
         self.local_dofs, self.dof_axes = fe.facet_displacement_dofs(facets)
         self.u_mid, self.v_mid = fields.u_mid, fields.v_mid
         self.velocity_per_displacement = fields.velocity_per_displacement

@@ -84,8 +84,6 @@ def batch_intervals(data: dict[str, np.ndarray], cfg) -> dict:
     chaotic, so one run's statistic is a sample: the interval says how far another run may land. Empty when
     the windows would be shorter than ``MIN_BATCH_S``. Keys as in ``statistics`` (e.g.
     ``impact_rate_per_s.stem_rock``), under ``statistics.interval_95``."""
-    from scipy import stats as sps
-
     from app.transient.impacts import run_statistics
 
     t = data.get(S.TIME)
@@ -105,12 +103,18 @@ def batch_intervals(data: dict[str, np.ndarray], cfg) -> dict:
             for key, value in values.items():
                 if group in _BATCH_KEYS or key in _BATCH_KEYS:
                     samples.setdefault((group, key), []).append(float(value))
-    t_crit = float(sps.t.ppf(0.975, BATCHES - 1))
     out: dict = {}
     for (group, key), values in samples.items():
         if len(values) == BATCHES:
-            out.setdefault(group, {})[key] = t_crit * float(np.std(values, ddof=1)) / np.sqrt(BATCHES)
+            out.setdefault(group, {})[key] = _half_width_95(values)
     return out
+
+
+def _half_width_95(batch_means) -> float:
+    """Half-width of the 95 % t-interval of the mean of ``BATCHES`` batch means: t_{0.975, B-1} s / sqrt(B)."""
+    from scipy import stats as sps
+
+    return float(sps.t.ppf(0.975, BATCHES - 1)) * float(np.std(batch_means, ddof=1)) / np.sqrt(BATCHES)
 
 
 def lumped_batch_intervals(events: np.ndarray, duration_s: float) -> dict:
@@ -118,8 +122,6 @@ def lumped_batch_intervals(events: np.ndarray, duration_s: float) -> dict:
     microsecond contacts): per window, the impact rates (closing events) per contact and the rock's mean force
     (the impulses of the stem-rock contacts ending in the window over its width); the same windows and
     t-interval (the method of bench/bench_tier_statistics.py)."""
-    from scipy import stats as sps
-
     from app.lumped import kernel as K
     from app.lumped.parameters import CONTACT_NAMES
 
@@ -136,9 +138,8 @@ def lumped_batch_intervals(events: np.ndarray, duration_s: float) -> dict:
             rates[name].append(np.sum(inside & closing & (ev[:, K.EV_CONTACT] == c)) / (hi - lo))
         rock_ends = inside & ~closing & (ev[:, K.EV_CONTACT] == CONTACT_NAMES.index("stem_rock"))
         force.append(float(np.sum(ev[rock_ends, K.EV_IMPULSE])) / (hi - lo))
-    half = float(sps.t.ppf(0.975, BATCHES - 1)) / np.sqrt(BATCHES)
-    return {"impact_rate_per_s": {name: half * float(np.std(v, ddof=1)) for name, v in rates.items()},
-            "stem_rock_foundation": {"mean_force_N": half * float(np.std(force, ddof=1))}}
+    return {"impact_rate_per_s": {name: _half_width_95(v) for name, v in rates.items()},
+            "stem_rock_foundation": {"mean_force_N": _half_width_95(force)}}
 
 
 def lumped_statistics(data: dict[str, np.ndarray], parameters: dict, duration_s: float, min_rise_m: float,
