@@ -85,6 +85,25 @@ class ModalResult:
         return None if j is None else self.open[j].frequency_Hz
 
 
+def resonances_near(model: FEModel, near_Hz: float, count: int) -> list[float]:
+    """The FE model's ``count`` natural frequencies nearest ``near_Hz`` with its electrodes short-circuited (as a
+    driven transient holds them) [Hz], ascending: the resonance a drive locked to it follows (app/drive.py
+    locked_case). Assembles K and M and solves on its own (collective)."""
+    from app.fe.operators import assemble_operators
+
+    ops = assemble_operators(model)
+    try:
+        modes = solve_modes(ops, electrical_state(model, "short"), near_Hz, count, 0.0, prefix="drive_lock_")
+    finally:
+        ops.destroy()
+    if len(modes) < count:
+        raise NumericalFailure(f"drive lock: {len(modes)} of {count} natural frequencies found near {near_Hz:.0f} Hz")
+    out = sorted(m.frequency_Hz for m in modes[:count])
+    for mode in modes:
+        mode.vector.destroy()
+    return out
+
+
 def run_modal(model: FEModel, ops: Operators) -> ModalResult:
     cfg = model.case.modal
     if cfg.cyclic is not None:

@@ -110,6 +110,15 @@ SET_INPUTS = [
     (FE, [*FE_TINY, "transient.loads.fe_force_N=[0.0]"], "transient.loads.fe_force_N"),
     (FE, [*FE_TINY, 'electrodes.hot.kind="ground"'], "transient.drive.tip_amplitude_m"),
     (FE, [*FE_TINY, "transient.end_time_s=-2e-4"], "transient.end_time_s"),
+    # a drive locked to the resonance (app/case/transient.py DriveSection, app/case/schema.py Case.check)
+    (FE, [*FE_TINY, "transient.drive.detuning_Hz=10.0"], "transient.drive.detuning_Hz"),
+    (FE, [*FE_TINY, "transient.drive.lock_modes=1"], "transient.drive.lock_modes"),
+    (FE, [*FE_TINY, 'transient.drive.lock="phase"'], "transient.drive.lock"),
+    (FE, [*FE_TINY, 'transient.drive.lock="resonance"', "transient.drive.detuning_Hz=-20000.0"],
+     "transient.drive.detuning_Hz"),
+    (FE, [*FE_TINY, 'transient.drive.lock="resonance"', "transient.drive.lock_modes=0"],
+     "transient.drive.lock_modes"),
+    (MOTOR, [f"electrodes.{e}.amplitude_V=0.0" for e in ("A", "B", "Am", "Bm")], "transient.drive.lock"),
     # the phase-locked field frames (app/case/schema.py OutputSection.check_frames)
     (FE, [*FE_TINY, "output.field_phases=0"], "output.field_phases"),
     (FE, [*FE_TINY, "output.field_phases=100"], "output.field_phases"),

@@ -426,6 +426,13 @@ class Case:
             raise CaseError(file, "harmonic.target.point", f"unknown point {self.harmonic.target.point!r}")
         if self.circuit and self.circuit.point not in self.points:
             raise CaseError(file, "circuit.point", f"unknown point {self.circuit.point!r}")
+        if self.transient is not None and self.transient.drive.lock == "resonance":
+            from app.drive import is_driven
+
+            if not is_driven(self):
+                raise CaseError(file, "transient.drive.lock", "locks the drive to the resonance: the transient "
+                                                              "drives nothing (no electrode of kind 'voltage' with a "
+                                                              "voltage, no tip amplitude, no base motion)")
 
     def _check_electrode_facets(self, file) -> None:
         """An electrode is an equipotential surface: a facet group belongs to one electrode at most (by name

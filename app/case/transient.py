@@ -52,6 +52,26 @@ class DriveSection:
     tip_amplitude_m: float | None = param(
         None, gt=0, unit="m", doc="free steady amplitude at `point`; sets the voltage by a harmonic solve")
     point: str = param("tip", doc="named [points] entry the amplitude refers to")
+    lock: Literal["none", "resonance"] = param(
+        "none", doc="'resonance': drive at the tier's own model's resonance nearest frequency_Hz plus detuning_Hz, "
+                    "as a phase-locked driver holds a stated detuning (the drive then does not depend on how far the "
+                    "mesh puts the resonance); frequency_Hz is where the resonance is sought and the reduced "
+                    "basis's reference frequency. The summary reports it (transient.drive)")
+    lock_modes: int = param(
+        2, ge=1, le=8, doc="lock = 'resonance': the resonance is the mean of the model's natural frequencies "
+                           "(electrodes short-circuited) nearest frequency_Hz, this many: 2 for a travelling wave's "
+                           "mode pair, 1 for a single mode")
+    detuning_Hz: float = param(
+        0.0, unit="Hz", doc="lock = 'resonance': drive frequency minus the model's resonance (positive: above it)")
+
+    def check(self, file, prefix):
+        if self.lock == "none":
+            for key, default in (("detuning_Hz", 0.0), ("lock_modes", 2)):
+                if getattr(self, key) != default:
+                    raise CaseError(file, f"{prefix}.{key}", "needs lock = 'resonance'")
+        elif abs(self.detuning_Hz) >= 0.5 * self.frequency_Hz:
+            raise CaseError(file, f"{prefix}.detuning_Hz", f"{self.detuning_Hz:g} Hz is not a detuning of a "
+                                                           f"resonance near {self.frequency_Hz:g} Hz")
 
 
 @dataclass(frozen=True)

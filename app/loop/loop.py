@@ -48,9 +48,11 @@ class Engine(Protocol):
 
     ``tier``: the case's tier; ``t``: the time of the current state [s]; ``steps``: accepted steps since
     t = 0 (a resumed run counts on); ``end_time_s``: the run's end; ``checkpoint_interval_steps``: a checkpoint
-    every so many accepted steps (0: at the end only)."""
+    every so many accepted steps (0: at the end only); ``case``: the case as the engine runs it (a drive locked to
+    the model's resonance has its frequency resolved: app/drive.py locked_case)."""
 
     tier: str
+    case: object
     t: float
     steps: int
     end_time_s: float
@@ -169,6 +171,7 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     digest = case_digest(case)
     found = read_checkpoint(out_dir, comm, case, digest, case.tier) if resume else None
     engine = make_engine(found)
+    case = engine.case      # the case as the engine runs it (a drive locked to the resonance: its frequency resolved)
     if found is not None:
         engine.restore(found)
         log(f"{engine.tier} tier: resuming at t = {engine.t * 1e3:.6g} ms from {out_dir / 'checkpoint'} "

@@ -51,6 +51,16 @@ class ModalEngine:
             log(f"modal tier: reduced model from the checkpoint {path}")
         else:
             self.model, self.from_cache = load_or_build(case, comm, log)
+        self.drive_lock = None
+        if cfg.drive.lock == "resonance":
+            # the reduced structure's own resonance (with enrichment: the FE stator's pair exactly); the case as run
+            # has the resolved frequency, the basis keeps the nominal one (app/drive.py locked_case)
+            from app.drive import drive_lock_line, locked_case
+
+            found_Hz = self.model.resonances_Hz(cfg.drive.frequency_Hz, cfg.drive.lock_modes)
+            self.case, self.drive_lock = locked_case(case, found_Hz)
+            self.cfg = cfg = self.case.transient
+            log(drive_lock_line(self.drive_lock))
         self.setup_wall_s = time.perf_counter() - start
         self._records()
 
@@ -477,6 +487,7 @@ class ModalEngine:
                "cutbacks": int(self.istate[lk.I_CUTBACKS]), "event_refinements": int(self.istate[lk.I_REFINEMENTS]),
                "drive_voltage_V": self.scale_V, "drive_frequency_Hz": cfg.drive.frequency_Hz,
                "initial_state": cfg.initial_state, "stepping_wall_time_s": self._loop_wall,
+               **({"drive": self.drive_lock} if self.drive_lock is not None else {}),
                "reduction": {"interface_dofs": model.n_interface, "electrodes": list(self.electrodes),
                              "inputs": list(model.inputs),
                              "modes": int(model.mode_frequencies_Hz.size), "size": model.size,

@@ -15,7 +15,9 @@ points, the enrichment's frequency, and the damping's reference frequency where 
 use it. So a sweep over voltage, load, preload, friction, rotor or step sizes builds it once; a sweep over the
 drive frequency builds it once where the basis does not follow that frequency (``reduction.cutoff_Hz`` or
 ``n_modes`` given, no enrichment or ``enrich_near_Hz`` given, no material-quality damping or its
-``reference_frequency_Hz`` given): tests/test_reduced_cache.py counts the builds.
+``reference_frequency_Hz`` given), and a sweep over a locked drive's ``transient.drive.detuning_Hz`` builds it
+once always (the basis follows the nominal frequency): tests/test_reduced_cache.py counts the builds. The key holds
+the frequencies the build uses (the cutoff in Hz, the enrichment target), not how the case states them.
 """
 
 from __future__ import annotations
@@ -145,10 +147,19 @@ def cache_key(case) -> str:
     bodies = {b["name"]: {"position_m": b["position_m"], "rotations": [r["axis"] for r in b["rotations"]]}
               for b in cfg["bodies"]}
     motions = [{k: m[k] for k in ("facets", "wavelength_m", "direction", "normal")} for m in cfg["base_motions"]]
+    # the basis's frequencies as the build uses them (cutoff_Hz or cutoff_factor x the drive; the enrichment target;
+    # the damping's reference): a case that states them and one that takes them from the drive hash alike (a drive
+    # locked to the resonance states them: app/drive.py locked_case)
     reduction = dict(data["reduction"])
+    for key in ("cutoff_Hz", "cutoff_factor", "enrich_near_Hz"):
+        reduction.pop(key, None)
+    red = case.reduction
+    reduction["cutoff_Hz_used"] = None if red.n_modes is not None else (
+        red.cutoff_Hz if red.cutoff_Hz is not None else red.cutoff_factor * cfg["drive"]["frequency_Hz"])
+    damping = {k: v for k, v in data["damping"].items() if k != "reference_frequency_Hz"}
     relevant = {"version": CACHE_VERSION, "geometry": data["geometry"], "materials": repr(case.materials),
                 "regions": data["regions"], "electrodes": electrodes, "supports": data["supports"],
-                "damping": data["damping"], "reduction": reduction, "contacts": contacts, "bodies": bodies,
+                "damping": damping, "reduction": reduction, "contacts": contacts, "bodies": bodies,
                 "motions": motions, "points": data["points"], "fields": bool(case.output.fields),
                 "derived": list(case.output.derived) if case.output.fields else [],
                 "enrich_near_Hz": (case.reduction.enrich_near_Hz or cfg["drive"]["frequency_Hz"])

@@ -68,7 +68,9 @@ class VoltageDrive:
 class TransientModel:
     """Builds the FE part, rigid bodies and contacts of a case (no time loop)."""
 
-    def __init__(self, case, comm, log):
+    def __init__(self, case, comm, log, lock_drive: bool = True):
+        """``lock_drive``: resolve a drive locked to the resonance (``transient.drive.lock``; an eigensolve), else
+        keep the case's frequency (``validate`` solves nothing)."""
         from app.fe.model import build_model
 
         self.case, self.comm, self.log = case, comm, log
@@ -77,6 +79,16 @@ class TransientModel:
         self.model = model = build_model(case, comm)
         if model.electrodes_of("floating"):
             raise CaseError(file, "electrodes", "floating electrodes are not supported by the transient analysis")
+        self.drive_lock = None
+        if cfg.drive.lock == "resonance" and lock_drive:
+            from app.drive import drive_lock_line, locked_case
+            from app.modal import resonances_near
+
+            found = resonances_near(model, cfg.drive.frequency_Hz, cfg.drive.lock_modes)
+            case, self.drive_lock = locked_case(case, found)
+            self.case, self.cfg = case, case.transient
+            cfg = self.cfg
+            log(drive_lock_line(self.drive_lock))
         W = model.W
         self.gdim = gdim = model.mesh.geometry.dim
         weight = volume_weight(model.mesh, model.kind, case.geometry.thickness_m)
@@ -328,9 +340,9 @@ def plot_spec(case, point: str | None, bodies: list[str], contacts: list[str], t
     return {"point": point, "bodies": bodies, "contacts": contacts, "title": title}
 
 
-def build(case, comm, log) -> TransientModel:
-    """The transient model of ``case`` without solving anything: every input check of the transient
-    analysis, including those that need the mesh (``piezodyn validate`` calls this too)."""
+def build(case, comm, log, lock_drive: bool = True) -> TransientModel:
+    """The transient model of ``case``: every input check of the transient analysis, including those that need the
+    mesh (``piezodyn validate`` calls this too, with ``lock_drive = False``: nothing solved)."""
     file, cfg = case.source, case.transient
     if cfg.drive.tip_amplitude_m is not None and not any(e.kind == "voltage" for e in case.electrodes.values()):
         raise CaseError(file, "transient.drive.tip_amplitude_m", "needs an electrode of kind 'voltage' to drive")
@@ -339,4 +351,4 @@ def build(case, comm, log) -> TransientModel:
             vector = getattr(c, key, None)
             if vector is not None and not np.any(np.asarray(vector, dtype=float)):
                 raise CaseError(file, f"transient.contacts[{i}].{key}", "must not be the zero vector")
-    return TransientModel(case, comm, log)
+    return TransientModel(case, comm, log, lock_drive)

@@ -29,9 +29,11 @@ class FEEngine:
     tier = "fe"
 
     def __init__(self, case, comm, log, found: Found | None = None):
-        self.case, self.comm, self.log = case, comm, log
-        self.cfg = cfg = case.transient
+        self.comm, self.log = comm, log
         self.tm: TransientModel = build(case, comm, log)
+        # the case as run: a drive locked to the resonance has its frequency resolved (app/drive.py locked_case)
+        self.case = case = self.tm.case
+        self.cfg = cfg = case.transient
         self.system = self.tm.system
         self.layout = CellLayout(self.tm.model.W)
         s = cfg.steps
@@ -52,7 +54,7 @@ class FEEngine:
         """``validate``: every check the run makes that needs the mesh, without solving (collective)."""
         from app.loop.loop import steady_state_watch
 
-        tm = build(case, comm, log)
+        tm = build(case, comm, log, lock_drive=False)
         try:
             steady_state_watch(case, units(tm, case))
         finally:
@@ -254,6 +256,8 @@ class FEEngine:
         cfg = self.cfg
         out.update({"drive_voltage_V": self.voltage_V, "drive_frequency_Hz": cfg.drive.frequency_Hz,
                     "initial_state": cfg.initial_state, "stepping_wall_time_s": self.stepper.stats.wall_time_s})
+        if self.tm.drive_lock is not None:
+            out["drive"] = self.tm.drive_lock
         self.log(f"transient: {self.steps} steps, {out['newton_iterations']} Newton iterations, "
                  f"{out['cutbacks']} cut-backs, {out['factorisations']} factorisations")
         return out
