@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CASES, run_case_quiet, run_cli
+from conftest import PINNED_MOTOR, run_case_quiet, run_cli
 from mpi4py import MPI
 from test_transient_checkpoint import assert_readable_outputs, read_series
 
-CASE = "wwusm-motor.toml"
+CASE = PINNED_MOTOR
 SETS = ["geometry.parameters.mesh_size_m=0.003", "geometry.parameters.tip_mesh_size_m=0.001",
         "reduction.interface_nodes=32", "transient.contacts[0].sample_points=128", "output.plots=false",
         "output.fields=false",
@@ -87,7 +87,7 @@ def test_motor_resume_from_half_time_equals_one_run(one_go, shared_tmp):
     first = run_case_quiet(CASE, shared_tmp, *SETS, f"transient.end_time_s={HALF_S!r}")
     assert first["results"]["transient"]["steady_state"]["cycles"] == 5
     assert not first["results"]["transient"]["steady_state"]["steady"]
-    second = run_case(CASES / CASE, SETS, shared_tmp, quiet=True, resume=True)
+    second = run_case(CASE, SETS, shared_tmp, quiet=True, resume=True)
     comm.barrier()
     res = second["results"]["transient"]
     assert res["resumed_from_s"] == first["results"]["transient"]["simulated_time_s"]
@@ -112,11 +112,11 @@ KILL_POINTS = [
 
 
 def kill_and_resume(point: str, out: Path, reference: Path, mpi: int = 0, resume_mpi: int | None = None) -> None:
-    killed = run_cli("run", CASES / CASE, "--out", out, "--quiet", *_cli_sets(SETS), mpi=mpi, kill_at=point)
+    killed = run_cli("run", CASE, "--out", out, "--quiet", *_cli_sets(SETS), mpi=mpi, kill_at=point)
     assert killed.returncode != 0, f"{point}: the run was not killed"
     assert not (out / "summary.json").exists()
     assert_readable_outputs(out)
-    resumed = run_cli("run", CASES / CASE, "--resume", out, "--quiet", *_cli_sets(SETS),
+    resumed = run_cli("run", CASE, "--resume", out, "--quiet", *_cli_sets(SETS),
                       mpi=mpi if resume_mpi is None else resume_mpi)
     assert resumed.returncode == 0, f"{point}: " + resumed.stderr[-3000:]
     assert_same_run(reference, out)
@@ -153,7 +153,7 @@ def test_motor_resume_errors_are_one_line(capsys, one_go, tmp_path):
     sets = _cli_sets(SETS)
 
     def resume(out, *more):
-        return cli_main(capsys, "run", CASES / CASE, "--resume", out, "--quiet", *sets, *more)
+        return cli_main(capsys, "run", CASE, "--resume", out, "--quiet", *sets, *more)
 
     out = tmp_path / "copy"
     shutil.copytree(one_go, out)

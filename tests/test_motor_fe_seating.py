@@ -18,7 +18,7 @@ import math
 import h5py
 import numpy as np
 import pytest
-from conftest import CASES
+from conftest import PINNED_MOTOR
 from mpi4py import MPI
 
 from app.case.schema import load_case
@@ -38,9 +38,9 @@ def quiet(*args):
 @pytest.fixture(scope="module")
 def seated(tmp_path_factory):
     comm = MPI.COMM_WORLD
-    case = load_case(CASES / "wwusm-motor.toml", TINY_FE)
+    case = load_case(PINNED_MOTOR, TINY_FE)
     out = tmp_path_factory.mktemp("seated")
-    results = run_case(CASES / "wwusm-motor.toml", TINY_FE, out / "out", comm=comm, quiet=True)["results"]["transient"]
+    results = run_case(PINNED_MOTOR, TINY_FE, out / "out", comm=comm, quiet=True)["results"]["transient"]
     with h5py.File(out / "out" / "transient.h5", "r") as f:
         data = {k: f[k][()] for k in f}
     return case, results, data
@@ -48,7 +48,7 @@ def seated(tmp_path_factory):
 
 def test_seating_lifts_the_rotor_onto_the_highest_crest_by_the_modal_tiers_rule():
     comm = MPI.COMM_WORLD
-    case = load_case(CASES / "wwusm-motor.toml", TINY_FE)
+    case = load_case(PINNED_MOTOR, TINY_FE)
     tm = build(case, comm, quiet)
     state, _ = tm.initial_state()
     contact = tm.system.interactions[0]

@@ -1,4 +1,6 @@
-"""The motor scene (app/scenes/wwusm_motor/) in the modal tier, on a coarse stator (its derivatives and the
+"""The motor scene (app/scenes/wwusm_motor/) in the modal tier, on a coarse mesh of the first stator (the pinned bench
+case bench/cases/wwusm-motor-pinned.toml: the values below are this code's on that stator; the shipped motor's
+stator has its own tests, tests/test_motor_preloads.py) (its derivatives and the
 condensed step: tests/test_reduced_kernel.py).
 
 * A held rotor: every contact point slides forward, so the friction torque is mu N r_c times the share of
@@ -20,6 +22,7 @@ import json
 import math
 
 import pytest
+from conftest import PINNED_MOTOR
 
 COARSE = ["geometry.parameters.mesh_size_m=0.003", "geometry.parameters.tip_mesh_size_m=0.001",
           "reduction.interface_nodes=32", "transient.contacts[0].sample_points=128", "transient.end_time_s=0.008",
@@ -30,7 +33,7 @@ PERIOD_S = 1 / 36065.0
 def _run(root, name, sets):
     from app.runner import run_case
 
-    return run_case("cases/wwusm-motor.toml", COARSE + sets, root / name, quiet=True)["results"]["transient"]
+    return run_case(PINNED_MOTOR, COARSE + sets, root / name, quiet=True)["results"]["transient"]
 
 
 @pytest.fixture(scope="module")
@@ -108,7 +111,7 @@ def test_reduced_stator_resonance_is_the_fe_one(motor_runs, tmp_path):
     from app.runner import run_case
 
     _, held, _, _ = motor_runs
-    fe = run_case("cases/wwusm-motor.toml",
+    fe = run_case(PINNED_MOTOR,
                   COARSE[:2] + ['tier="fe"', 'analyses=["modal"]', "modal.target_frequency_Hz=36065.0",
                                 "modal.n_modes=2", "output.fields=false", "output.plots=false"],
                   tmp_path / "fe_modal", quiet=True)["results"]["modal"]

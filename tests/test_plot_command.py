@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CASES, run_cli
+from conftest import CASES, PINNED_MOTOR, run_cli
 
 DRILL = ['tier="modal"', "geometry.parameters.mesh_size_m=0.004", "geometry.parameters.ceramic_mesh_size_m=0.0025",
          "transient.end_time_s=1e-4", "transient.output_interval_s=1e-4", "output.fields=false"]
@@ -48,7 +48,7 @@ def results(tmp_path_factory):
 def motor_result(tmp_path_factory):
     """The motor scene (modal tier) on the tests' coarse stator for ten periods, as tests/test_cases.py runs it."""
     out = tmp_path_factory.mktemp("plot_motor")
-    proc = run_cli("run", CASES / "wwusm-motor.toml", "--out", out, "--quiet", *_sets(MOTOR))
+    proc = run_cli("run", PINNED_MOTOR, "--out", out, "--quiet", *_sets(MOTOR))
     assert proc.returncode == 0, proc.stderr
     return out
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse
-from conftest import CASES
+from conftest import PINNED_MOTOR
 from mpi4py import MPI
 
 import app.transient.driver as driver
@@ -52,7 +52,7 @@ def runs():
     """The same model and start, stepped by the active-set Newton (the driver's system) and by the all-DOF
     Newton (a second CoupledSystem on the same FE model, bodies and interactions)."""
     comm = MPI.COMM_WORLD
-    case = load_case(CASES / "wwusm-motor.toml", TINY_FE)
+    case = load_case(PINNED_MOTOR, TINY_FE)
     tm = driver.build(case, comm, quiet)
     state, _ = tm.initial_state()
     s = case.transient.steps
