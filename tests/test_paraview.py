@@ -188,8 +188,9 @@ def test_drill_at_an_impact_in_paraview(x_display, transient_result):
     assert von_mises.max() > 1e6                        # the horn carries MPa under a 15 um drive
 
 
-# the shipped motor on a coarse swept mesh (6 mm, 2 mm at the tip, the case's refinement 0.6: 31 488 DOFs) in the FE tier for one drive period
-# (the drive locked to this mesh's F(1,4)) from the harmonic steady state, the rotor seated: 8 phase-locked frames
+# the shipped motor on a coarse swept mesh (6 mm, 2 mm at the tip, the case's refinement 0.6: 31 488 DOFs) in the
+# FE tier for one drive period (the drive locked to this mesh's F(1,4)) from the harmonic steady state, the rotor
+# seated: 8 phase-locked frames
 MOTOR_ONE_PERIOD = ["geometry.parameters.mesh_size_m=0.006", "geometry.parameters.tip_mesh_size_m=0.002",
                     'tier="fe"', "transient.end_time_s=2.8e-5", "output.plots=false"]
 
