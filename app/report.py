@@ -57,6 +57,12 @@ def transient_rows(transient: dict | None) -> list[tuple[str, str, str]]:
     rows = [("simulated time", f"{transient['simulated_time_s'] * 1e3:.4g}", "ms")]
     if transient.get("drive_voltage_V") is not None:
         rows.append(("drive amplitude", f"{transient['drive_voltage_V']:.4g}", "V"))
+    if transient.get("drive_frequency_Hz") is not None:
+        rows.append(("drive frequency", f"{transient['drive_frequency_Hz']:.2f}", "Hz"))
+    lock = transient.get("drive")
+    if lock:        # a drive locked to the model's resonance (app/drive.py locked_case)
+        rows.append(("model resonance (locked to)", f"{lock['resonance_Hz']:.2f}", "Hz"))
+        rows.append(("detuning from it", f"{lock['detuning_Hz']:+.2f}", "Hz"))
     rows.append(("steps", f"{transient.get('steps', 0)}", "1"))
     rows.append(("cut-backs", f"{transient.get('cutbacks', 0)}", "1"))
     rows.append(("wall time per simulated ms", _number(transient.get("wall_s_per_simulated_ms")), "s"))

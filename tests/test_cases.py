@@ -33,8 +33,9 @@ TINY = {
     "validation/strip-friction-drive.toml": ["transient.end_time_s=2.5e-5", "transient.output_interval_s=2.5e-5"],
     "validation/ring-inplane-3d.toml": ["geometry.parameters.mesh_size_m=0.002", "modal.n_modes=4"],
     "validation/ring-inplane-fourier.toml": ["geometry.parameters.mesh_size_m=0.0004"],
-    "wwusm-motor.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
-                         "reduction.interface_nodes=16", "transient.contacts[0].sample_points=64",
+    # tests/test_motor_preloads.py's coarse stator (one reduced model in the tests' cache for both)
+    "wwusm-motor.toml": ["geometry.parameters.mesh_size_m=0.006", "geometry.parameters.tip_mesh_size_m=0.002",
+                         "reduction.interface_nodes=32", "transient.contacts[0].sample_points=128",
                          "transient.end_time_s=2.8e-4"],
     "wwusm-stator-fourier.toml": ["geometry.parameters.mesh_size_m=0.004",
                                   "geometry.parameters.tip_mesh_size_m=0.002"],

@@ -426,13 +426,6 @@ class Case:
             raise CaseError(file, "harmonic.target.point", f"unknown point {self.harmonic.target.point!r}")
         if self.circuit and self.circuit.point not in self.points:
             raise CaseError(file, "circuit.point", f"unknown point {self.circuit.point!r}")
-        if self.transient is not None and self.transient.drive.lock == "resonance":
-            from app.drive import is_driven
-
-            if not is_driven(self):
-                raise CaseError(file, "transient.drive.lock", "locks the drive to the resonance: the transient "
-                                                              "drives nothing (no electrode of kind 'voltage' with a "
-                                                              "voltage, no tip amplitude, no base motion)")
 
     def _check_electrode_facets(self, file) -> None:
         """An electrode is an equipotential surface: a facet group belongs to one electrode at most (by name
@@ -512,4 +505,17 @@ def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
     case = replace(case, materials=materials, analyses=analyses, source=str(path.resolve()), **extra)
     check_tier(case, file, written)
     case.output.check_frames(case, file)
+    _check_drive_lock(case, file)
     return case
+
+
+def _check_drive_lock(case: Case, file: str) -> None:
+    """A drive locked to the resonance needs something driven (a cross-section rule: electrodes and transient)."""
+    if case.transient is None or case.transient.drive.lock != "resonance":
+        return
+    from app.drive import is_driven
+
+    if not is_driven(case):
+        raise CaseError(file, "transient.drive.lock", "locks the drive to the resonance, but the transient drives "
+                                                      "nothing (no electrode of kind 'voltage' with a voltage, no "
+                                                      "tip amplitude, no base motion)")
