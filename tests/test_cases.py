@@ -36,6 +36,7 @@ TINY = {
     "wwusm-motor.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
                          "reduction.interface_nodes=16", "transient.contacts[0].sample_points=64",
                          "transient.end_time_s=2.8e-4"],
+    "wwusm-motor-lumped.toml": ["lumped.curve_points=3"],
     "wwusm-stator-fourier.toml": ["geometry.parameters.mesh_size_m=0.004",
                                   "geometry.parameters.tip_mesh_size_m=0.002"],
     "wwusm-stator.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
