@@ -67,7 +67,13 @@ class MotorParameters:
     inertia_kg_m2: float
 
     def to_report(self) -> dict:
-        return asdict(self)
+        """The parameters under names that carry their units (summary.json)."""
+        names = {"omega_m": "mode_angular_frequency_rad_per_s", "k_m": "modal_stiffness_N_per_m",
+                 "c_m": "modal_damping_N_s_per_m", "m_m": "modal_mass_kg", "rho": "tangential_ratio",
+                 "omega": "drive_angular_frequency_rad_per_s", "mu": "friction_coefficient",
+                 "mu_dynamic": "friction_coefficient_dynamic", "k_w": "winkler_stiffness_Pa_per_m",
+                 "sin_alpha": "sin_half_angle"}
+        return {names.get(k, k): v for k, v in asdict(self).items()}
 
 
 def derive_parameters(section) -> MotorParameters:
