@@ -354,9 +354,9 @@ class FrictionDriveSection:
 
     model: Literal["friction_drive"] = param(doc="'friction_drive' (this table)")
     branch: Literal["upper", "lower"] = param(
-        "upper", doc="which root of the wave's amplitude equation is the operating point: 'upper' (the larger "
-                     "wave, stable in this model) or 'lower' (the smaller one, a saddle in this model); both are "
-                     "reported where they exist")
+        "upper", doc="which root of the wave's amplitude equation is the operating point: 'upper' (the largest "
+                     "wave) or 'lower' (the smallest, where there are two or more); every root is reported with "
+                     "its stability")
     curve_points: int = param(9, ge=2, le=200, doc="points of the speed-torque curve, no load to stall")
     stator: WaveModeSection = field(default_factory=WaveModeSection)
     drive: MotorDriveSection = field(default_factory=MotorDriveSection)

@@ -23,8 +23,10 @@ The last line is one equation in the wave amplitude a (everything else follows f
 the crests (theta_c < pi): the contact's stiffening dk ~ N / a falls as the wave grows, so a drive above the
 mode's resonance meets it twice. Every root is found (a scan of a between the smallest wave that lifts the rotor
 off the troughs and the resonant amplitude F_d / (omega c_m), then Brent); a root where the residual rises with a
-is stable for the wave's slow amplitude dynamics ('upper'), where it falls a saddle ('lower'). Without a root the
-wave cannot carry the preload on its crests (the rotor lies on the whole ring: the law does not apply).
+is taken as stable for the wave's slow amplitude dynamics, where it falls as a saddle (the saddle-node argument:
+the turning points of a(F_d) are where d(a |Z|)/da = 0; not checked by a time integration). ``branch``: 'upper'
+is the largest root, 'lower' the smallest of two or more. Without a root the wave cannot carry the preload on its
+crests (the rotor lies on the whole ring: the law does not apply).
 
 Why no time loop: the law is quasi-static and the steady travelling wave is stationary in its frame, so the run
 loop would only relax, period by period, to this fixed point (and could not tell the saddle). The rotor's
