@@ -132,8 +132,22 @@ def test_every_point_closes_its_energy_balance():
         for point in points:
             assert abs(point["energy_balance_relative"]) < 1e-9
             assert point["electrical_power_W"] > 0
+
+
+
+def test_slow_flow_stability_follows_the_saddle_node_picture():
+    """Reference: the saddle-node picture of a forced oscillator whose stiffness depends on its amplitude (the
+    turning points of a(F_d) are where d(a|Z|)/da = 0: a root where a|Z| - F_d falls with a is a saddle). The code
+    decides stability from the eigenvalues of the slow flow linearised at the root (amplitude and the rotor's spin,
+    finite differences): the two must agree at every root, no load, under load and held; 1.2 N has three roots at
+    no load (stable, saddle, stable). No tolerance: a sign."""
     three = fd.solve(section(rotor={"preload_N": 1.2}))["branches"]
     assert [b["stable"] for b in three] == [True, False, True]     # upper, saddle, lower
+    for s in (section(rotor={"preload_N": 1.2}), section(rotor={"preload_N": 0.98})):
+        p = fd.derive_parameters(s)
+        for ratio in (0.0, 0.5, None):
+            for root in fd.roots(p, ratio):
+                assert root["stable"] == root["residual_rises"], (s.rotor.preload_N, ratio, root["amplitude_m"])
 
 
 def test_the_wave_cannot_carry_four_newtons_at_400_Vpp():

@@ -22,10 +22,11 @@ one algebraic problem, not a time integration:
 The last line is one equation in the wave amplitude a (everything else follows from a). It can have two roots on
 the crests (theta_c < pi): the contact's stiffening dk ~ N / a falls as the wave grows, so a drive above the
 mode's resonance meets it twice. Every root is found (a scan of a between the smallest wave that lifts the rotor
-off the troughs and the resonant amplitude F_d / (omega c_m), then Brent); a root where the residual rises with a
-is taken as stable for the wave's slow amplitude dynamics, where it falls as a saddle (the saddle-node argument:
-the turning points of a(F_d) are where d(a |Z|)/da = 0; not checked by a time integration). ``branch``: 'upper'
-is the largest root, 'lower' the smallest of two or more. Without a root the wave cannot carry the preload on its
+off the troughs and the resonant amplitude F_d / (omega c_m), then Brent). A root is stable if the slow flow
+(the pair's averaged complex amplitude and the rotor's spin, :func:`slow_flow_rates`) linearised there has no
+growing eigenvalue; at the roots measured this is where the residual rises with a, and a saddle (one growing
+eigenvalue, the middle root of three) where it falls (tests/test_lumped_motor.py). ``branch``: 'upper' is the
+largest root, 'lower' the smallest of two or more. Without a root the wave cannot carry the preload on its
 crests (the rotor lies on the whole ring: the law does not apply).
 
 Why no time loop: the law is quasi-static and the steady travelling wave is stationary in its frame, so the run
@@ -143,6 +144,43 @@ def state(p: MotorParameters, a: float, load_ratio: float | None) -> dict:
             "residual_N": a * abs(impedance) - p.drive_force_N}
 
 
+def slow_flow_rates(p: MotorParameters, x: np.ndarray, load_torque_N_m: float, held: bool) -> np.ndarray:
+    """d/dt of the slow state x = (Re X, Im X, Omega): the complex amplitude X of each mode of the pair (x =
+    Re(X e^{i omega t}), the travelling wave kept) averaged over a period, 2 i omega m_m dX/dt = F_d - Z(|X|,
+    Omega) X (the second derivative and c dX/dt neglected: slow against omega), and the rotor's spin,
+    I dOmega/dt = T_f(|X|, Omega) - T (0 when held)."""
+    amplitude = complex(x[0], x[1])
+    a = abs(amplitude)
+    theta_c = contact_half_angle(p, a)
+    surface = p.omega * p.rho * a
+    speed = x[2] * p.radius_m
+    force = p.mu * p.normal_force_N * law.force_ratio(speed, surface, theta_c)
+    loss = law.dissipated_power_per_length(speed, surface, theta_c, p.mu, p.k_w, a) * 2 * math.pi * p.radius_m \
+        * p.width_m
+    c_eq = (force * speed + loss) / (p.omega * a) ** 2
+    impedance = (p.k_m + p.k_w * p.width_m * p.radius_m * law.crest_harmonic(theta_c) - p.m_m * p.omega**2
+                 + 1j * p.omega * (p.c_m + c_eq))
+    rate = (p.drive_force_N - impedance * amplitude) / (2j * p.omega * p.m_m)
+    spin = 0.0 if held else (force * p.radius_m - load_torque_N_m) / p.inertia_kg_m2
+    return np.array([rate.real, rate.imag, spin])
+
+
+def slow_flow_eigenvalues(p: MotorParameters, root: dict, load_torque_N_m: float, held: bool) -> np.ndarray:
+    """Eigenvalues [1/s] of the slow flow (:func:`slow_flow_rates`) linearised at a root (central differences,
+    steps 1e-6 of the state's scale); the spin drops out when held."""
+    amplitude = p.drive_force_N / root["impedance"]
+    x0 = np.array([amplitude.real, amplitude.imag, root["speed_m_per_s"] / p.radius_m])
+    n = 2 if held else 3
+    scales = [abs(amplitude), abs(amplitude), max(x0[2], p.omega * p.rho * abs(amplitude) / p.radius_m)]
+    jacobian = np.zeros((n, n))
+    for j in range(n):
+        step = np.zeros(3)
+        step[j] = 1e-6 * scales[j]
+        jacobian[:, j] = ((slow_flow_rates(p, x0 + step, load_torque_N_m, held)
+                           - slow_flow_rates(p, x0 - step, load_torque_N_m, held)) / (2 * step[j]))[:n]
+    return np.linalg.eigvals(jacobian)
+
+
 def roots(p: MotorParameters, load_ratio: float | None) -> list[dict]:
     """Every wave amplitude on the crests that satisfies the amplitude equation under ``load_ratio`` (see
     :func:`state`), largest first, each with ``stable`` (the residual rises with a there)."""
@@ -158,7 +196,12 @@ def roots(p: MotorParameters, load_ratio: float | None) -> list[dict]:
             a = grid[i] if values[i] == 0.0 else brentq(lambda x: state(p, x, load_ratio)["residual_N"], grid[i],
                                                         grid[i + 1], xtol=1e-16, rtol=1e-13)
             root = state(p, a, load_ratio)
-            root["stable"] = bool(values[i + 1] > values[i])
+            root["residual_rises"] = bool(values[i + 1] > values[i])
+            held = load_ratio is None
+            torque = 0.0 if held else load_ratio * p.mu * p.normal_force_N * p.radius_m
+            eigenvalues = slow_flow_eigenvalues(p, root, torque, held)
+            root["slow_flow_growth_rate_per_s"] = float(eigenvalues.real.max())
+            root["stable"] = bool(eigenvalues.real.max() < 0)
             found.append(root)
     return found[::-1]
 
@@ -201,7 +244,7 @@ def operating_point(p: MotorParameters, root: dict, load_torque_N_m: float) -> d
         "surface_speed_m_per_s": surface, "speed_over_surface_speed": root["speed_m_per_s"] / surface,
         "contact_stiffening_N_per_m": root["stiffening_N_per_m"],
         "contact_damping_N_s_per_m": root["contact_damping_N_s_per_m"],
-        "stable": root["stable"],
+        "stable": root["stable"], "slow_flow_growth_rate_per_s": root["slow_flow_growth_rate_per_s"],
     }
 
 
