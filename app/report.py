@@ -86,6 +86,16 @@ def transient_rows(transient: dict | None) -> list[tuple[str, str, str]]:
 def lumped_rows(lumped: dict | None) -> list[tuple[str, str, str]]:
     if not lumped:
         return []
+    if "simulated_time_s" not in lumped:        # a steady solve (app.runner.STEADY_LUMPED_MODELS)
+        rows = [("steady points solved", f"{lumped['points_solved']}", "1"),
+                ("wall time per point", f"{lumped['wall_s_per_point'] * 1e3:.3g}", "ms")]
+        if lumped.get("no_load_speed_rpm") is not None:
+            rows.append(("no-load speed (upper branch)", f"{lumped['no_load_speed_rpm']:.4g}", "rpm"))
+        if lumped.get("stall_torque_N_m") is not None:
+            rows.append(("stall torque mu N r_c", f"{lumped['stall_torque_N_m'] * 1e3:.4g}", "mN m"))
+        if not lumped.get("riding"):
+            rows.append(("operating point on the crests", "none", "-"))
+        return rows
     rows = [("simulated time", f"{lumped['simulated_time_s'] * 1e3:.4g}", "ms"),
             ("wall time per simulated ms", _number(lumped.get("wall_s_per_simulated_ms")), "s")]
     stats = lumped.get("statistics") or {}

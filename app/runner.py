@@ -69,6 +69,9 @@ def load_for_run(case_path: str | Path, overrides: list[str] | None, resume: boo
     if resume and "transient" not in case.analyses and case.tier != "lumped":
         raise CaseError(str(case_path), "--resume", f"only a transient analysis or a lumped run can be resumed; "
                                                     f"this case runs {', '.join(case.analyses)}")
+    if resume and case.tier == "lumped" and case.lumped.model in STEADY_LUMPED_MODELS:
+        raise CaseError(str(case_path), "--resume", f"lumped model {case.lumped.model!r} is a steady solve: nothing "
+                                                    "to resume (run it again)")
     return case
 
 
@@ -87,6 +90,9 @@ def check_case(case: Case, comm: MPI.Comm = MPI.COMM_WORLD, log=None) -> None:
     """Every input check that ``run`` makes, including those that need the mesh, without solving:
     the FE model (groups, electrodes, points) and the transient model (drive point, contacts,
     loads). Collective."""
+    if case.tier == "lumped" and case.lumped.model in STEADY_LUMPED_MODELS:
+        _steady_lumped(case.lumped.model).check(case)
+        return
     if case.tier == "lumped" or "transient" in case.analyses:
         engine_class(case.tier).check(case, comm, log or (lambda *a: None))
         if not _probes_frequency_domain(case):
@@ -118,6 +124,16 @@ def check_frequency_domain(case: Case, model) -> None:
 
 ENGINES = {"fe": "app.transient.engine:FEEngine", "modal": "app.reduced.engine:ModalEngine",
            "lumped": "app.lumped.engine:LumpedEngine"}
+
+
+#: lumped models solved for their steady state rather than stepped through the run loop (module: solve, check)
+STEADY_LUMPED_MODELS = {"friction_drive": "app.lumped.friction_drive"}
+
+
+def _steady_lumped(model: str):
+    from importlib import import_module
+
+    return import_module(STEADY_LUMPED_MODELS[model])
 
 
 def engine_class(tier: str):
@@ -168,6 +184,9 @@ def run_lumped(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dic
     from app.lumped.outputs import describe_series, plot_spec
 
     section = case.lumped
+    if section.model in STEADY_LUMPED_MODELS:
+        run_lumped_steady(case, out, comm, log, timer, summary)
+        return
     cls = engine_class(case.tier)
     with timer.phase("lumped"):
         results = summary["results"]["lumped"] = run_transient(lambda found: cls(case, comm, log, found), case, out,
@@ -187,6 +206,21 @@ def run_lumped(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dic
             comm.barrier()
             results.pop("time_series")
             results["outputs"].remove(series.name)
+    summary["outputs"] += results.pop("outputs", [])
+    print_table(result_rows(summary["results"], scene_of(case)), log)
+
+
+def run_lumped_steady(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict) -> None:
+    """A lumped model with a steady solve (``STEADY_LUMPED_MODELS``): its module's ``solve(section)`` on rank 0 (it
+    takes milliseconds), the results to every rank, then the scene's statistics and outputs from them (there is no
+    time series)."""
+    with timer.phase("lumped"):
+        results = _steady_lumped(case.lumped.model).solve(case.lumped) if comm.rank == 0 else None
+        results = comm.bcast(results, root=0) if comm.size > 1 else results
+        results["scene"] = case.scene
+        summary["results"]["lumped"] = results
+        add_scene_results(results, case, out, comm)
+        log(f"lumped ({case.lumped.model}): {results['points_solved']} steady points in {results['wall_time_s']:.3g} s")
     summary["outputs"] += results.pop("outputs", [])
     print_table(result_rows(summary["results"], scene_of(case)), log)
 
@@ -311,6 +345,8 @@ def add_scene_results(results: dict, case: Case, out: Path, comm) -> None:
         h5 = out / results["time_series"] if results.get("time_series") else None
         if scene is not None and h5 is not None and h5.is_file():
             added = scene.statistics(read_time_series(h5), case, results)
+        elif scene is not None and h5 is None:       # a steady solve: the scene reads the tier's results
+            added = scene.statistics({}, case, results)
     added = comm.bcast(added, root=0) if comm.size > 1 else added
     results.setdefault("statistics", {}).update(added)
     if comm.rank == 0:

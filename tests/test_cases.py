@@ -37,6 +37,7 @@ TINY = {
     "wwusm-motor.toml": ["geometry.parameters.mesh_size_m=0.006", "geometry.parameters.tip_mesh_size_m=0.002",
                          "reduction.interface_nodes=32", "transient.contacts[0].sample_points=128",
                          "transient.end_time_s=2.8e-4"],
+    "wwusm-motor-lumped.toml": ["lumped.curve_points=3"],
     "wwusm-stator-fourier.toml": ["geometry.parameters.mesh_size_m=0.004",
                                   "geometry.parameters.tip_mesh_size_m=0.002"],
     "wwusm-stator.toml": ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",

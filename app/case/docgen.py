@@ -113,6 +113,7 @@ def render() -> str:
     for name, (params_cls, _) in BUILDERS.items():
         sections.append((params_cls, f"[geometry.parameters] for builder = \"{name}\""))
     for cls_path, title in (("app.case.lumped:LumpedSection", "[lumped]"),
+                            ("app.case.lumped:FrictionDriveSection", "[lumped] with model = \"friction_drive\""),
                             ("app.case.transient:TransientSection", "[transient]")):
         module, _, attr = cls_path.partition(":")
         try:
@@ -125,7 +126,8 @@ def render() -> str:
         parts.append("\n".join(table(cls, title)))
         if title.startswith("[") and not title.startswith("[["):
             prefix = title[1:title.index("]")]
-            parts += tables_below(cls, prefix, seen)
+            context = title[title.index("]") + 1:]          # ' with model = "..."': the sub-tables say it too
+            parts += tables_below(cls, prefix, seen, f" (of{context[5:]})" if context.startswith(" with ") else "")
     library = ", ".join(f"`{n}`" for n in __import__("app.materials", fromlist=["LIBRARY"]).LIBRARY)
     parts.append(f"## Material library\n\n`library = ...` copies one of: {library}; keys given next to it "
                  "override the entry. See docs/physics.md for the data and its sources.\n")

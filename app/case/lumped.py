@@ -176,6 +176,10 @@ class LumpedOutputSection:
 
 @dataclass(frozen=True)
 class LumpedSection:
+    model: Literal["impact_chain"] = param(
+        "impact_chain", doc="the lumped model: 'impact_chain' (this table: transducer, free mass, stem, rock; the "
+                            "drill paper's eqs. 5-16) or 'friction_drive' (the travelling-wave motor, "
+                            "[lumped] with model = \"friction_drive\")")
     source: Literal["typed", "circuit"] = param(
         "typed", doc="transducer parameters typed or from an FE circuit"
     )
@@ -238,3 +242,143 @@ def load_circuit(path: str | Path, file: str | None = None, key: str | None = "c
             raise CaseError(file, key, f"circuit file {str(path)!r}: {name} must be > 0, got {value}")
         circuit[name] = float(value)
     return circuit
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# model = "friction_drive": a travelling-wave motor as the stator's wave mode, a rigid rotor and the rigid-Winkler
+# friction-drive law (docs/lumped-motor.md). Every default is the stator and rotor of the motor case's pinned
+# stator (bench/cases/wwusm-motor-pinned.toml): its F(1,4) pair referred to the contact circle, taken from the
+# modal tier's reduced stator by bench/motor_lumped_parameters.py.
+
+MODAL_SUMMARY_KEYS = ("modal_force_per_volt_N_per_V", "modal_stiffness_N_per_m", "damping_ratio")
+
+
+@dataclass(frozen=True)
+class WaveModeSection:
+    """The stator's wave mode (a degenerate pair of order n) referred to the normal amplitude W of the wave at
+    the contact circle (app/modal.py:contact_force reports the same quantities)."""
+
+    source: Literal["typed", "modal_summary"] = param(
+        "typed", doc="'typed': the keys below; 'modal_summary': resonance, stiffness, damping and force per volt "
+                     "from a stator modal run's summary.json (results.modal.contact_force), the tangential ratio "
+                     "typed")
+    modal_summary_file: str | None = param(
+        None, doc="summary.json of a modal run with [modal.contact_force] (a relative path: from the case file)")
+    resonance_frequency_Hz: float = param(35992.42, gt=0, unit="Hz", doc="the pair's centre, short circuit")
+    modal_stiffness_N_per_m: float = param(8.6962e7, gt=0, unit="N/m", doc="k_m referred to W (m_m = k_m / omega_m^2)")
+    damping_ratio: float = param(0.0019341, gt=0, lt=1, unit="", doc="zeta of the mode (c_m = 2 zeta k_m / omega_m)")
+    force_per_volt_N_per_V: float = param(
+        0.018114, gt=0, unit="N/V", doc="modal force F_m per volt of drive amplitude, referred to W: at resonance "
+                                        "W = F_m / (2 zeta k_m)")
+    tangential_ratio: float = param(
+        0.2994, gt=0, unit="", doc="U_t / W: the surface's circumferential amplitude over its normal amplitude at "
+                                   "the contact circle, in the mode")
+
+    def check(self, file, prefix):
+        if self.source == "modal_summary":
+            if not self.modal_summary_file:
+                raise CaseError(file, f"{prefix}.modal_summary_file", "required when source = 'modal_summary'")
+            path = Path(self.modal_summary_file)
+            if not path.is_absolute() and file and not path.exists():
+                path = Path(file).parent / path
+            load_modal_summary(path, file, f"{prefix}.modal_summary_file")
+            object.__setattr__(self, "modal_summary_file", str(path.resolve()))
+        elif self.modal_summary_file is not None:
+            raise CaseError(file, f"{prefix}.modal_summary_file", "is read only with source = 'modal_summary'")
+
+
+def load_modal_summary(path: str | Path, file: str | None = None, key: str | None = None) -> dict:
+    """The wave mode of a stator modal run's summary.json: {resonance_frequency_Hz, modal_stiffness_N_per_m,
+    damping_ratio, force_per_volt_N_per_V} from results.modal.contact_force (the pair's mean frequency). Missing
+    file or key, or a non-positive value -> CaseError naming ``key``."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise CaseError(file, key, f"cannot read {str(path)!r} ({exc.strerror})") from None
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise CaseError(file, key, f"{str(path)!r} is not a JSON summary") from None
+    cf = ((data.get("results") or {}).get("modal") or {}).get("contact_force") if isinstance(data, dict) else None
+    if not isinstance(cf, dict):
+        raise CaseError(file, key, f"{str(path)!r} has no results.modal.contact_force (run the stator's modal "
+                                   "analysis with [modal.contact_force])")
+    out = {}
+    for name in MODAL_SUMMARY_KEYS:
+        value = cf.get(name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+            raise CaseError(file, key, f"{str(path)!r}: contact_force.{name} missing or not a number > 0")
+        out[name] = float(value)
+    modes = cf.get("modes") or []
+    freqs = [m.get("frequency_Hz") for m in modes if isinstance(m, dict)]
+    if not freqs or not all(isinstance(f, (int, float)) and f > 0 for f in freqs):
+        raise CaseError(file, key, f"{str(path)!r}: contact_force.modes[*].frequency_Hz missing")
+    return {"resonance_frequency_Hz": float(sum(freqs) / len(freqs)),
+            "modal_stiffness_N_per_m": out["modal_stiffness_N_per_m"], "damping_ratio": out["damping_ratio"],
+            "force_per_volt_N_per_V": out["modal_force_per_volt_N_per_V"]}
+
+
+@dataclass(frozen=True)
+class MotorDriveSection:
+    voltage_amplitude_V: float = param(200.0, gt=0, unit="V", doc="amplitude of each phase (400 Vpp: 200 V)")
+    frequency_Hz: float = param(36065.0, gt=0, unit="Hz", doc="drive frequency")
+
+
+@dataclass(frozen=True)
+class MotorRotorSection:
+    preload_N: float = param(0.98, gt=0, unit="N", doc="axial preload P (N = P / sin(half_angle) on the cone)")
+    load_torque_N_m: float = param(0.0, ge=0, unit="N m", doc="the operating point's load torque (opposing the "
+                                                                 "drive)")
+    inertia_kg_m2: float = param(1.52e-6, gt=0, unit="kg m^2", doc="spin inertia: sets only the start-up time "
+                                                                   "constant I Omega_0 / T_stall (reported)")
+
+
+@dataclass(frozen=True)
+class MotorContactSection:
+    radius_m: float = param(0.012862384017536786, gt=0, unit="m", doc="contact circle r_c")
+    half_angle_deg: float = param(15.0, gt=0, lt=90, unit="deg", doc="cone half-angle of the contact face")
+    width_m: float = param(3.1051e-4, gt=0, unit="m", doc="contact width b across the band (band area / 2 pi r_c)")
+    stiffness_Pa_per_m: float = param(4e13, gt=0, unit="Pa/m", doc="Winkler (penalty) stiffness k_w per area")
+    mu_dynamic: float = param(0.57, ge=0, unit="", doc="Coulomb coefficient (MU)")
+    static_ratio: float = param(1.298, ge=1, unit="", doc="mu_s / mu_d (FACT); without decay mu_s acts at every "
+                                                          "slip speed, as in the FE and modal tiers")
+
+    def check(self, file, prefix):
+        if self.mu_dynamic <= 0:
+            raise CaseError(file, f"{prefix}.mu_dynamic", "must be > 0: a friction drive needs friction")
+
+
+@dataclass(frozen=True)
+class FrictionDriveSection:
+    """``[lumped]`` with ``model = "friction_drive"``: the travelling-wave motor's steady operating point and
+    speed-torque curve from the stator's wave mode and the rigid-Winkler friction-drive law (docs/lumped-motor.md)."""
+
+    model: Literal["friction_drive"] = param(doc="'friction_drive' (this table)")
+    branch: Literal["upper", "lower"] = param(
+        "upper", doc="which root of the wave's amplitude equation is the operating point: 'upper' (the largest "
+                     "wave) or 'lower' (the smallest, where there are two or more); every root is reported with "
+                     "its stability")
+    curve_points: int = param(9, ge=2, le=200, doc="points of the speed-torque curve, no load to stall")
+    stator: WaveModeSection = field(default_factory=WaveModeSection)
+    drive: MotorDriveSection = field(default_factory=MotorDriveSection)
+    rotor: MotorRotorSection = field(default_factory=MotorRotorSection)
+    contact: MotorContactSection = field(default_factory=MotorContactSection)
+
+    def check(self, file, prefix):
+        dotted = f"{prefix}." if prefix else ""
+        mu = self.contact.mu_dynamic * self.contact.static_ratio
+        bound = mu * self.rotor.preload_N / math.sin(math.radians(self.contact.half_angle_deg)) * self.contact.radius_m
+        if self.rotor.load_torque_N_m > bound:
+            raise CaseError(file, f"{dotted}rotor.load_torque_N_m",
+                            f"{self.rotor.load_torque_N_m:g} N m exceeds the stall torque mu N r_c = {bound:.4g} N m "
+                            "(the rotor would turn backwards)")
+
+
+LUMPED_MODELS = {"impact_chain": LumpedSection, "friction_drive": FrictionDriveSection}
+
+
+def lumped_section_type(raw, file: str | None):
+    """The dataclass of a ``[lumped]`` table, by its ``model`` key (default 'impact_chain')."""
+    model = raw.get("model", "impact_chain") if isinstance(raw, dict) else "impact_chain"
+    if model not in LUMPED_MODELS:
+        raise CaseError(file, "lumped.model", f"unknown lumped model {model!r} (models: {', '.join(LUMPED_MODELS)})")
+    return LUMPED_MODELS[model]

@@ -43,7 +43,8 @@ TIERS: dict[str, Tier] = {
         analysis_sections={"transient": ("transient",)},
         foreign=("lumped",)),
     "lumped": Tier(
-        "lumped", "lumped-parameter drill model (transducer modes + rigid bodies)",
+        "lumped", "lumped-parameter models: [lumped] model = 'impact_chain' (the drill: transducer mode + rigid "
+                  "bodies + Kelvin-Voigt contacts) or 'friction_drive' (the motor: wave mode + friction-drive law)",
         analyses=("lumped",), default_analyses=("lumped",),
         requires=("lumped",),
         foreign=("geometry", "materials", "regions", "electrodes", "supports", "points", "damping", "modal",

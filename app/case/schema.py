@@ -493,6 +493,10 @@ def load_case(path: str | Path, overrides: list[str] | None = None) -> Case:
     try:
         for name, cls in sections.items():
             if name in raw:
+                if name == "lumped":        # the lumped tier's models have tables of their own
+                    from app.case.lumped import lumped_section_type
+
+                    cls = lumped_section_type(raw[name], file)
                 extra[name] = from_dict(cls, raw.pop(name), file, name)
         case = from_dict(Case, raw, file)
     except CaseError as exc:

@@ -21,6 +21,13 @@ Model (Wallaschek, Smart Mater. Struct. 7 (1998) 369; Sattel, Hagedorn & Schmidt
   for V >= omega U_t; the no-load speed V_0 (F = 0) is close to omega U_t: V_0 / (omega U_t) =
   cos phi_0 with 2 (sin phi_0 - phi_0 cos theta_c) = B, about 1 - 0.06 theta_c^2 for small theta_c.
 
+What the contact does to the wave (the lumped motor, app/lumped/friction_drive.py, uses these): the crest
+pressure's first harmonic in xi, mean over a wavelength of p cos xi = (k_w W / (2 pi)) C(theta_c) with
+C = theta_c - sin theta_c cos theta_c (``crest_harmonic``), is in phase with the normal displacement: it
+stiffens the wave. The friction traction is even in xi and works on the surface's tangential velocity
+omega U_t cos xi: in quadrature with the displacement, it damps the wave by the mean power the surface gives
+the slider, F V + (friction loss) (``dissipated_power_per_length``), since sign(s) s = |s|.
+
 Units: SI throughout (m, s, N, Pa/m for k_w).
 """
 
@@ -60,6 +67,13 @@ def layer_winkler(penalty_Pa_per_m: float, thickness_m: float, young_Pa: float, 
 def contact_integral(theta_c: float) -> float:
     """B(theta_c) = sin theta_c - theta_c cos theta_c (N = 2 k_w W B / k)."""
     return math.sin(theta_c) - theta_c * math.cos(theta_c)
+
+
+def crest_harmonic(theta_c: float) -> float:
+    """C(theta_c) = theta_c - sin theta_c cos theta_c = integral over |xi| < theta_c of (cos xi - cos theta_c)
+    cos xi: the first harmonic of the crest pressure (over k_w W), the part of the contact force that loads the
+    wave's normal mode shape cos xi (about 2 theta_c^3 / 3 = 2 B for small theta_c)."""
+    return theta_c - math.sin(theta_c) * math.cos(theta_c)
 
 
 def contact_half_angle(normal_force_per_wavelength_N: float, winkler_Pa_per_m: float, amplitude_m: float,

@@ -230,6 +230,13 @@ class PercussionDrill(SceneReport):
                      "statistics.stem_rock_foundation.mean_force_N", "statistics.stem_rock_foundation.mean_power_W",
                      "statistics.stem_rock_foundation.impulse_per_impact_mean_N_s")
 
+    def check(self, case) -> None:
+        from app.errors import CaseError
+
+        if case.tier == "lumped" and case.lumped.model != "impact_chain":
+            raise CaseError(case.source, "lumped.model", "the drill's lumped model is 'impact_chain' (transducer, free "
+                                                         f"mass, stem, rock), not {case.lumped.model!r}")
+
     def statistics(self, data: dict, case, results: dict) -> dict:
         if case.tier == "lumped":
             section = case.lumped

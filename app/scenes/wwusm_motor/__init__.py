@@ -11,6 +11,11 @@ per-site tables), the contact point's path and the pressure round the ring (``mo
 
 The case needs ``output.energies`` (charges and energies) and, for the ring and the fractions,
 ``output.contact_sites``; one rotor with one rotation and a surface contact on it.
+
+In the lumped tier (``[lumped]`` with ``model = "friction_drive"``, app/lumped/friction_drive.py) there is no time
+series: the tier solves for the steady operating point and already reports it in these keys
+(``results.operating_point``); the scene takes it as ``statistics.motor`` and writes the speed-torque curves of
+both branches (``motor_speed_torque.csv``, ``motor_speed_torque.png``).
 """
 
 from __future__ import annotations
@@ -58,8 +63,14 @@ class WedgeWaveMotor(SceneReport):
 
     def check(self, case) -> None:
         file = case.source
-        if case.tier == "lumped" or case.transient is None:
-            raise CaseError(file, "tier", "the motor scene runs a transient in the fe or modal tier")
+        if case.tier == "lumped":
+            if case.lumped.model != "friction_drive":
+                raise CaseError(file, "lumped.model", "the motor's lumped model is 'friction_drive' (the stator's wave "
+                                                      f"mode and the friction-drive law), not {case.lumped.model!r}")
+            return
+        if case.transient is None:
+            raise CaseError(file, "transient", "the motor scene runs a transient in the fe or modal tier, or the "
+                                               "lumped tier's friction_drive model")
         rotor, contact = _rotor(case)
         if rotor is None or len(rotor.rotations) < 1:
             raise CaseError(file, "transient.bodies", "the motor needs a rotor: a body with a rotation")
@@ -71,6 +82,8 @@ class WedgeWaveMotor(SceneReport):
                                                      "energies: set it to true")
 
     def steady_floors(self, case) -> tuple[float, float]:
+        if case.transient is None:
+            return 0.0, 0.0
         """A change below 2 % of the speed a 1 um tangential wave gives the rotor (free), or of the Coulomb
         bound mu_s N r_c (held): noise near standstill, not a drift."""
         rotor, contact = _rotor(case)
@@ -85,6 +98,9 @@ class WedgeWaveMotor(SceneReport):
 
     # ------------------------------------------------------------------ the operating point
     def statistics(self, data: dict, case, results: dict) -> dict:
+        if case.tier == "lumped":       # a steady solve: the operating point in the motor's keys already
+            point = results.get("operating_point")
+            return {"motor": point} if point else {}
         cfg = case.transient
         rotor, contact = _rotor(case)
         t = data.get(S.TIME)
@@ -203,8 +219,13 @@ class WedgeWaveMotor(SceneReport):
                 ("efficiency", f"{100 * p['efficiency']:.3g}", "%"),
                 ("friction loss", f"{p['friction_loss_W'] * 1e3:.4g}", "mW"),
                 ("damping loss", f"{p['damping_loss_W'] * 1e3:.4g}", "mW"),
-                ("energy balance (relative)", f"{p['energy_balance_relative']:.2e}", "1"),
-                ("steady window", f"{p['window_periods']}", "periods")]
+                ("energy balance (relative)", f"{p['energy_balance_relative']:.2e}", "1")]
+        if "window_periods" in p:
+            rows.append(("steady window", f"{p['window_periods']}", "periods"))
+        if "wave_amplitude_m" in p:      # the lumped tier's steady solve
+            rows += [("wave normal amplitude at the contact", f"{p['wave_amplitude_m'] * 1e6:.4g}", "um"),
+                     ("contact half-angle theta_c", f"{p['contact_half_angle_rad']:.4g}", "rad"),
+                     ("rotor speed / crest surface speed", f"{p['speed_over_surface_speed']:.5g}", "1")]
         f = p.get("fractions")
         if f:
             rows += [("contact separated", f"{100 * f['separation']:.3g}", "%"),
@@ -214,8 +235,10 @@ class WedgeWaveMotor(SceneReport):
         return rows
 
     def outputs(self, results: dict, out_dir: Path, title: str, plots: bool = True) -> list[str]:
-        from app.scenes.wwusm_motor.outputs import write_outputs
+        from app.scenes.wwusm_motor.outputs import write_curves, write_outputs
 
+        if results.get("curves") is not None:
+            return write_curves(results, Path(out_dir), title, plots)
         return write_outputs(results, Path(out_dir), title, plots)
 
 

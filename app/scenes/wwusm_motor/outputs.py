@@ -115,3 +115,47 @@ def _plots(out_dir, ring, data, probe, t, start, title) -> list[str]:
         plt.close(fig)
         written.append(SPEED_PLOT)
     return written
+
+
+CURVE_CSV = "motor_speed_torque.csv"
+CURVE_PLOT = "motor_speed_torque.png"
+#: columns of the speed-torque CSV (keys of an operating point; ``branch`` first)
+CURVE_COLUMNS = ("load_torque_N_m", "speed_rpm", "speed_rad_per_s", "output_power_W", "electrical_power_W",
+                 "efficiency", "friction_loss_W", "damping_loss_W", "wave_amplitude_m", "contact_half_angle_rad",
+                 "speed_over_surface_speed")
+
+
+def write_curves(results: dict, out_dir: Path, title: str, plots: bool) -> list[str]:
+    """The speed-torque curves of a steady solve (``results["curves"]``: branch -> operating points, no load to
+    stall) as ``motor_speed_torque.csv`` (column ``branch``: 0 upper, 1 lower) and its plot."""
+    curves = results["curves"]
+    table = {"branch": [], **{k: [] for k in CURVE_COLUMNS}}
+    for index, points in enumerate(curves.values()):
+        for point in points:
+            table["branch"].append(float(index))
+            for key in CURVE_COLUMNS:
+                table[key].append(float(point[key]))
+    if not table["branch"]:
+        return []
+    write_csv(out_dir / CURVE_CSV, table)
+    written = [CURVE_CSV]
+    if plots:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(6, 4))
+        for (name, points), style in zip(curves.items(), ("o-", "s--")):
+            if points:
+                ax.plot([p["load_torque_N_m"] * 1e3 for p in points], [p["speed_rpm"] for p in points], style, ms=4,
+                        label=f"{name} branch")
+        ax.set_xlabel("load torque [mN m]")
+        ax.set_ylabel("rotor speed [rpm]")
+        ax.legend(loc="best", fontsize=8)
+        ax.set_title(f"{title}\nspeed-torque (lumped: wave mode + friction-drive law)", fontsize=9)
+        fig.tight_layout()
+        fig.savefig(out_dir / CURVE_PLOT, dpi=110)
+        plt.close(fig)
+        written.append(CURVE_PLOT)
+    return written
