@@ -10,7 +10,9 @@ OUT.png (rigid bodies as large points). An optional third argument picks the tim
 file: the frequency [Hz]) shown and rendered instead of the last ("last" for the last); an optional fourth
 names the point array to colour by instead of the potential (e.g. ``von_mises_Pa``). The report also holds
 the range of every point array of the FE grid at the time shown (``fe_ranges``: the largest magnitude of a
-vector or tensor array) and of the bodies' displacement (``body_displacement_range``).
+vector or tensor array) and of the bodies' displacement (``body_displacement_range``), and for every region
+indicator cell array (``region: <name>``) the cells and ``region`` tag range that Threshold (1 to 1) on the
+warped grid keeps (``region_thresholds``).
 
 A transient field file's companion ``<stem minus _fields>_bodies.xdmf`` (the rigid bodies with their shapes,
 app/transient/fields.py) is opened with it when it exists: its blocks per reader, and after the same Warp By
@@ -23,6 +25,7 @@ import sys
 from paraview import servermanager as sm
 from paraview.simple import (
     ColorBy,
+    Delete,
     GetActiveCamera,
     GetActiveViewOrCreate,
     GetColorTransferFunction,
@@ -30,6 +33,7 @@ from paraview.simple import (
     SaveScreenshot,
     Show,
     Text,
+    Threshold,
     WarpByVector,
     Xdmf3ReaderS,
     Xdmf3ReaderT,
@@ -155,6 +159,25 @@ def main(path, png, at=None, colour="potential"):
                         "potential_range": list(potential.GetRange()) if potential is not None else None,
                         "region_range": list(fe_warped.GetCellData().GetArray("region").GetRange()),
                         "bodies": bodies, "frequency_Hz": frequency, "time": show}
+    # the regions by name: Threshold on each ``region: <name>`` indicator (1 in the region) of the warped grid
+    report["region_thresholds"] = {}
+    for index in range(fe_warped.GetCellData().GetNumberOfArrays()):
+        indicator = fe_warped.GetCellData().GetArrayName(index)
+        if not indicator.startswith("region: "):
+            continue
+        threshold = Threshold(Input=warp)
+        threshold.Scalars = ["CELLS", indicator]
+        threshold.LowerThreshold = 1
+        threshold.UpperThreshold = 1
+        threshold.UpdatePipeline(show)
+        blocks = [blk for _, blk in leaves(sm.Fetch(threshold)) if blk.GetNumberOfCells()]
+        report["region_thresholds"][indicator] = {
+            "cells": sum(blk.GetNumberOfCells() for blk in blocks),
+            "region_range": [min(blk.GetCellData().GetArray("region").GetRange()[0] for blk in blocks),
+                             max(blk.GetCellData().GetArray("region").GetRange()[1] for blk in blocks)]
+            if blocks else None,
+            "warped_bounds": list(blocks[0].GetBounds()) if blocks else None}
+        Delete(threshold)
     body_warp = None
     if body_readers:
         body_readers["Xdmf3ReaderT"].UpdatePipeline(show)

@@ -1,6 +1,7 @@
 """Results open in ParaView: a transient result (serial and on 2 ranks, FE and modal tier) and a modal result, read by
 ParaView's own XDMF readers through pvpython on a private Xvfb display (tests/paraview_open.py):
-Warp By Vector on the displacement, the potential on the same (warped) grid, the region tags, the rigid bodies as
+Warp By Vector on the displacement, the potential on the same (warped) grid, the region tags and names (a cell
+array per region, Threshold on it), the rigid bodies as
 their own blocks, the mode frequencies as the time values. Without pvpython or Xvfb they skip, except
 when ``PIEZODYN_REQUIRE_PARAVIEW=1`` (set by .ci/test.sh, so CI and the Docker test image run them):
 then they fail, naming what is missing (.ci/install.sh installs both). ``PIEZODYN_UPDATE_FIGURES=1``
@@ -88,6 +89,28 @@ def _name(block: dict) -> str:
     return re.sub(r"\[\d+\]$", "", block["name"])      # readers append the time index
 
 
+def check_region_names(report: dict, names: dict[int, str], mesh_h5: Path) -> None:
+    """Region names readable in ParaView: every reader's FE grid carries, besides the ``region`` tag, one cell
+    array per named region (``region: <name>``, 1 in its cells: app/exports.py region_indicators), and Threshold
+    (1 to 1) on each, after Warp By Vector, keeps exactly that region's cells (its tag alone, as many cells as the
+    file's ``mesh/region`` has with that tag: h5py)."""
+    import h5py
+
+    with h5py.File(mesh_h5, "r") as f:
+        region = f["mesh/region"][:]
+    indicators = {f"region: {name}" for name in names.values()}
+    assert len(indicators) == len(names) >= 2
+    for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
+        for block in report[reader]["blocks"]:
+            assert set(block["cell_arrays"]) == {"region", *indicators}, reader
+    thresholds = report["region_thresholds"]
+    assert set(thresholds) == indicators
+    for tag, name in names.items():
+        kept = thresholds[f"region: {name}"]
+        assert kept["region_range"] == [tag, tag], name
+        assert kept["cells"] == np.count_nonzero(region == tag) > 0, name
+
+
 def check_transient(report: dict, out: Path) -> None:
     """The FE series (one grid per output: meshio reads it too) and its companion file of the rigid bodies
     with their shapes (app/transient/body_shapes.py), read by the three readers at the same times; after
@@ -109,11 +132,11 @@ def check_transient(report: dict, out: Path) -> None:
         assert len(report[reader]["times"]) == n_outputs
         # the default derived fields, units in their names (docs/fields.md)
         assert set(fe["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
-        assert fe["cell_arrays"] == ["region"]
         (bodies,) = report[reader]["body_blocks"]       # every body in one triangle grid, at the same times
         assert report[reader]["body_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
         assert bodies["point_arrays"] == ["displacement"] and set(bodies["cell_arrays"]) == {"body", "sector"}
         assert bodies["cells"] > 40                     # shapes, not points
+    check_region_names(report, {int(k): v for k, v in summary["regions"].items()}, out / "transient_fields" / "mesh.h5")
     warped = report["warped"]
     assert warped["time"] == pytest.approx(last, rel=1e-9)
     # Warp By Vector moved the FE grid: the tip (bottom) moved by scale * u, the potential rides along
@@ -202,8 +225,8 @@ def test_motor_result_in_paraview(x_display, tmp_path):
     and electric field ParaView reads at the last frame are the step file's (h5py) and below the run's peaks per
     region in summary.json (field_peaks: the maxima over the frames); the rotor's vertices move. Region names:
     summary.json ``regions`` and the file's ``region_names`` Information give the same table, and the tags
-    ParaView reads are exactly its keys (ParaView 5.11's XDMF readers do not expose Information elements:
-    docs/fields.md)."""
+    ParaView reads are exactly its keys; ParaView shows the names as one cell array per region
+    (check_region_names: ParaView 5.11's XDMF readers do not expose Information elements, docs/fields.md)."""
     import xml.etree.ElementTree as ET
 
     import h5py
@@ -220,7 +243,6 @@ def test_motor_result_in_paraview(x_display, tmp_path):
         (fe,) = report[reader]["blocks"]
         assert len(report[reader]["times"]) == n_outputs
         assert set(fe["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
-        assert fe["cell_arrays"] == ["region"]
         (rotor,) = report[reader]["body_blocks"]
         assert report[reader]["body_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
         assert rotor["cells"] > 40 and set(rotor["cell_arrays"]) == {"body", "sector"}
@@ -242,6 +264,7 @@ def test_motor_result_in_paraview(x_display, tmp_path):
     assert info is not None
     assert {int(k): v.strip() for k, v in (item.split(":") for item in info.get("Value").split(";"))} == names
     assert report["warped"]["region_range"] == [min(names), max(names)]
+    check_region_names(report, names, tmp_path / "transient_fields" / "mesh.h5")
 
 
 @needs_paraview
@@ -278,7 +301,8 @@ def test_modal_result_in_paraview(x_display, tmp_path):
         np.testing.assert_allclose(report[reader]["times"], frequencies, rtol=1e-12)   # time = frequency [Hz]
         (block,) = report[reader]["blocks"]             # one grid: no extra unwarped mesh
         assert set(block["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
-        assert block["cell_arrays"] == ["region"]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    check_region_names(report, {int(k): v for k, v in summary["regions"].items()}, tmp_path / "modes_short.h5")
     import xml.etree.ElementTree as ET
 
     grids = ET.parse(tmp_path / "modes_short.xdmf").iter("Grid")
