@@ -12,7 +12,9 @@ names the point array to colour by instead of the potential (e.g. ``von_mises_Pa
 the range of every point array of the FE grid at the time shown (``fe_ranges``: the largest magnitude of a
 vector or tensor array) and of the bodies' displacement (``body_displacement_range``), and for every region
 indicator cell array (``region: <name>``) the cells and ``region`` tag range that Threshold (1 to 1) on the
-warped grid keeps (``region_thresholds``).
+warped grid keeps (``region_thresholds``). The modal tier's contact sites' companion
+``<stem minus _fields>_contact_sites.xdmf`` (a point cloud with ``contact_pressure_Pa``), when it exists: per
+reader its blocks at the last time and the point arrays' ranges at every time (``site_ranges``).
 
 A transient field file's companion ``<stem minus _fields>_bodies.xdmf`` (the rigid bodies with their shapes,
 app/transient/fields.py) is opened with it when it exists: its blocks per reader, and after the same Warp By
@@ -86,13 +88,14 @@ def body_bounds(data):
     return out
 
 
-def companion(path):
-    """The rigid bodies' file written next to a transient field file, or None."""
+def companion(path, kind="bodies"):
+    """The rigid bodies' (``kind`` "bodies") or contact sites' ("contact_sites") file written next to a transient
+    field file, or None."""
     folder, name = os.path.split(path)
     if not name.endswith("_fields.xdmf"):
         return None
-    bodies = os.path.join(folder, name[:-len("_fields.xdmf")] + "_bodies.xdmf")
-    return bodies if os.path.isfile(bodies) else None
+    other = os.path.join(folder, name[:-len("_fields.xdmf")] + f"_{kind}.xdmf")
+    return other if os.path.isfile(other) else None
 
 
 def point_ranges(block):
@@ -124,6 +127,21 @@ def main(path, png, at=None, colour="potential"):
             reader.UpdatePipeline(times[-1])
             report[name]["body_times"] = times
             report[name]["body_blocks"] = describe(sm.Fetch(reader))
+    sites_path = companion(path, "contact_sites")
+    if sites_path is not None:          # the modal tier's contact sites: a point cloud with their pressure
+        for name, site_reader in (("Xdmf3ReaderT", Xdmf3ReaderT(FileName=[sites_path])),
+                                  ("Xdmf3ReaderS", Xdmf3ReaderS(FileName=[sites_path])),
+                                  ("XDMFReader", XDMFReader(FileNames=[sites_path]))):
+            site_reader.UpdatePipelineInformation()
+            times = list(site_reader.TimestepValues) if site_reader.TimestepValues else [0.0]
+            report[name]["site_times"] = times
+            report[name]["site_ranges"] = {}
+            for t in times:             # each frame's pressure range, as this reader reads it
+                site_reader.UpdatePipeline(t)
+                blocks = [blk for _, blk in leaves(sm.Fetch(site_reader)) if blk.GetNumberOfPoints()]
+                report[name]["site_blocks"] = describe(sm.Fetch(site_reader))
+                report[name]["site_ranges"][repr(t)] = point_ranges(blocks[0])
+            Delete(site_reader)
     reader = readers["Xdmf3ReaderT"]
     times = report["Xdmf3ReaderT"]["times"]
     show = times[-1] if at is None else min(times, key=lambda t: abs(t - at))

@@ -126,9 +126,8 @@ SET_INPUTS = [
     (FE, [*FE_TINY, "transient.steps.min_s=1e-6"], "transient.steps.min_s"),
     (FE, [*FE_TINY, "transient.scheme.rho_inf=2"], "transient.scheme.rho_inf"),
     (FE, [*FE_TINY, "transient.checkpoint_interval_steps=-1"], "transient.checkpoint_interval_steps"),
-    # the contact pressure field: the FE tier's transient, of a surface contact (docs/contact.md)
+    # the contact pressure: the FE and modal tiers' transient, of a surface contact (docs/contact.md)
     (FE, [*FE_TINY, "output.contact_pressure=true"], "output.contact_pressure"),        # no surface contact
-    (MOTOR, ["output.contact_pressure=true"], "output.contact_pressure"),               # the modal tier
     (TRANSDUCER, ["output.contact_pressure=true"], "output.contact_pressure"),          # no transient analysis
     # prescribed travelling wave
     (STRIP, [f'{_WAVE}.facets="nowhere"'], f"{_WAVE}.facets"),

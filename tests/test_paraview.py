@@ -214,7 +214,8 @@ def test_drill_at_an_impact_in_paraview(x_display, transient_result):
 # the tests' coarse stator (3 mm, 1 mm at the tip) in the FE tier for one drive period of 36.065 kHz from the
 # harmonic steady state, the rotor seated: 8 phase-locked frames of the travelling wave
 MOTOR_ONE_PERIOD = ["geometry.parameters.mesh_size_m=0.003", "geometry.parameters.tip_mesh_size_m=0.001",
-                    'tier="fe"', "transient.end_time_s=2.8e-5", "output.plots=false"]
+                    'tier="fe"', "transient.end_time_s=2.8e-5", "output.plots=false", "output.contact_pressure=true"]
+CONTACT_PRESSURE = "contact_pressure_Pa"        # the contact pressure's name in every tier (docs/fields.md)
 
 
 @needs_paraview
@@ -242,7 +243,7 @@ def test_motor_result_in_paraview(x_display, tmp_path):
     for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
         (fe,) = report[reader]["blocks"]
         assert len(report[reader]["times"]) == n_outputs
-        assert set(fe["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
+        assert set(fe["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES, CONTACT_PRESSURE}
         (rotor,) = report[reader]["body_blocks"]
         assert report[reader]["body_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
         assert rotor["cells"] > 40 and set(rotor["cell_arrays"]) == {"body", "sector"}
@@ -265,6 +266,48 @@ def test_motor_result_in_paraview(x_display, tmp_path):
     assert {int(k): v.strip() for k, v in (item.split(":") for item in info.get("Value").split(";"))} == names
     assert report["warped"]["region_range"] == [min(names), max(names)]
     check_region_names(report, names, tmp_path / "transient_fields" / "mesh.h5")
+
+
+# the motor in the modal tier on tests/test_cases.py's coarse stator (tests/test_contact_pressure_modal.py): bursts of
+# 20 frames every 2.95 periods over 0.1 ms, the second where the rotor bounces on the crests
+MOTOR_MODAL_PRESSURE = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
+                        "reduction.interface_nodes=16", "transient.contacts[0].sample_points=64", "output.plots=false",
+                        "transient.end_time_s=1e-4", "output.contact_pressure=true",
+                        "output.field_interval_periods=2.95", "output.field_phases=20"]
+
+
+@needs_paraview
+def test_modal_tier_contact_pressure_in_paraview(x_display, tmp_path):
+    """The modal tier's contact pressure as ParaView shows it: its contact sites' companion file
+    (transient_contact_sites.xdmf) opens in the three readers as one cloud of 64 points at the field series' times,
+    carrying the pressure under the FE tier's name (CONTACT_PRESSURE, which test_motor_result_in_paraview finds on
+    the FE tier's grid), the sites' displacement and area; at every frame the largest pressure each reader reads is
+    the run's peak pressure column at that step (transient.h5, the compiled loop's own maximum over the sites:
+    tests/test_contact_pressure_modal.py shows why they agree to round-off; 1e-9 relative), and the rotor presses
+    (some frame above 1e5 Pa)."""
+    import h5py
+
+    result = run_cli("run", CASES / "wwusm-motor.toml", "--out", tmp_path, "--quiet",
+                     *[a for o in MOTOR_MODAL_PRESSURE for a in ("--set", o)])
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = open_in_paraview(x_display, tmp_path / "transient_fields.xdmf", tmp_path / "paraview_motor_modal.png",
+                              colour="von_mises_Pa")
+    with h5py.File(tmp_path / "transient.h5", "r") as f:
+        time = f["time_s"][:]
+        peak = f["stator_rotor_peak_pressure_Pa"][:]
+    pressed = 0
+    for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
+        (sites,) = report[reader]["site_blocks"]
+        assert sites["points"] == 64
+        assert set(sites["point_arrays"]) == {"displacement", CONTACT_PRESSURE, "site_area_m2", "contact"}
+        assert report[reader]["site_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
+        for t, ranges in report[reader]["site_ranges"].items():
+            if float(t) == 0.0:
+                continue                                # no row at t = 0
+            row = int(np.argmin(np.abs(time - float(t))))
+            assert ranges[CONTACT_PRESSURE][1] == pytest.approx(peak[row], rel=1e-9, abs=1e-9 * peak.max()), t
+            pressed += ranges[CONTACT_PRESSURE][1] > 1e5
+    assert pressed >= 3
 
 
 @needs_paraview
