@@ -16,6 +16,9 @@ warped grid keeps (``region_thresholds``). The modal tier's contact sites' compa
 ``<stem minus _fields>_contact_sites.xdmf`` (a point cloud with ``contact_pressure_Pa``), when it exists: per
 reader its blocks at the last time and the point arrays' ranges at every time (``site_ranges``).
 
+A bodies file given alone (``..._bodies.xdmf``, the lumped tier's) is read by the three readers, warped and
+rendered coloured by ``body`` (:func:`main_bodies`).
+
 A transient field file's companion ``<stem minus _fields>_bodies.xdmf`` (the rigid bodies with their shapes,
 app/transient/fields.py) is opened with it when it exists: its blocks per reader, and after the same Warp By
 Vector the warped bounds of each body's vertices (by the cell value ``body``), rendered with the FE grid."""
@@ -106,7 +109,57 @@ def point_ranges(block):
             for i in range(data.GetNumberOfArrays())}
 
 
+def main_bodies(path, png, at=None):
+    """A bodies file alone (the lumped tier's ``transient_bodies.xdmf``): per reader its times and blocks, the
+    bodies' bounds at the time shown before and after Warp By Vector (scaled so the largest displacement shows as
+    5 % of the scene), rendered coloured by ``body``."""
+    report = {}
+    readers = {"Xdmf3ReaderT": Xdmf3ReaderT(FileName=[path]), "Xdmf3ReaderS": Xdmf3ReaderS(FileName=[path]),
+               "XDMFReader": XDMFReader(FileNames=[path])}
+    for name, reader in readers.items():
+        reader.UpdatePipelineInformation()
+        times = list(reader.TimestepValues) if reader.TimestepValues else [0.0]
+        reader.UpdatePipeline(times[-1])
+        report[name] = {"times": times, "blocks": describe(sm.Fetch(reader))}
+    reader = readers["Xdmf3ReaderT"]
+    times = report["Xdmf3ReaderT"]["times"]
+    show = times[-1] if at is None else min(times, key=lambda t: abs(t - at))
+    reader.UpdatePipeline(show)
+    data = sm.Fetch(reader)
+    block = [blk for _, blk in leaves(data) if blk.GetNumberOfCells()][0]
+    u_max = max(block.GetPointData().GetArray("displacement").GetRange(-1)[1], 1e-300)
+    b = block.GetBounds()
+    size = max(b[1] - b[0], b[3] - b[2], b[5] - b[4])
+    scale = 0.05 * size / u_max
+    warp = WarpByVector(Input=reader)
+    warp.Vectors = ["POINTS", "displacement"]
+    warp.ScaleFactor = scale
+    warp.UpdatePipeline(show)
+    report["body_bounds_before"] = body_bounds(data)
+    report["warped"] = {"time": show, "scale": scale, "u_max": u_max, "body_bounds": body_bounds(sm.Fetch(warp))}
+    view = GetActiveViewOrCreate("RenderView")
+    view.ViewSize = [500, 900]
+    view.ViewTime = show
+    view.OrientationAxesVisibility = 0
+    display = Show(warp, view)
+    ColorBy(display, ("CELLS", "body"))
+    display.RescaleTransferFunctionToDataRange(True, False)
+    Show(Text(Text=f"{path.rsplit('/', 1)[-1]}: t = {show * 1e3:.4g} ms, displacement x {scale:.3g}"), view)
+    view.ResetCamera()
+    camera = GetActiveCamera()
+    centre = [(b[0] + b[1]) / 2, (b[2] + b[3]) / 2, (b[4] + b[5]) / 2]
+    camera.SetFocalPoint(*centre)
+    camera.SetPosition(centre[0] + 1.5 * size, centre[1] - 1.5 * size, centre[2] + 0.4 * size)
+    camera.SetViewUp(0.0, 0.0, 1.0)
+    view.ResetCamera()
+    Render(view)
+    SaveScreenshot(png, view, ImageResolution=[500, 900])
+    print("PIEZODYN-REPORT " + json.dumps(report))
+
+
 def main(path, png, at=None, colour="potential"):
+    if path.endswith("_bodies.xdmf"):
+        return main_bodies(path, png, at)
     report = {}
     readers = {"Xdmf3ReaderT": Xdmf3ReaderT(FileName=[path]), "Xdmf3ReaderS": Xdmf3ReaderS(FileName=[path]),
                "XDMFReader": XDMFReader(FileNames=[path])}

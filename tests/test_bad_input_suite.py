@@ -129,6 +129,10 @@ SET_INPUTS = [
     # the contact pressure: the FE and modal tiers' transient, of a surface contact (docs/contact.md)
     (FE, [*FE_TINY, "output.contact_pressure=true"], "output.contact_pressure"),        # no surface contact
     (TRANSDUCER, ["output.contact_pressure=true"], "output.contact_pressure"),          # no transient analysis
+    # the lumped bodies file: frames no closer than the samples, within the run
+    (LUMPED, ["lumped.output.bodies_interval_s=1e-6"], "lumped.output.bodies_interval_s"),
+    (LUMPED, ["lumped.output.bodies_interval_s=1.0"], "lumped.output.bodies_interval_s"),
+    (LUMPED, ["lumped.output.bodies_interval_s=-1e-3"], "lumped.output.bodies_interval_s"),
     # prescribed travelling wave
     (STRIP, [f'{_WAVE}.facets="nowhere"'], f"{_WAVE}.facets"),
     (STRIP, [f"{_WAVE}.direction=[0.0, 0.0]"], f"{_WAVE}.direction"),

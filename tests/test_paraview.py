@@ -311,6 +311,40 @@ def test_modal_tier_contact_pressure_in_paraview(x_display, tmp_path):
 
 
 @needs_paraview
+def test_lumped_bodies_in_paraview(x_display, tmp_path):
+    """The lumped tier's bodies file (``lumped.output.bodies_interval_s``, app/lumped/bodies.py) in ParaView's
+    three readers: one triangle grid of the four bodies with ``displacement`` and the ``body``/``sector`` cell
+    values at the 21 frame times; after Warp By Vector at the last frame each body's triangles sit where the series
+    puts it (transient.h5: the tip, the ball, the stem and the rock surface; scale x the column's value, 1e-9 m:
+    the file's doubles through ParaView's warp)."""
+    import h5py
+
+    result = run_cli("run", CASES / "usdc-lumped.toml", "--out", tmp_path, "--quiet",
+                     *[a for o in ["lumped.duration_s=0.002", "lumped.output.bodies_interval_s=1e-4",
+                                   "lumped.output.plots=false"] for a in ("--set", o)])
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = open_in_paraview(x_display, tmp_path / "transient_bodies.xdmf", tmp_path / "paraview_lumped_bodies.png")
+    for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
+        assert report[reader]["times"] == pytest.approx([k * 1e-4 for k in range(21)], rel=1e-12, abs=0)
+        (bodies,) = report[reader]["blocks"]
+        assert bodies["point_arrays"] == ["displacement"] and set(bodies["cell_arrays"]) == {"body", "sector"}
+        assert bodies["cells"] > 40
+    warped = report["warped"]
+    assert warped["time"] == pytest.approx(2e-3, rel=1e-12)
+    with h5py.File(tmp_path / "transient.h5", "r") as f:
+        row = int(np.argmin(np.abs(f["time_s"][:] - warped["time"])))
+        values = [float(np.ravel(f[c][row])[0]) for c in ("tip_displacement_m", "ball_position_m", "stem_position_m",
+                                                          "rock_surface_displacement_m")]
+    before, after = report["body_bounds_before"], warped["body_bounds"]
+    assert sorted(before) == ["0", "1", "2", "3"]
+    for index, value in enumerate(values):
+        moved = warped["scale"] * value
+        assert after[str(index)][:4] == pytest.approx(before[str(index)][:4], abs=1e-12)      # straight up
+        assert after[str(index)][4:] == pytest.approx([b + moved for b in before[str(index)][4:]], abs=1e-9)
+    assert abs(warped["scale"] * values[0]) > 1e-3      # the tip visibly moved at this scale
+
+
+@needs_paraview
 def test_two_rank_transient_result_in_paraview(x_display, tmp_path):
     result = run_cli("run", CASES / "usdc-fe.toml", "--out", tmp_path, "--quiet",
                      *[a for o in FE_TINY for a in ("--set", o)], mpi=2)

@@ -182,12 +182,7 @@ class FieldSeriesExport:
                     stale.unlink()
             write_mesh_h5(self.dir / "mesh.h5", self.vertex)
             if self.bodies is not None:
-                b = self.bodies
-                write_h5_atomic(self.dir / "bodies.h5",
-                                {"points": b.points, "triangles": b.triangles, "body": b.body, "sector": b.sector},
-                                {"points": {"units": "m"},
-                                 "body": {"meaning": "index of the cell's rigid body in names", "names": b.names},
-                                 "sector": {"meaning": "alternating stripes round a body of revolution (its spin)"}})
+                write_bodies_h5(self.dir / "bodies.h5", self.bodies)
             if self.sites is not None:
                 c = self.sites
                 n = len(c.points)
@@ -294,22 +289,7 @@ class FieldSeriesExport:
 
     def _body_grid(self, t: float, step_file: str) -> ET.Element:
         """One output of the bodies: their triangles at the start and the displacement of ``step_file``."""
-        b, where = self.bodies, f"{self.dir.name}/bodies.h5"
-        grid = ET.Element("Grid", Name=BODY_GRID, GridType="Uniform")
-        ET.SubElement(grid, "Time", Value=repr(float(t)))
-        topo = ET.SubElement(grid, "Topology", TopologyType="Triangle", NumberOfElements=str(len(b.triangles)),
-                             NodesPerElement="3")
-        data_item(topo, f"{where}:/triangles", b.triangles.shape, "Int")
-        geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
-        data_item(geo, f"{where}:/points", b.points.shape)
-        for attr_name, kind, center, source, shape, number in (
-                ("displacement", "Vector", "Node", f"{self.dir.name}/{step_file}:/bodies/displacement",
-                 b.points.shape, "Float"),
-                ("body", "Scalar", "Cell", f"{where}:/body", b.body.shape, "Int"),
-                ("sector", "Scalar", "Cell", f"{where}:/sector", b.sector.shape, "Int")):
-            attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
-            data_item(attr, source, shape, number, 8 if number == "Float" else 4)
-        return grid
+        return body_grid(self.bodies, t, self.dir.name, step_file)
 
     def _site_grid(self, t: float, step_file: str) -> ET.Element:
         """One output of the contact sites: the points at their reference position, one vertex cell each, the
@@ -341,6 +321,87 @@ class FieldSeriesExport:
         peaks = self.comm.bcast(peaks, root=0)
         merge_peaks(self.peaks, peaks)
         return fields or {}, peaks
+
+    def close(self) -> None:
+        """Nothing stays open between outputs."""
+
+
+def write_bodies_h5(path: Path, bodies) -> None:
+    """The bodies' triangles at their start (``points`` [m], ``triangles``, cell values ``body`` and ``sector``)."""
+    b = bodies
+    write_h5_atomic(path, {"points": b.points, "triangles": b.triangles, "body": b.body, "sector": b.sector},
+                    {"points": {"units": "m"},
+                     "body": {"meaning": "index of the cell's rigid body in names", "names": b.names},
+                     "sector": {"meaning": "alternating stripes round a body of revolution (its spin)"}})
+
+
+def body_grid(bodies, t: float, folder: str, step_file: str) -> ET.Element:
+    """One output of the bodies: their triangles at the start (``<folder>/bodies.h5``) and the displacement of
+    ``<folder>/<step_file>`` (``bodies/displacement``)."""
+    b, where = bodies, f"{folder}/bodies.h5"
+    grid = ET.Element("Grid", Name=BODY_GRID, GridType="Uniform")
+    ET.SubElement(grid, "Time", Value=repr(float(t)))
+    topo = ET.SubElement(grid, "Topology", TopologyType="Triangle", NumberOfElements=str(len(b.triangles)),
+                         NodesPerElement="3")
+    data_item(topo, f"{where}:/triangles", b.triangles.shape, "Int")
+    geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
+    data_item(geo, f"{where}:/points", b.points.shape)
+    for attr_name, kind, center, source, shape, number in (
+            ("displacement", "Vector", "Node", f"{folder}/{step_file}:/bodies/displacement", b.points.shape, "Float"),
+            ("body", "Scalar", "Cell", f"{where}:/body", b.body.shape, "Int"),
+            ("sector", "Scalar", "Cell", f"{where}:/sector", b.sector.shape, "Int")):
+        attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
+        data_item(attr, source, shape, number, 8 if number == "Float" else 4)
+    return grid
+
+
+class BodySeriesExport:
+    """The rigid bodies with their shapes alone, for a tier without an FE mesh (the lumped tier): the file
+    ``path`` (``transient_bodies.xdmf``, the same grid as :class:`FieldSeriesExport`'s companion) with its data in
+    ``<path stem>/``: ``bodies.h5`` once and one ``step_<k>.h5`` per frame (``bodies/displacement`` [m]). A frame
+    at t = 0 and at the first output at or after each multiple of ``interval_s``; ``write(t, z)`` as
+    FieldSeriesExport's (``z``: the packed body coordinates ``bodies`` displaces by). ``bodies``: a function
+    returning the :class:`app.transient.body_shapes.BodyMeshes` (called on rank 0). Kill-safe and resumable as
+    FieldSeriesExport."""
+
+    def __init__(self, path: Path, bodies, interval_s: float, comm, resume_from_s: float | None = None):
+        self.path = Path(path)
+        self.dir = self.path.with_suffix("")
+        self.comm = comm
+        self.schedule = FrameSchedule(interval_s, 1, interval_periods=1)
+        self.interval_s = self.schedule.spacing_s
+        self.next_s = 0.0 if resume_from_s is None else self.schedule.next_after(resume_from_s)
+        self.steps: list[bytes] = []
+        self.bodies = None
+        if comm.rank == 0:
+            self.bodies = bodies()
+            self.dir.mkdir(parents=True, exist_ok=True)
+            if resume_from_s is not None:
+                self.steps = [step_bytes(step) for step in _steps_until(self.path, resume_from_s)]
+            for stale in self.dir.glob("step_*.h5*"):       # steps of a killed run past the checkpoint
+                if _step_index(stale) >= len(self.steps):
+                    stale.unlink()
+            write_bodies_h5(self.dir / "bodies.h5", self.bodies)
+            replace_file(self.path, xdmf_document(self.steps, self.path.stem))
+        self.written = comm.bcast(len(self.steps), root=0)
+
+    def files(self) -> list[str]:
+        return [self.path.name, f"{self.dir.name}/bodies.h5"] + [f"{self.dir.name}/step_{k:06d}.h5"
+                                                                 for k in range(self.written)]
+
+    def write(self, t: float, body_positions=None) -> None:
+        if t < self.next_s - 1e-9 * self.interval_s:
+            return
+        if self.comm.rank == 0:
+            name = f"step_{len(self.steps):06d}.h5"
+            write_h5_atomic(self.dir / name, {"bodies/displacement": self.bodies.displacement(body_positions)},
+                            {"bodies/displacement": {"units": "m", "time_s": t}})
+            kill_point("fields_data")
+            self.steps.append(step_bytes(body_grid(self.bodies, t, self.dir.name, name)))
+            replace_file(self.path, xdmf_document(self.steps, self.path.stem))
+        self.written += 1
+        self.next_s = self.schedule.next_after(t)
+        kill_point("fields_written")
 
     def close(self) -> None:
         """Nothing stays open between outputs."""
