@@ -2,8 +2,9 @@
 
 Field files for ParaView are XDMF 3 written here (not by dolfinx's XDMFFile): the XML is ours and
 the heavy data goes to HDF5 through h5py on rank 0. Every grid carries the displacement [m] (3
-components, so Warp By Vector works in 2D too), the electric potential [V] at the same vertices
-and the region tag of each cell, so one can warp by displacement and colour by potential on one
+components, so Warp By Vector works in 2D too), the electric potential [V] at the same vertices,
+the region tag of each cell and one indicator cell array per named region (``region: <name>``,
+:func:`region_indicators`), so one can warp by displacement and colour by potential on one
 grid. Values are the fields interpolated to P1 (one per mesh vertex), gathered from the ranks in
 the mesh's input node and cell order: a file has the same layout on any number of ranks.
 
@@ -214,12 +215,45 @@ def mesh_grid(name: str, vertex: VertexFields, mesh_h5: str, fields_at: str, ext
             ("region", "Scalar", "Cell", f"{mesh_h5}:/mesh/region", (vertex.n_cells,), "Int")):
         attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
         data_item(attr, source, shape, number, 8 if number == "Float" else 4)
+    for tag, name in sorted(getattr(vertex, "region_names", {}).items()):
+        attr = ET.SubElement(grid, "Attribute", Name=region_indicator_name(name), AttributeType="Scalar", Center="Cell")
+        data_item(attr, f"{mesh_h5}:/{region_indicator_path(tag)}", (vertex.n_cells,), "Int", 1)
     for attr_name, components in extra:
         kind = {1: "Scalar", 3: "Vector"}.get(components, "Matrix")
         attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center="Node")
         shape = (vertex.n_nodes,) if components == 1 else (vertex.n_nodes, components)
         data_item(attr, f"{fields_at}/{attr_name}", shape)
     return grid
+
+
+REGION_INDICATOR_PREFIX = "region: "
+
+
+def region_indicator_name(name: str) -> str:
+    """The cell array that marks region ``name`` (1 in its cells, 0 elsewhere), e.g. ``region: horn``."""
+    return REGION_INDICATOR_PREFIX + name
+
+
+def region_indicator_path(tag: int) -> str:
+    return f"mesh/in_region_{int(tag)}"
+
+
+def region_indicators(vertex) -> dict[str, np.ndarray]:
+    """The region indicator cell arrays of a mesh (rank 0): {HDF5 path: int8 1 in the region's cells, 0 elsewhere},
+    one per named region. Why: ParaView's XDMF readers show neither the Domain's Information nor field data
+    meshio can read (a Grid-centred Attribute breaks meshio's reader), and XDMF Sets come out unwarped; a cell
+    array per region carries the name into ParaView's array list (Threshold on ``region: horn`` between 1 and 1
+    extracts the horn) and into meshio's cell_data. Written once in the mesh's HDF5 file (1 byte per cell and
+    region), named by every frame's grid."""
+    region = vertex.mesh_arrays["region"]
+    return {region_indicator_path(tag): (region == tag).astype(np.int8)
+            for tag in sorted(getattr(vertex, "region_names", {}))}
+
+
+def mesh_datasets(vertex) -> dict[str, np.ndarray]:
+    """The datasets of a field file's mesh (rank 0): ``mesh/geometry``, ``mesh/topology``, ``mesh/region`` and the
+    region indicators (:func:`region_indicators`)."""
+    return {**{f"mesh/{k}": v for k, v in vertex.mesh_arrays.items()}, **region_indicators(vertex)}
 
 
 def region_information(region_names: dict[int, str]) -> ET.Element:
@@ -257,13 +291,16 @@ def step_bytes(step: ET.Element) -> bytes:
 
 
 def write_mesh_h5(path: Path, vertex: VertexFields) -> None:
-    arrays = vertex.mesh_arrays
-    write_h5_atomic(path, {f"mesh/{k}": v for k, v in arrays.items()}, mesh_h5_attributes(vertex))
+    write_h5_atomic(path, mesh_datasets(vertex), mesh_h5_attributes(vertex))
 
 
 def mesh_h5_attributes(vertex: VertexFields) -> dict:
-    names = region_names_text(getattr(vertex, "region_names", {}))
-    return {"mesh/geometry": {"units": "m"}, "mesh/region": {"meaning": "cell group tag of the mesh", "names": names}}
+    region_names = getattr(vertex, "region_names", {})
+    names = region_names_text(region_names)
+    return {"mesh/geometry": {"units": "m"}, "mesh/region": {"meaning": "cell group tag of the mesh", "names": names},
+            **{region_indicator_path(tag): {"meaning": f"1 in the cells of region {tag} ({name}), 0 elsewhere",
+                                            "name": region_indicator_name(name)}
+               for tag, name in region_names.items()}}
 
 
 class _VertexSeriesExport:
@@ -307,7 +344,7 @@ class _VertexSeriesExport:
         names = [self.path.name, self.h5_path.name]
         if self.vertex.comm.rank != 0:
             return names
-        datasets = {f"mesh/{k}": v for k, v in self.vertex.mesh_arrays.items()}
+        datasets = mesh_datasets(self.vertex)
         steps, attrs = [], mesh_h5_attributes(self.vertex)
         for k, (value, u, phi, extra) in enumerate(self.frames):
             group = self._group(k)

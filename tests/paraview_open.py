@@ -10,7 +10,14 @@ OUT.png (rigid bodies as large points). An optional third argument picks the tim
 file: the frequency [Hz]) shown and rendered instead of the last ("last" for the last); an optional fourth
 names the point array to colour by instead of the potential (e.g. ``von_mises_Pa``). The report also holds
 the range of every point array of the FE grid at the time shown (``fe_ranges``: the largest magnitude of a
-vector or tensor array) and of the bodies' displacement (``body_displacement_range``).
+vector or tensor array) and of the bodies' displacement (``body_displacement_range``), and for every region
+indicator cell array (``region: <name>``) the cells and ``region`` tag range that Threshold (1 to 1) on the
+warped grid keeps (``region_thresholds``). The modal tier's contact sites' companion
+``<stem minus _fields>_contact_sites.xdmf`` (a point cloud with ``contact_pressure_Pa``), when it exists: per
+reader its blocks at the last time and the point arrays' ranges at every time (``site_ranges``).
+
+A bodies file given alone (``..._bodies.xdmf``, the lumped tier's) is read by the three readers, warped and
+rendered coloured by ``body`` (:func:`main_bodies`).
 
 A transient field file's companion ``<stem minus _fields>_bodies.xdmf`` (the rigid bodies with their shapes,
 app/transient/fields.py) is opened with it when it exists: its blocks per reader, and after the same Warp By
@@ -23,6 +30,7 @@ import sys
 from paraview import servermanager as sm
 from paraview.simple import (
     ColorBy,
+    Delete,
     GetActiveCamera,
     GetActiveViewOrCreate,
     GetColorTransferFunction,
@@ -30,6 +38,7 @@ from paraview.simple import (
     SaveScreenshot,
     Show,
     Text,
+    Threshold,
     WarpByVector,
     Xdmf3ReaderS,
     Xdmf3ReaderT,
@@ -82,13 +91,14 @@ def body_bounds(data):
     return out
 
 
-def companion(path):
-    """The rigid bodies' file written next to a transient field file, or None."""
+def companion(path, kind="bodies"):
+    """The rigid bodies' (``kind`` "bodies") or contact sites' ("contact_sites") file written next to a transient
+    field file, or None."""
     folder, name = os.path.split(path)
     if not name.endswith("_fields.xdmf"):
         return None
-    bodies = os.path.join(folder, name[:-len("_fields.xdmf")] + "_bodies.xdmf")
-    return bodies if os.path.isfile(bodies) else None
+    other = os.path.join(folder, name[:-len("_fields.xdmf")] + f"_{kind}.xdmf")
+    return other if os.path.isfile(other) else None
 
 
 def point_ranges(block):
@@ -99,7 +109,57 @@ def point_ranges(block):
             for i in range(data.GetNumberOfArrays())}
 
 
+def main_bodies(path, png, at=None):
+    """A bodies file alone (the lumped tier's ``transient_bodies.xdmf``): per reader its times and blocks, the
+    bodies' bounds at the time shown before and after Warp By Vector (scaled so the largest displacement shows as
+    5 % of the scene), rendered coloured by ``body``."""
+    report = {}
+    readers = {"Xdmf3ReaderT": Xdmf3ReaderT(FileName=[path]), "Xdmf3ReaderS": Xdmf3ReaderS(FileName=[path]),
+               "XDMFReader": XDMFReader(FileNames=[path])}
+    for name, reader in readers.items():
+        reader.UpdatePipelineInformation()
+        times = list(reader.TimestepValues) if reader.TimestepValues else [0.0]
+        reader.UpdatePipeline(times[-1])
+        report[name] = {"times": times, "blocks": describe(sm.Fetch(reader))}
+    reader = readers["Xdmf3ReaderT"]
+    times = report["Xdmf3ReaderT"]["times"]
+    show = times[-1] if at is None else min(times, key=lambda t: abs(t - at))
+    reader.UpdatePipeline(show)
+    data = sm.Fetch(reader)
+    block = [blk for _, blk in leaves(data) if blk.GetNumberOfCells()][0]
+    u_max = max(block.GetPointData().GetArray("displacement").GetRange(-1)[1], 1e-300)
+    b = block.GetBounds()
+    size = max(b[1] - b[0], b[3] - b[2], b[5] - b[4])
+    scale = 0.05 * size / u_max
+    warp = WarpByVector(Input=reader)
+    warp.Vectors = ["POINTS", "displacement"]
+    warp.ScaleFactor = scale
+    warp.UpdatePipeline(show)
+    report["body_bounds_before"] = body_bounds(data)
+    report["warped"] = {"time": show, "scale": scale, "u_max": u_max, "body_bounds": body_bounds(sm.Fetch(warp))}
+    view = GetActiveViewOrCreate("RenderView")
+    view.ViewSize = [500, 900]
+    view.ViewTime = show
+    view.OrientationAxesVisibility = 0
+    display = Show(warp, view)
+    ColorBy(display, ("CELLS", "body"))
+    display.RescaleTransferFunctionToDataRange(True, False)
+    Show(Text(Text=f"{path.rsplit('/', 1)[-1]}: t = {show * 1e3:.4g} ms, displacement x {scale:.3g}"), view)
+    view.ResetCamera()
+    camera = GetActiveCamera()
+    centre = [(b[0] + b[1]) / 2, (b[2] + b[3]) / 2, (b[4] + b[5]) / 2]
+    camera.SetFocalPoint(*centre)
+    camera.SetPosition(centre[0] + 1.5 * size, centre[1] - 1.5 * size, centre[2] + 0.4 * size)
+    camera.SetViewUp(0.0, 0.0, 1.0)
+    view.ResetCamera()
+    Render(view)
+    SaveScreenshot(png, view, ImageResolution=[500, 900])
+    print("PIEZODYN-REPORT " + json.dumps(report))
+
+
 def main(path, png, at=None, colour="potential"):
+    if path.endswith("_bodies.xdmf"):
+        return main_bodies(path, png, at)
     report = {}
     readers = {"Xdmf3ReaderT": Xdmf3ReaderT(FileName=[path]), "Xdmf3ReaderS": Xdmf3ReaderS(FileName=[path]),
                "XDMFReader": XDMFReader(FileNames=[path])}
@@ -120,6 +180,21 @@ def main(path, png, at=None, colour="potential"):
             reader.UpdatePipeline(times[-1])
             report[name]["body_times"] = times
             report[name]["body_blocks"] = describe(sm.Fetch(reader))
+    sites_path = companion(path, "contact_sites")
+    if sites_path is not None:          # the modal tier's contact sites: a point cloud with their pressure
+        for name, site_reader in (("Xdmf3ReaderT", Xdmf3ReaderT(FileName=[sites_path])),
+                                  ("Xdmf3ReaderS", Xdmf3ReaderS(FileName=[sites_path])),
+                                  ("XDMFReader", XDMFReader(FileNames=[sites_path]))):
+            site_reader.UpdatePipelineInformation()
+            times = list(site_reader.TimestepValues) if site_reader.TimestepValues else [0.0]
+            report[name]["site_times"] = times
+            report[name]["site_ranges"] = {}
+            for t in times:             # each frame's pressure range, as this reader reads it
+                site_reader.UpdatePipeline(t)
+                blocks = [blk for _, blk in leaves(sm.Fetch(site_reader)) if blk.GetNumberOfPoints()]
+                report[name]["site_blocks"] = describe(sm.Fetch(site_reader))
+                report[name]["site_ranges"][repr(t)] = point_ranges(blocks[0])
+            Delete(site_reader)
     reader = readers["Xdmf3ReaderT"]
     times = report["Xdmf3ReaderT"]["times"]
     show = times[-1] if at is None else min(times, key=lambda t: abs(t - at))
@@ -155,6 +230,25 @@ def main(path, png, at=None, colour="potential"):
                         "potential_range": list(potential.GetRange()) if potential is not None else None,
                         "region_range": list(fe_warped.GetCellData().GetArray("region").GetRange()),
                         "bodies": bodies, "frequency_Hz": frequency, "time": show}
+    # the regions by name: Threshold on each ``region: <name>`` indicator (1 in the region) of the warped grid
+    report["region_thresholds"] = {}
+    for index in range(fe_warped.GetCellData().GetNumberOfArrays()):
+        indicator = fe_warped.GetCellData().GetArrayName(index)
+        if not indicator.startswith("region: "):
+            continue
+        threshold = Threshold(Input=warp)
+        threshold.Scalars = ["CELLS", indicator]
+        threshold.LowerThreshold = 1
+        threshold.UpperThreshold = 1
+        threshold.UpdatePipeline(show)
+        blocks = [blk for _, blk in leaves(sm.Fetch(threshold)) if blk.GetNumberOfCells()]
+        report["region_thresholds"][indicator] = {
+            "cells": sum(blk.GetNumberOfCells() for blk in blocks),
+            "region_range": [min(blk.GetCellData().GetArray("region").GetRange()[0] for blk in blocks),
+                             max(blk.GetCellData().GetArray("region").GetRange()[1] for blk in blocks)]
+            if blocks else None,
+            "warped_bounds": list(blocks[0].GetBounds()) if blocks else None}
+        Delete(threshold)
     body_warp = None
     if body_readers:
         body_readers["Xdmf3ReaderT"].UpdatePipeline(show)

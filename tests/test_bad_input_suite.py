@@ -135,10 +135,13 @@ SET_INPUTS = [
     (FE, [*FE_TINY, "transient.steps.min_s=1e-6"], "transient.steps.min_s"),
     (FE, [*FE_TINY, "transient.scheme.rho_inf=2"], "transient.scheme.rho_inf"),
     (FE, [*FE_TINY, "transient.checkpoint_interval_steps=-1"], "transient.checkpoint_interval_steps"),
-    # the contact pressure field: the FE tier's transient, of a surface contact (docs/contact.md)
+    # the contact pressure: the FE and modal tiers' transient, of a surface contact (docs/contact.md)
     (FE, [*FE_TINY, "output.contact_pressure=true"], "output.contact_pressure"),        # no surface contact
-    (MOTOR, ["output.contact_pressure=true"], "output.contact_pressure"),               # the modal tier
     (TRANSDUCER, ["output.contact_pressure=true"], "output.contact_pressure"),          # no transient analysis
+    # the lumped bodies file: frames no closer than the samples, within the run
+    (LUMPED, ["lumped.output.bodies_interval_s=1e-6"], "lumped.output.bodies_interval_s"),
+    (LUMPED, ["lumped.output.bodies_interval_s=1.0"], "lumped.output.bodies_interval_s"),
+    (LUMPED, ["lumped.output.bodies_interval_s=-1e-3"], "lumped.output.bodies_interval_s"),
     # prescribed travelling wave
     (STRIP, [f'{_WAVE}.facets="nowhere"'], f"{_WAVE}.facets"),
     (STRIP, [f"{_WAVE}.direction=[0.0, 0.0]"], f"{_WAVE}.direction"),

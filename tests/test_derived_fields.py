@@ -292,7 +292,8 @@ TRANSDUCER_COARSE = ["output.plots=false", "geometry.parameters.mesh_size_m=0.00
 
 def test_transducer_files_carry_derived_fields_and_region_names(tmp_path):
     """The convention of docs/fields.md on the drill transducer (coarse): the harmonic response file opens in meshio
-    with the derived fields (units in their names), the Domain names the regions as summary.json does, and the
+    with the derived fields (units in their names), the Domain names the regions as summary.json does and a cell
+    array per region marks its cells, and the
     maxima over the cycle agree with a brute-force maximum over 3600 phases of the file's own real and imaginary
     stress (reference: direct sampling; its error (1 - cos(0.05 deg)) < 4e-7 relative, tolerance 1e-5). Near
     resonance the response is almost a standing wave (re and im stresses nearly parallel), where the exact
@@ -317,8 +318,12 @@ def test_transducer_files_carry_derived_fields_and_region_names(tmp_path):
     assert dict(item.split(": ") for item in info.get("Value").split("; ")) == names
     with meshio.xdmf.TimeSeriesReader(str(out / "harmonic_fields.xdmf")) as reader:
         reader.read_points_cells()
-        frequency, point_data, _ = reader.read_data(0)
+        frequency, point_data, cell_data = reader.read_data(0)
     assert frequency == pytest.approx(summary["results"]["harmonic"]["field_frequency_Hz"])
+    # the region names as cell arrays, one per region (1 in its cells), as ParaView shows them
+    assert set(cell_data) == {"region", *(f"region: {name}" for name in names.values())}
+    for tag, name in names.items():
+        np.testing.assert_array_equal(cell_data[f"region: {name}"][0], cell_data["region"][0] == int(tag))
     expected = {"displacement", "potential", "displacement_im", "potential_im", "von_mises_cycle_max_Pa",
                 "max_principal_stress_cycle_max_Pa"}
     for base in ("strain", "stress_{}_Pa", "electric_field_{}_V_per_m", "electric_displacement_{}_C_per_m2"):

@@ -26,6 +26,18 @@ TRANSDUCER_MODAL = ['analyses=["modal"]', "output.plots=false", "geometry.parame
 # the default [output] derived fields, units in their names (docs/fields.md)
 DEFAULT_DERIVED_NAMES = {"von_mises_Pa", "principal_stress_Pa", "electric_field_V_per_m"}
 
+def check_region_names(cell_data: dict, names: dict) -> None:
+    """The region names as meshio reads them: besides the ``region`` tag, one cell array per named region
+    (``region: <name>``, 1 exactly in the cells with that tag; app/exports.py region_indicators), the names of
+    summary.json ``regions``."""
+    assert len(names) >= 2
+    assert set(cell_data) == {"region", *(f"region: {name}" for name in names.values())}
+    for tag, name in names.items():
+        indicator = cell_data[f"region: {name}"][0]
+        assert indicator.any()
+        np.testing.assert_array_equal(indicator, cell_data["region"][0] == int(tag))
+
+
 def read_series(path) -> tuple[np.ndarray, list, list[tuple[float, dict, dict]]]:
     """(points, cell blocks, [(time, point_data, cell_data)]) of an XDMF time series, through meshio."""
     with meshio.xdmf.TimeSeriesReader(path) as reader:
@@ -50,7 +62,8 @@ def test_every_transient_xdmf_reads_in_meshio(drill):
     points, cells, frames = read_series(out / "transient_fields.xdmf")
     assert len(frames) == n_outputs and cells[0].type == "triangle"
     for _, point_data, cell_data in frames:
-        assert set(point_data) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES} and set(cell_data) == {"region"}
+        assert set(point_data) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
+        check_region_names(cell_data, summary["regions"])
         assert point_data["displacement"].shape == (len(points), 3)
     assert max(np.abs(frames[-1][1]["displacement"]).max(), 0) > 1e-7       # the transducer rings
 
@@ -122,7 +135,7 @@ def test_mode_files_read_in_meshio_with_one_numbering(tmp_path):
         points, cells, frames = read_series(path)
         for _, point_data, cell_data in frames:
             assert set(point_data) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
-            assert set(cell_data) == {"region"}
+            check_region_names(cell_data, summary["regions"])
             assert np.linalg.norm(point_data["displacement"], axis=1).max() == pytest.approx(2e-3, rel=1e-12)
         grids = [g for g in ET.parse(path).iter("Grid") if g.get("GridType") == "Uniform"]
         assert [g.get("Name").split(":")[0] for g in grids] == [f"mode {k}" for k in range(1, len(frames) + 1)]
@@ -145,3 +158,40 @@ def test_mode_files_read_in_meshio_with_one_numbering(tmp_path):
              if g.get("GridType") == "Uniform"][k - 1].iter("Information")}
     assert info["frequency_Hz"] == pytest.approx(modal["working_resonance_Hz"], rel=1e-15)
     assert info["shape_scale_m_sqrt_kg"] == pytest.approx(scale, rel=1e-15)
+
+
+def test_lumped_bodies_move_as_their_series_says(tmp_path):
+    """The lumped drill's bodies file (``lumped.output.bodies_interval_s``, app/lumped/bodies.py): meshio reads the
+    triangles of the transducer's tip, ball, stem and rock, a frame at t = 0 and at every 0.1 ms, and each body's
+    vertices are displaced, straight up, by its coordinate in the series file at the frame's time (reference:
+    transient.h5's tip_displacement_m, ball_position_m, stem_position_m, rock_surface_displacement_m, zero where the
+    parts rest on each other unloaded; 1e-15 m: the drawing's coordinates, 0.28 m, in doubles)."""
+    summary = run_case_quiet("usdc-lumped.toml", tmp_path, "lumped.duration_s=0.002",
+                             "lumped.output.bodies_interval_s=1e-4", "lumped.output.plots=false")
+    assert {"transient_bodies.xdmf", "transient_bodies/bodies.h5"} <= set(summary["outputs"])
+    points, (triangles,), frames = read_series(tmp_path / "transient_bodies.xdmf")
+    assert triangles.type == "triangle" and len(frames) == 21
+    assert [t for t, _, _ in frames] == pytest.approx([k * 1e-4 for k in range(21)], rel=1e-12, abs=0)
+    with h5py.File(tmp_path / "transient_bodies" / "bodies.h5", "r") as f:
+        names = [str(n) for n in f["body"].attrs["names"]]
+    assert names == ["transducer", "ball", "stem", "rock"]
+    columns = {"transducer": "tip_displacement_m", "ball": "ball_position_m", "stem": "stem_position_m",
+               "rock": "rock_surface_displacement_m"}
+    with h5py.File(tmp_path / "transient.h5", "r") as f:
+        time = f["time_s"][:]
+        series = {name: f[column][:].reshape(len(time), -1)[:, 0] for name, column in columns.items()}
+    moved = {name: 0.0 for name in names}
+    for t, point_data, cell_data in frames:
+        assert set(point_data) == {"displacement"} and set(cell_data) == {"body", "sector"}
+        row = int(np.argmin(np.abs(time - t)))
+        assert time[row] == pytest.approx(t, rel=1e-12)
+        u = point_data["displacement"]
+        body = cell_data["body"][0]
+        for index, name in enumerate(names):
+            vertices = np.unique(triangles.data[body == index])
+            expected = np.zeros((len(vertices), 3))
+            expected[:, 2] = series[name][row]
+            np.testing.assert_allclose(u[vertices], expected, rtol=0, atol=1e-15, err_msg=f"{name} at {t}")
+            moved[name] = max(moved[name], abs(series[name][row]))
+    # the initial gaps (150, 100, 50 um) and the hammering: every body but the rock moves by tens of um
+    assert min(moved[name] for name in ("transducer", "ball", "stem")) > 1e-5

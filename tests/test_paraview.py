@@ -1,6 +1,7 @@
 """Results open in ParaView: a transient result (serial and on 2 ranks, FE and modal tier) and a modal result, read by
 ParaView's own XDMF readers through pvpython on a private Xvfb display (tests/paraview_open.py):
-Warp By Vector on the displacement, the potential on the same (warped) grid, the region tags, the rigid bodies as
+Warp By Vector on the displacement, the potential on the same (warped) grid, the region tags and names (a cell
+array per region, Threshold on it), the rigid bodies as
 their own blocks, the mode frequencies as the time values. Without pvpython or Xvfb they skip, except
 when ``PIEZODYN_REQUIRE_PARAVIEW=1`` (set by .ci/test.sh, so CI and the Docker test image run them):
 then they fail, naming what is missing (.ci/install.sh installs both). ``PIEZODYN_UPDATE_FIGURES=1``
@@ -88,6 +89,28 @@ def _name(block: dict) -> str:
     return re.sub(r"\[\d+\]$", "", block["name"])      # readers append the time index
 
 
+def check_region_names(report: dict, names: dict[int, str], mesh_h5: Path) -> None:
+    """Region names readable in ParaView: every reader's FE grid carries, besides the ``region`` tag, one cell
+    array per named region (``region: <name>``, 1 in its cells: app/exports.py region_indicators), and Threshold
+    (1 to 1) on each, after Warp By Vector, keeps exactly that region's cells (its tag alone, as many cells as the
+    file's ``mesh/region`` has with that tag: h5py)."""
+    import h5py
+
+    with h5py.File(mesh_h5, "r") as f:
+        region = f["mesh/region"][:]
+    indicators = {f"region: {name}" for name in names.values()}
+    assert len(indicators) == len(names) >= 2
+    for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
+        for block in report[reader]["blocks"]:
+            assert set(block["cell_arrays"]) == {"region", *indicators}, reader
+    thresholds = report["region_thresholds"]
+    assert set(thresholds) == indicators
+    for tag, name in names.items():
+        kept = thresholds[f"region: {name}"]
+        assert kept["region_range"] == [tag, tag], name
+        assert kept["cells"] == np.count_nonzero(region == tag) > 0, name
+
+
 def check_transient(report: dict, out: Path) -> None:
     """The FE series (one grid per output: meshio reads it too) and its companion file of the rigid bodies
     with their shapes (app/transient/body_shapes.py), read by the three readers at the same times; after
@@ -109,11 +132,11 @@ def check_transient(report: dict, out: Path) -> None:
         assert len(report[reader]["times"]) == n_outputs
         # the default derived fields, units in their names (docs/fields.md)
         assert set(fe["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
-        assert fe["cell_arrays"] == ["region"]
         (bodies,) = report[reader]["body_blocks"]       # every body in one triangle grid, at the same times
         assert report[reader]["body_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
         assert bodies["point_arrays"] == ["displacement"] and set(bodies["cell_arrays"]) == {"body", "sector"}
         assert bodies["cells"] > 40                     # shapes, not points
+    check_region_names(report, {int(k): v for k, v in summary["regions"].items()}, out / "transient_fields" / "mesh.h5")
     warped = report["warped"]
     assert warped["time"] == pytest.approx(last, rel=1e-9)
     # Warp By Vector moved the FE grid: the tip (bottom) moved by scale * u, the potential rides along
@@ -192,7 +215,8 @@ def test_drill_at_an_impact_in_paraview(x_display, transient_result):
 # FE tier for one drive period (the drive locked to this mesh's F(1,4)) from the harmonic steady state, the rotor
 # seated: 8 phase-locked frames
 MOTOR_ONE_PERIOD = ["geometry.parameters.mesh_size_m=0.006", "geometry.parameters.tip_mesh_size_m=0.002",
-                    'tier="fe"', "transient.end_time_s=2.8e-5", "output.plots=false"]
+                    'tier="fe"', "transient.end_time_s=2.8e-5", "output.plots=false", "output.contact_pressure=true"]
+CONTACT_PRESSURE = "contact_pressure_Pa"        # the contact pressure's name in every tier (docs/fields.md)
 
 
 @needs_paraview
@@ -203,8 +227,8 @@ def test_motor_result_in_paraview(x_display, tmp_path):
     and electric field ParaView reads at the last frame are the step file's (h5py) and below the run's peaks per
     region in summary.json (field_peaks: the maxima over the frames); the rotor's vertices move. Region names:
     summary.json ``regions`` and the file's ``region_names`` Information give the same table, and the tags
-    ParaView reads are exactly its keys (ParaView 5.11's XDMF readers do not expose Information elements:
-    docs/fields.md)."""
+    ParaView reads are exactly its keys; ParaView shows the names as one cell array per region
+    (check_region_names: ParaView 5.11's XDMF readers do not expose Information elements, docs/fields.md)."""
     import xml.etree.ElementTree as ET
 
     import h5py
@@ -220,8 +244,7 @@ def test_motor_result_in_paraview(x_display, tmp_path):
     for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
         (fe,) = report[reader]["blocks"]
         assert len(report[reader]["times"]) == n_outputs
-        assert set(fe["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
-        assert fe["cell_arrays"] == ["region"]
+        assert set(fe["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES, CONTACT_PRESSURE}
         (rotor,) = report[reader]["body_blocks"]
         assert report[reader]["body_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
         assert rotor["cells"] > 40 and set(rotor["cell_arrays"]) == {"body", "sector"}
@@ -243,6 +266,83 @@ def test_motor_result_in_paraview(x_display, tmp_path):
     assert info is not None
     assert {int(k): v.strip() for k, v in (item.split(":") for item in info.get("Value").split(";"))} == names
     assert report["warped"]["region_range"] == [min(names), max(names)]
+    check_region_names(report, names, tmp_path / "transient_fields" / "mesh.h5")
+
+
+# the motor in the modal tier on tests/test_cases.py's coarse stator (tests/test_contact_pressure_modal.py): bursts of
+# 20 frames every 2.95 periods over 0.1 ms, the second where the rotor bounces on the crests
+MOTOR_MODAL_PRESSURE = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
+                        "reduction.interface_nodes=16", "transient.contacts[0].sample_points=64", "output.plots=false",
+                        "transient.end_time_s=1e-4", "output.contact_pressure=true",
+                        "output.field_interval_periods=2.95", "output.field_phases=20"]
+
+
+@needs_paraview
+def test_modal_tier_contact_pressure_in_paraview(x_display, tmp_path):
+    """The modal tier's contact pressure as ParaView shows it: its contact sites' companion file
+    (transient_contact_sites.xdmf) opens in the three readers as one cloud of 64 points at the field series' times,
+    carrying the pressure under the FE tier's name (CONTACT_PRESSURE, which test_motor_result_in_paraview finds on
+    the FE tier's grid), the sites' displacement and area; at every frame the largest pressure each reader reads is
+    the run's peak pressure column at that step (transient.h5, the compiled loop's own maximum over the sites:
+    tests/test_contact_pressure_modal.py shows why they agree to round-off; 1e-9 relative), and the rotor presses
+    (some frame above 1e5 Pa)."""
+    import h5py
+
+    result = run_cli("run", CASES / "wwusm-motor.toml", "--out", tmp_path, "--quiet",
+                     *[a for o in MOTOR_MODAL_PRESSURE for a in ("--set", o)])
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = open_in_paraview(x_display, tmp_path / "transient_fields.xdmf", tmp_path / "paraview_motor_modal.png",
+                              colour="von_mises_Pa")
+    with h5py.File(tmp_path / "transient.h5", "r") as f:
+        time = f["time_s"][:]
+        peak = f["stator_rotor_peak_pressure_Pa"][:]
+    pressed = 0
+    for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
+        (sites,) = report[reader]["site_blocks"]
+        assert sites["points"] == 64
+        assert set(sites["point_arrays"]) == {"displacement", CONTACT_PRESSURE, "site_area_m2", "contact"}
+        assert report[reader]["site_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
+        for t, ranges in report[reader]["site_ranges"].items():
+            if float(t) == 0.0:
+                continue                                # no row at t = 0
+            row = int(np.argmin(np.abs(time - float(t))))
+            assert ranges[CONTACT_PRESSURE][1] == pytest.approx(peak[row], rel=1e-9, abs=1e-9 * peak.max()), t
+            pressed += ranges[CONTACT_PRESSURE][1] > 1e5
+    assert pressed >= 3
+
+
+@needs_paraview
+def test_lumped_bodies_in_paraview(x_display, tmp_path):
+    """The lumped tier's bodies file (``lumped.output.bodies_interval_s``, app/lumped/bodies.py) in ParaView's
+    three readers: one triangle grid of the four bodies with ``displacement`` and the ``body``/``sector`` cell
+    values at the 21 frame times; after Warp By Vector at the last frame each body's triangles sit where the series
+    puts it (transient.h5: the tip, the ball, the stem and the rock surface; scale x the column's value, 1e-9 m:
+    the file's doubles through ParaView's warp)."""
+    import h5py
+
+    result = run_cli("run", CASES / "usdc-lumped.toml", "--out", tmp_path, "--quiet",
+                     *[a for o in ["lumped.duration_s=0.002", "lumped.output.bodies_interval_s=1e-4",
+                                   "lumped.output.plots=false"] for a in ("--set", o)])
+    assert result.returncode == 0, result.stderr[-2000:]
+    report = open_in_paraview(x_display, tmp_path / "transient_bodies.xdmf", tmp_path / "paraview_lumped_bodies.png")
+    for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
+        assert report[reader]["times"] == pytest.approx([k * 1e-4 for k in range(21)], rel=1e-12, abs=0)
+        (bodies,) = report[reader]["blocks"]
+        assert bodies["point_arrays"] == ["displacement"] and set(bodies["cell_arrays"]) == {"body", "sector"}
+        assert bodies["cells"] > 40
+    warped = report["warped"]
+    assert warped["time"] == pytest.approx(2e-3, rel=1e-12)
+    with h5py.File(tmp_path / "transient.h5", "r") as f:
+        row = int(np.argmin(np.abs(f["time_s"][:] - warped["time"])))
+        values = [float(np.ravel(f[c][row])[0]) for c in ("tip_displacement_m", "ball_position_m", "stem_position_m",
+                                                          "rock_surface_displacement_m")]
+    before, after = report["body_bounds_before"], warped["body_bounds"]
+    assert sorted(before) == ["0", "1", "2", "3"]
+    for index, value in enumerate(values):
+        moved = warped["scale"] * value
+        assert after[str(index)][:4] == pytest.approx(before[str(index)][:4], abs=1e-12)      # straight up
+        assert after[str(index)][4:] == pytest.approx([b + moved for b in before[str(index)][4:]], abs=1e-9)
+    assert abs(warped["scale"] * values[0]) > 1e-3      # the tip visibly moved at this scale
 
 
 @needs_paraview
@@ -279,7 +379,8 @@ def test_modal_result_in_paraview(x_display, tmp_path):
         np.testing.assert_allclose(report[reader]["times"], frequencies, rtol=1e-12)   # time = frequency [Hz]
         (block,) = report[reader]["blocks"]             # one grid: no extra unwarped mesh
         assert set(block["point_arrays"]) == {"displacement", "potential", *DEFAULT_DERIVED_NAMES}
-        assert block["cell_arrays"] == ["region"]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    check_region_names(report, {int(k): v for k, v in summary["regions"].items()}, tmp_path / "modes_short.h5")
     import xml.etree.ElementTree as ET
 
     grids = ET.parse(tmp_path / "modes_short.xdmf").iter("Grid")

@@ -172,6 +172,11 @@ class LumpedOutputSection:
         doc="a tip/free-mass open interval is a flight if z rises at least this much above take-off",
     )
     histogram_bins: int = param(20, ge=1, doc="bins of the flight-duration histogram")
+    bodies_interval_s: float | None = param(
+        None, gt=0, unit="s", doc="write the transducer tip, ball, stem and rock drawn with shapes, moving with their "
+                                  "coordinates, as transient_bodies.xdmf (ParaView, meshio) at t = 0 and at the first "
+                                  "sample at or after every multiple of this; at least output_interval_s; unset: "
+                                  "none (docs/lumped.md)")
 
 
 @dataclass(frozen=True)
@@ -206,6 +211,11 @@ class LumpedSection:
                 f"{dotted}output.output_interval_s",
                 f"must not exceed duration_s = {self.duration_s} s, got {self.output.output_interval_s} s",
             )
+        bodies_s = self.output.bodies_interval_s
+        if bodies_s is not None and not self.output.output_interval_s * (1 - 1e-12) <= bodies_s <= self.duration_s:
+            raise CaseError(file, f"{dotted}output.bodies_interval_s",
+                            f"must lie between output_interval_s = {self.output.output_interval_s} s and duration_s = "
+                            f"{self.duration_s} s, got {bodies_s} s")
         if self.source == "circuit":
             if not self.circuit_file:
                 raise CaseError(file, f"{dotted}circuit_file", "required when source = 'circuit'")

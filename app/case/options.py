@@ -89,11 +89,11 @@ def check_tier(case, file: str, written=None) -> None:
 
 
 def _check_contact_pressure(case, file: str) -> None:
-    """``output.contact_pressure`` is the FE tier's transient field of its surface contacts (the modal tier
-    reports the pressure at its contact sites: ``output.contact_sites``)."""
-    if case.tier != "fe" or "transient" not in (case.analyses or ()):
-        raise CaseError(file, "output.contact_pressure", "is written by the FE tier's transient analysis only "
-                                                         "(the modal tier: output.contact_sites)")
+    """``output.contact_pressure`` is the transient pressure of the surface contacts, in the FE tier (a field on
+    the mesh) and the modal tier (at its contact sites, a point cloud companion of the fields)."""
+    if case.tier not in ("fe", "modal") or "transient" not in (case.analyses or ()):
+        raise CaseError(file, "output.contact_pressure", "is written by the transient analysis of the FE and modal "
+                                                         "tiers only")
     if not any(c.kind == "surface" for c in case.transient.contacts):
         raise CaseError(file, "output.contact_pressure", "the case has no surface contact ([[transient.contacts]] "
                                                          "of kind 'surface') to write the pressure of")

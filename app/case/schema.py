@@ -295,10 +295,12 @@ class OutputSection:
                                   "this (Warp By Vector at scale 1 shows it); the factor applied to the "
                                   "mass-normalised shape is in the file (docs/summary.md)")
     contact_pressure: bool = param(
-        False, doc="transient, FE tier: the normal contact pressure of every surface contact at the vertices of its "
-                   "facets, the solver's penalty law (field 'contact_pressure_Pa' of transient_fields.xdmf, zero off "
-                   "the contact surfaces), each step's peak ('<contact>_peak_pressure_Pa' in transient.h5) and the "
-                   "run's (results.transient.contacts.<contact>.max_pressure_Pa)")
+        False, doc="transient, FE and modal tiers: the normal contact pressure of every surface contact, the "
+                   "solver's penalty law: FE tier at the vertices of its facets (field 'contact_pressure_Pa' of "
+                   "transient_fields.xdmf, zero off the contact surfaces), modal tier at its contact sites (the same "
+                   "name in the point cloud transient_contact_sites.xdmf, moving with the structure, with each "
+                   "site's area); each step's peak ('<contact>_peak_pressure_Pa' in transient.h5) and the "
+                   "run's (results.transient.contacts.<contact>.max_pressure_Pa) in both")
     field_phases: int | None = param(
         None, ge=1, doc="transient fields: frames per drive period (transient.drive.frequency_Hz) in each burst, "
                         "evenly spaced in phase; a burst spans one period (default 8)")

@@ -152,10 +152,21 @@ class LumpedEngine:
         return {}
 
     def field_export(self, out_dir: Path, resume_from_s: float | None):
-        return None
+        """``[lumped.output] bodies_interval_s``: the bodies drawn with shapes (app/lumped/bodies.py), else None."""
+        interval = self.section.output.bodies_interval_s
+        if interval is None:
+            return None
+        from app.lumped.bodies import body_meshes
+        from app.transient.fields import BodySeriesExport
+
+        return BodySeriesExport(Path(out_dir) / "transient_bodies.xdmf", lambda: body_meshes(self.section), interval,
+                                self.comm, resume_from_s)
 
     def body_positions(self) -> np.ndarray:
-        return np.zeros(0)
+        """The drawn bodies' packed coordinates at the current sample (rank 0; app/lumped/bodies.py)."""
+        from app.lumped.bodies import body_coordinates
+
+        return body_coordinates(self.section, self.integrator.y) if self.root else np.zeros(0)
 
     def results(self) -> dict:
         out = None

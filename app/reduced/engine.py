@@ -149,7 +149,7 @@ class ModalEngine:
                      np.zeros((cap, self.structure.inputs.size)), np.zeros((cap, m)), np.zeros((cap, m)),
                      np.zeros((cap, n_c + n_l, 3)), np.zeros((cap, n_c, 3)), np.zeros((cap, n_c)),
                      np.zeros((cap, n_c)), np.zeros((cap, n_c + n_l), np.bool_), np.zeros((cap, n_c + n_l)),
-                     np.zeros((cap, 5)), np.zeros((cap, n_c, 3)))
+                     np.zeros((cap, 5)), np.zeros((cap, n_c, 3)), np.zeros((cap, n_c)))
         ns = self.sites_record.contact.size
         sampled = [(name, self.sites_record.contact == k) for k, name in enumerate(self._kernel_contact_names())
                    if self.contacts_record.kind[k] == lk.SURFACE]
@@ -373,6 +373,8 @@ class ModalEngine:
                 units[S.contact_area(c.name)] = "m^2"
             if c.kind == "surface" and case.output.contact_sites:
                 units[S.contact_probe(c.name)] = "m (n, e1, e2)"
+            if c.kind == "surface" and case.output.contact_pressure:
+                units[S.contact_peak_pressure(c.name)] = "Pa"
         return units
 
     def advance(self, t_end: float, max_steps: int, stop_at_s: float) -> dict[str, np.ndarray]:
@@ -441,6 +443,8 @@ class ModalEngine:
                 block[S.contact_area(c.name)] = out.area[:rows, k].copy()
             if c.kind == "surface" and case.output.contact_sites:
                 block[S.contact_probe(c.name)] = out.probe[:rows, k].copy()
+            if c.kind == "surface" and case.output.contact_pressure:
+                block[S.contact_peak_pressure(c.name)] = out.peak[:rows, k].copy()
             if c.kind == "point":
                 l += 1
             else:
@@ -476,7 +480,40 @@ class ModalEngine:
         return FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
                                  lambda: self.q, frame_schedule(self.case),
                                  bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
-                                 resume_from_s=resume_from_s)
+                                 resume_from_s=resume_from_s,
+                                 sites=self._site_cloud() if case.output.contact_pressure else None)
+
+    def _site_cloud(self):
+        """``output.contact_pressure``: the surface contacts' sites as the field series' point cloud companion
+        (app.transient.fields.ContactSiteCloud), their pressure the law's at the current (end-of-step) state."""
+        from app.transient.fields import ContactSiteCloud
+
+        sites, model = self.sites_record, self.model
+        names = self._kernel_contact_names()
+        chosen = np.flatnonzero(self.contacts_record.kind[sites.contact] == lk.SURFACE)
+        return ContactSiteCloud(points=np.asarray(model.site_points)[chosen], area_m2=sites.weight[chosen],
+                                contact=sites.contact[chosen], names=names,
+                                state=lambda: self._site_pressures(chosen) if self.comm.rank == 0 else None)
+
+    def _site_pressures(self, chosen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The displacement [m] (n, 3) and the normal contact pressure [Pa] (n,) of the sites ``chosen`` at the
+        current state: the kernel's law (app.contact.law.site_force) at the end-of-step coordinates and rates, as
+        the FE tier's ContactPressureProbe takes its state (with Newmark the state the step's equilibrium used;
+        with generalized-alpha the step used its mid-point)."""
+        sites, gdim = self.sites_record, self.model.gdim
+        y = (sites.rows @ self.q).reshape(-1, gdim)
+        rate = (sites.rows @ self.v).reshape(-1, gdim)
+        work = lk.site_work(self.bodies_record.mass.size)
+        displacement = np.zeros((chosen.size, 3))
+        pressure = np.zeros(chosen.size)
+        y3, rate3 = np.zeros(3), np.zeros(3)
+        for j, i in enumerate(chosen):
+            y3[:gdim], rate3[:gdim] = y[i], rate[i]
+            fn = lk.site_force(int(i), y3, rate3, self.z, self.zd, sites, self.contacts_record, self.bodies_record,
+                               1.0, 1.0, False, work)[0]
+            pressure[j] = fn / sites.weight[i]
+            displacement[j, :gdim] = y[i]
+        return displacement, pressure
 
     def body_positions(self) -> np.ndarray:
         return self.z

@@ -148,6 +148,7 @@ class Outputs(NamedTuple):
     dissipated: np.ndarray    # (cap, n_contacts + n_links) friction and damping energy since t = 0 [J]
     energy: np.ndarray        # (cap, 5): kinetic, strain, rigid kinetic, contact penalty [J], damping loss [J]
     probe: np.ndarray         # (cap, n_contacts, 3) displacement of each contact's first site in its frame
+    peak: np.ndarray          # (cap, n_contacts) largest site pressure fn / weight of a surface contact [Pa]
     site_sums: np.ndarray     # (n_sites, 5): time integrals of pressure [Pa s], closed, stick, slip +, slip - [s]
 
 
@@ -1107,6 +1108,7 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
             out.torque[row, c, k] = 0.0
         out.normal[row, c] = 0.0
         out.area[row, c] = 0.0
+        out.peak[row, c] = 0.0
     power = np.zeros(n_c + n_l)
     tq = np.zeros(3)
     fneg = np.zeros(3)
@@ -1135,6 +1137,8 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
         for k in range(3):
             out.torque[row, c, k] += tq[k]
         out.normal[row, c] += fn
+        if contacts.kind[c] != NODE:
+            out.peak[row, c] = max(out.peak[row, c], fn / sites.weight[i])
         # dissipated power: damping (pressure beyond its elastic part times the closing rate) and friction
         if contacts.kind[c] == NODE:
             elastic = contacts.stiffness[c] * (-wk.gap[i]) ** contacts.exponent[c]

@@ -68,6 +68,17 @@ def _box(radius: float, s0: float, s1: float) -> np.ndarray:
     return np.array([[0.0, s0], [radius, s0], [radius, s1], [0.0, s1]])
 
 
+def sphere_shape(radius_m: float, axis=(0.0, 0.0, 1.0)) -> _Shape:
+    """A sphere of ``radius_m`` centred at its body's reference point."""
+    return _Shape("sphere", _unit3(axis, 3), _sphere(radius_m))
+
+
+def cylinder_shape(radius_m: float, from_m: float, to_m: float, axis=(0.0, 0.0, 1.0), kind: str = "rod") -> _Shape:
+    """A closed cylinder of ``radius_m`` along the unit ``axis`` from ``from_m`` to ``to_m`` (from_m < to_m) of
+    the body's reference point (``kind`` "slab" for a wide flat one, "rod" otherwise: the same drawing)."""
+    return _Shape(kind, _unit3(axis, 3), _box(radius_m, from_m, to_m))
+
+
 def body_shapes(transient, scene_size_m: float) -> dict[str, list[_Shape]]:
     """Shapes of each body of the ``[transient]`` section (name -> list of shapes), see the module's rules;
     ``scene_size_m``: the FE mesh's largest extent."""
@@ -169,17 +180,31 @@ class BodyMeshes:
 
     def __init__(self, transient, model_kind: str, slices: dict[str, slice], scene_size_m: float):
         bodies = transient.bodies
-        self.names = [b.name for b in bodies]
-        self.gdim = len(bodies[0].position_m) if bodies else 3
+        gdim = len(bodies[0].position_m) if bodies else 3
         shapes = body_shapes(transient, scene_size_m)
+        self._build([(b.name, b.position_m, [(r.axis, r.angle_rad) for r in b.rotations], shapes[b.name])
+                     for b in bodies], gdim, model_kind, slices)
+
+    @classmethod
+    def from_shapes(cls, bodies, gdim: int, model_kind: str, slices: dict[str, slice]) -> BodyMeshes:
+        """Bodies given by their shapes: ``bodies`` a list of (name, reference position (gdim) [m], rotations as
+        [(axis name, start angle [rad])], [shapes]), shapes from :func:`sphere_shape` and :func:`cylinder_shape`
+        (the lumped tier's drill, which has no [transient] section)."""
+        meshes = cls.__new__(cls)
+        meshes._build(bodies, gdim, model_kind, slices)
+        return meshes
+
+    def _build(self, bodies, gdim: int, model_kind: str, slices: dict[str, slice]) -> None:
+        self.names = [name for name, *_ in bodies]
+        self.gdim = gdim
         points, triangles, body, sector = [], [], [], []
         self._vertices, self._start, self._axes, self._slices, self._angles = [], [], [], [], []
         n = 0
-        for index, b in enumerate(bodies):
+        for index, (name, position, rotations, shapes) in enumerate(bodies):
             reference = np.zeros(3)
-            reference[:self.gdim] = b.position_m
+            reference[:self.gdim] = position
             first = n
-            for shape in shapes[b.name]:
+            for shape in shapes:
                 if self.gdim == 3:
                     p, t, s = _revolve(shape, reference)
                 else:
@@ -191,9 +216,9 @@ class BodyMeshes:
                 sector.append(s)
                 n += len(p)
             self._vertices.append(slice(first, n))
-            self._start.append((reference, np.array([r.angle_rad for r in b.rotations], dtype=float)))
-            self._axes.append(np.array([_AXES[r.axis] for r in b.rotations], dtype=float).reshape(-1, 3))
-            self._slices.append(slices[b.name])
+            self._start.append((reference, np.array([angle for _, angle in rotations], dtype=float)))
+            self._axes.append(np.array([_AXES[axis] for axis, _ in rotations], dtype=float).reshape(-1, 3))
+            self._slices.append(slices[name])
         self.points = np.concatenate(points) if points else np.zeros((0, 3))
         self.triangles = np.concatenate(triangles) if triangles else np.zeros((0, 3), dtype=np.int64)
         self.body = np.concatenate(body) if body else np.zeros(0, dtype=np.int32)

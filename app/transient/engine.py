@@ -126,7 +126,9 @@ class FEEngine:
             values = vertex.sample_scalar(probe.pressure)
             if values is not None:
                 total = values if total is None else total + values
-        return {"contact_pressure_Pa": (total, "Pa")}
+        from app.transient.fields import CONTACT_PRESSURE
+
+        return {CONTACT_PRESSURE: (total, "Pa")}
 
     def _started(self) -> None:
         cfg = self.cfg

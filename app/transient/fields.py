@@ -13,6 +13,9 @@ times: one triangle grid of all bodies (``rigid_bodies``: cell values ``body``, 
 with each vertex's displacement [m] in the step file (``bodies/displacement``). Both files are written
 in the reference configuration with their displacement, so one Warp By Vector (scale 1) on each puts
 the transducer and the bodies where they are; meshio reads the points once and the displacement per time.
+The modal tier's contact sites with ``output.contact_pressure`` are a second companion,
+``transient_contact_sites.xdmf`` (:class:`ContactSiteCloud`: a point cloud with the sites' displacement and
+``contact_pressure_Pa``, their area and contact index in ``<stem>/contact_sites.h5``).
 
 Why a file per output: a process killed while writing HDF5 can leave that file unreadable; here
 it can only hit a step file that the XML does not name yet (step files are written under a
@@ -26,6 +29,8 @@ from __future__ import annotations
 import json
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +49,8 @@ from app.files import replace_file, write_h5_atomic
 from app.killpoint import kill_point
 
 BODY_GRID = "rigid_bodies"      # name of the bodies' grid in the companion file
+SITE_GRID = "contact_sites"     # name of the contact sites' grid in their companion file
+CONTACT_PRESSURE = "contact_pressure_Pa"     # the contact pressure's name in every tier's files [Pa]
 FRAME_PEAKS = "region_peaks_json"       # attribute of a step file's displacement: that frame's peaks per region
 DEFAULT_PHASES = 8
 
@@ -103,6 +110,23 @@ def frame_schedule(case) -> FrameSchedule:
     return FrameSchedule(period, phases, interval_periods=interval)
 
 
+@dataclass
+class ContactSiteCloud:
+    """The contact sites of a run (the modal tier's: where its contact law is evaluated), written as a point cloud
+    companion of the field series, ``<stem minus _fields>_contact_sites.xdmf``: one Polyvertex grid of the sites at
+    their reference position ``points`` (n, 3) [m], with per frame their displacement [m] (Warp By Vector at scale
+    1 moves them with the structure) and the normal contact pressure ``contact_pressure_Pa`` [Pa] (the FE tier's
+    name), and once their area ``site_area_m2`` [m^2] (the share of the contact surface each one stands for: the
+    sum of pressure x area over a contact's sites is its normal force) and ``contact`` (index into ``names``).
+    ``state()`` returns (displacement (n, 3), pressure (n,)) of the current state on rank 0 (None elsewhere)."""
+
+    points: np.ndarray
+    area_m2: np.ndarray
+    contact: np.ndarray
+    names: list
+    state: Callable
+
+
 class FieldSeriesExport:
     """``write(t, body_positions)`` appends the current displacement [m] and electric potential [V]
     (``vertex.sample(solution())``: :class:`app.exports.VertexFields` of the FE model and a full u-phi PETSc
@@ -112,13 +136,17 @@ class FieldSeriesExport:
     largest extent) returning the :class:`app.transient.body_shapes.BodyMeshes` of the run (called on rank 0).
     ``resume_from_s``: continue the existing series after that time (later steps are dropped).
     ``scalars``: a callable returning further vertex fields of the current state, {name: (values at the
-    vertices on rank 0 (None elsewhere), units)}, e.g. ``contact_pressure_Pa`` (collective)."""
+    vertices on rank 0 (None elsewhere), units)}, e.g. ``contact_pressure_Pa`` (collective). ``sites``: None, or
+    the :class:`ContactSiteCloud` written as the companion ``<stem minus _fields>_contact_sites.xdmf``."""
 
     def __init__(self, path: Path, vertex, solution, schedule: FrameSchedule, bodies=None,
-                 resume_from_s: float | None = None, scalars=None):
+                 resume_from_s: float | None = None, scalars=None, sites: ContactSiteCloud | None = None):
         self.path = Path(path)
         self.dir = self.path.with_suffix("")
         self.bodies_path = self.path.with_name(self.path.stem.replace("_fields", "") + "_bodies.xdmf")
+        self.sites_path = self.path.with_name(self.path.stem.replace("_fields", "") + "_contact_sites.xdmf")
+        self.sites = sites if sites is not None and len(sites.points) else None
+        self.site_steps: list[bytes] = []
         self.solution = solution
         self.schedule = schedule
         self.interval_s = schedule.spacing_s          # the loop's tolerance scale
@@ -142,23 +170,36 @@ class FieldSeriesExport:
                 self.steps = [step_bytes(step) for step in _steps_until(self.path, resume_from_s)]
                 if self.bodies is not None:
                     self.body_steps = [step_bytes(step) for step in _steps_until(self.bodies_path, resume_from_s)]
-                    if len(self.body_steps) != len(self.steps):     # a kill between the two XMLs
-                        n = min(len(self.body_steps), len(self.steps))
-                        self.steps, self.body_steps = self.steps[:n], self.body_steps[:n]
+                if self.sites is not None:
+                    self.site_steps = [step_bytes(step) for step in _steps_until(self.sites_path, resume_from_s)]
+                # a kill between the XMLs (companions first): keep the frames every file has
+                n = min(len(self.steps), *([len(self.body_steps)] if self.bodies is not None else []),
+                        *([len(self.site_steps)] if self.sites is not None else []))
+                self.steps, self.body_steps, self.site_steps = (self.steps[:n], self.body_steps[:n],
+                                                                self.site_steps[:n])
             for stale in self.dir.glob("step_*.h5*"):       # steps of a killed run past the checkpoint
                 if _step_index(stale) >= len(self.steps):
                     stale.unlink()
             write_mesh_h5(self.dir / "mesh.h5", self.vertex)
             if self.bodies is not None:
-                b = self.bodies
-                write_h5_atomic(self.dir / "bodies.h5",
-                                {"points": b.points, "triangles": b.triangles, "body": b.body, "sector": b.sector},
+                write_bodies_h5(self.dir / "bodies.h5", self.bodies)
+            if self.sites is not None:
+                c = self.sites
+                n = len(c.points)
+                write_h5_atomic(self.dir / "contact_sites.h5",
+                                {"points": np.asarray(c.points, dtype=float),
+                                 "vertices": np.arange(n, dtype=np.int64).reshape(n, 1),
+                                 "site_area_m2": np.asarray(c.area_m2, dtype=float),
+                                 "contact": np.asarray(c.contact, dtype=np.int32)},
                                 {"points": {"units": "m"},
-                                 "body": {"meaning": "index of the cell's rigid body in names", "names": b.names},
-                                 "sector": {"meaning": "alternating stripes round a body of revolution (its spin)"}})
+                                 "site_area_m2": {"units": "m^2", "meaning": "the contact surface a site stands for: "
+                                                  "pressure x area summed over a contact's sites is its normal force"},
+                                 "contact": {"meaning": "index of the site's contact in names",
+                                             "names": list(c.names)}})
             self._replace_documents()
         self.written = self.comm.bcast(len(self.steps), root=0)
         self.has_bodies = self.comm.bcast(self.bodies is not None, root=0)
+        self.has_sites = self.comm.bcast(self.sites is not None, root=0)
         # peaks per region over the frames of the series (app.fe.derived.region_peaks), every rank; a resumed run
         # starts from the kept frames' own peaks (each step file keeps its frame's), so a kill changes nothing
         self.peaks: dict | None = None
@@ -191,16 +232,19 @@ class FieldSeriesExport:
     def files(self) -> list[str]:
         """Names of the files of the series, relative to the output directory."""
         bodies = [self.bodies_path.name, f"{self.dir.name}/bodies.h5"] if self.has_bodies else []
-        return [self.path.name, f"{self.dir.name}/mesh.h5", *bodies] + [f"{self.dir.name}/step_{k:06d}.h5"
+        sites = [self.sites_path.name, f"{self.dir.name}/contact_sites.h5"] if self.has_sites else []
+        return [self.path.name, f"{self.dir.name}/mesh.h5", *bodies, *sites] + [f"{self.dir.name}/step_{k:06d}.h5"
                                                                         for k in range(self.written)]
 
     def _document(self) -> bytes:
         return xdmf_document(self.steps, self.path.stem, getattr(self.vertex, "region_names", None))
 
     def _replace_documents(self) -> None:
-        """The bodies' XML first: a kill between the two leaves the FE series no longer than the bodies'."""
+        """The companions' XML first: a kill between them leaves the FE series no longer than theirs."""
         if self.bodies is not None:
             replace_file(self.bodies_path, xdmf_document(self.body_steps, self.bodies_path.stem))
+        if self.sites is not None:
+            replace_file(self.sites_path, xdmf_document(self.site_steps, self.sites_path.stem))
         replace_file(self.path, self._document())
 
     def write(self, t: float, body_positions=None) -> None:
@@ -210,6 +254,7 @@ class FieldSeriesExport:
         sampled = self.vertex.sample(x)
         derived, frame_peaks = self._derived(x)
         scalars = self.scalars() if self.scalars is not None else {}
+        site_state = self.sites.state() if self.sites is not None else None
         if self.rank0:
             u, phi = sampled
             k = len(self.steps)
@@ -223,6 +268,10 @@ class FieldSeriesExport:
             if self.bodies is not None:
                 datasets["bodies/displacement"] = self.bodies.displacement(body_positions)
                 attrs["bodies/displacement"] = {"units": "m", "time_s": t}
+            if site_state is not None:
+                datasets["contact_sites/displacement"], datasets[f"contact_sites/{CONTACT_PRESSURE}"] = site_state
+                attrs["contact_sites/displacement"] = {"units": "m", "time_s": t}
+                attrs[f"contact_sites/{CONTACT_PRESSURE}"] = {"units": "Pa", "time_s": t}
             write_h5_atomic(self.dir / name, datasets, attrs)
             kill_point("fields_data")                   # the step file exists, the XML does not name it yet
             step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:",
@@ -231,6 +280,8 @@ class FieldSeriesExport:
             self.steps.append(step_bytes(step))
             if self.bodies is not None:
                 self.body_steps.append(step_bytes(self._body_grid(t, name)))
+            if self.sites is not None:
+                self.site_steps.append(step_bytes(self._site_grid(t, name)))
             self._replace_documents()
         self.written += 1
         self.next_s = self._next_after(t)
@@ -238,20 +289,24 @@ class FieldSeriesExport:
 
     def _body_grid(self, t: float, step_file: str) -> ET.Element:
         """One output of the bodies: their triangles at the start and the displacement of ``step_file``."""
-        b, where = self.bodies, f"{self.dir.name}/bodies.h5"
-        grid = ET.Element("Grid", Name=BODY_GRID, GridType="Uniform")
+        return body_grid(self.bodies, t, self.dir.name, step_file)
+
+    def _site_grid(self, t: float, step_file: str) -> ET.Element:
+        """One output of the contact sites: the points at their reference position, one vertex cell each, the
+        displacement and pressure of ``step_file``, the static area and contact index."""
+        n, where, step = len(self.sites.points), f"{self.dir.name}/contact_sites.h5", f"{self.dir.name}/{step_file}"
+        grid = ET.Element("Grid", Name=SITE_GRID, GridType="Uniform")
         ET.SubElement(grid, "Time", Value=repr(float(t)))
-        topo = ET.SubElement(grid, "Topology", TopologyType="Triangle", NumberOfElements=str(len(b.triangles)),
-                             NodesPerElement="3")
-        data_item(topo, f"{where}:/triangles", b.triangles.shape, "Int")
+        topo = ET.SubElement(grid, "Topology", TopologyType="Polyvertex", NumberOfElements=str(n), NodesPerElement="1")
+        data_item(topo, f"{where}:/vertices", (n, 1), "Int")
         geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
-        data_item(geo, f"{where}:/points", b.points.shape)
-        for attr_name, kind, center, source, shape, number in (
-                ("displacement", "Vector", "Node", f"{self.dir.name}/{step_file}:/bodies/displacement",
-                 b.points.shape, "Float"),
-                ("body", "Scalar", "Cell", f"{where}:/body", b.body.shape, "Int"),
-                ("sector", "Scalar", "Cell", f"{where}:/sector", b.sector.shape, "Int")):
-            attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
+        data_item(geo, f"{where}:/points", (n, 3))
+        for attr_name, kind, source, shape, number in (
+                ("displacement", "Vector", f"{step}:/contact_sites/displacement", (n, 3), "Float"),
+                (CONTACT_PRESSURE, "Scalar", f"{step}:/contact_sites/{CONTACT_PRESSURE}", (n,), "Float"),
+                ("site_area_m2", "Scalar", f"{where}:/site_area_m2", (n,), "Float"),
+                ("contact", "Scalar", f"{where}:/contact", (n,), "Int")):
+            attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center="Node")
             data_item(attr, source, shape, number, 8 if number == "Float" else 4)
         return grid
 
@@ -266,6 +321,87 @@ class FieldSeriesExport:
         peaks = self.comm.bcast(peaks, root=0)
         merge_peaks(self.peaks, peaks)
         return fields or {}, peaks
+
+    def close(self) -> None:
+        """Nothing stays open between outputs."""
+
+
+def write_bodies_h5(path: Path, bodies) -> None:
+    """The bodies' triangles at their start (``points`` [m], ``triangles``, cell values ``body`` and ``sector``)."""
+    b = bodies
+    write_h5_atomic(path, {"points": b.points, "triangles": b.triangles, "body": b.body, "sector": b.sector},
+                    {"points": {"units": "m"},
+                     "body": {"meaning": "index of the cell's rigid body in names", "names": b.names},
+                     "sector": {"meaning": "alternating stripes round a body of revolution (its spin)"}})
+
+
+def body_grid(bodies, t: float, folder: str, step_file: str) -> ET.Element:
+    """One output of the bodies: their triangles at the start (``<folder>/bodies.h5``) and the displacement of
+    ``<folder>/<step_file>`` (``bodies/displacement``)."""
+    b, where = bodies, f"{folder}/bodies.h5"
+    grid = ET.Element("Grid", Name=BODY_GRID, GridType="Uniform")
+    ET.SubElement(grid, "Time", Value=repr(float(t)))
+    topo = ET.SubElement(grid, "Topology", TopologyType="Triangle", NumberOfElements=str(len(b.triangles)),
+                         NodesPerElement="3")
+    data_item(topo, f"{where}:/triangles", b.triangles.shape, "Int")
+    geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
+    data_item(geo, f"{where}:/points", b.points.shape)
+    for attr_name, kind, center, source, shape, number in (
+            ("displacement", "Vector", "Node", f"{folder}/{step_file}:/bodies/displacement", b.points.shape, "Float"),
+            ("body", "Scalar", "Cell", f"{where}:/body", b.body.shape, "Int"),
+            ("sector", "Scalar", "Cell", f"{where}:/sector", b.sector.shape, "Int")):
+        attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
+        data_item(attr, source, shape, number, 8 if number == "Float" else 4)
+    return grid
+
+
+class BodySeriesExport:
+    """The rigid bodies with their shapes alone, for a tier without an FE mesh (the lumped tier): the file
+    ``path`` (``transient_bodies.xdmf``, the same grid as :class:`FieldSeriesExport`'s companion) with its data in
+    ``<path stem>/``: ``bodies.h5`` once and one ``step_<k>.h5`` per frame (``bodies/displacement`` [m]). A frame
+    at t = 0 and at the first output at or after each multiple of ``interval_s``; ``write(t, z)`` as
+    FieldSeriesExport's (``z``: the packed body coordinates ``bodies`` displaces by). ``bodies``: a function
+    returning the :class:`app.transient.body_shapes.BodyMeshes` (called on rank 0). Kill-safe and resumable as
+    FieldSeriesExport."""
+
+    def __init__(self, path: Path, bodies, interval_s: float, comm, resume_from_s: float | None = None):
+        self.path = Path(path)
+        self.dir = self.path.with_suffix("")
+        self.comm = comm
+        self.schedule = FrameSchedule(interval_s, 1, interval_periods=1)
+        self.interval_s = self.schedule.spacing_s
+        self.next_s = 0.0 if resume_from_s is None else self.schedule.next_after(resume_from_s)
+        self.steps: list[bytes] = []
+        self.bodies = None
+        if comm.rank == 0:
+            self.bodies = bodies()
+            self.dir.mkdir(parents=True, exist_ok=True)
+            if resume_from_s is not None:
+                self.steps = [step_bytes(step) for step in _steps_until(self.path, resume_from_s)]
+            for stale in self.dir.glob("step_*.h5*"):       # steps of a killed run past the checkpoint
+                if _step_index(stale) >= len(self.steps):
+                    stale.unlink()
+            write_bodies_h5(self.dir / "bodies.h5", self.bodies)
+            replace_file(self.path, xdmf_document(self.steps, self.path.stem))
+        self.written = comm.bcast(len(self.steps), root=0)
+
+    def files(self) -> list[str]:
+        return [self.path.name, f"{self.dir.name}/bodies.h5"] + [f"{self.dir.name}/step_{k:06d}.h5"
+                                                                 for k in range(self.written)]
+
+    def write(self, t: float, body_positions=None) -> None:
+        if t < self.next_s - 1e-9 * self.interval_s:
+            return
+        if self.comm.rank == 0:
+            name = f"step_{len(self.steps):06d}.h5"
+            write_h5_atomic(self.dir / name, {"bodies/displacement": self.bodies.displacement(body_positions)},
+                            {"bodies/displacement": {"units": "m", "time_s": t}})
+            kill_point("fields_data")
+            self.steps.append(step_bytes(body_grid(self.bodies, t, self.dir.name, name)))
+            replace_file(self.path, xdmf_document(self.steps, self.path.stem))
+        self.written += 1
+        self.next_s = self.schedule.next_after(t)
+        kill_point("fields_written")
 
     def close(self) -> None:
         """Nothing stays open between outputs."""
