@@ -8,8 +8,11 @@ converged stator's, which the lock follows).
   mu_s N r_c with the run's own N (Coulomb: a held rotor cannot take more than every point sliding forward; 2 %
   for the contact points' spread about r_c). Measured (2026-11-26): 40.3 mN m at 0.98 N (1.45 of mu_k N r_c, 0.997
   of the Coulomb bound), 191 mN m at 4.116 N (1.64, 0.99).
-* Free rotor at 4.116 N: it turns the way the wave drives it at a speed of the order the wave gives (above 100
-  rpm; measured 1 513 rpm at no load), and the drive frequency is the locked one (the model's pair plus 0 Hz).
+* Free rotor at 4.116 N: it turns the way the wave drives it (above 10 rpm), and the drive frequency is the locked
+  one (the model's pair plus 0 Hz). The motor has two branches (docs/motor-rotor.md, "Two branches on the issue-24
+  stator"): riding the free wave's crests (this coarse mesh from the harmonic start: 1 513 rpm, 117 W drawn) and
+  wedged into the 15 deg seat (the case mesh: 60 rpm, 0.4 W); the bound holds on both, so the test does not pin
+  which one this mesh takes.
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ def test_the_held_rotor_takes_at_least_half_the_kinetic_friction_bound(runs, pre
 def test_the_free_rotor_turns_under_the_larger_preload_at_the_locked_drive(runs):
     free = runs[(4.116, "free")]
     motor = free["statistics"]["motor"]
-    assert motor["speed_rpm"] > 100.0, motor["speed_rpm"]
+    assert motor["speed_rpm"] > 10.0, motor["speed_rpm"]
     drive = free["drive"]
     assert drive["detuning_Hz"] == 0.0 and len(drive["resonances_Hz"]) == 2
     assert free["drive_frequency_Hz"] == pytest.approx(sum(drive["resonances_Hz"]) / 2, rel=1e-14)
