@@ -18,6 +18,9 @@ rotor, then the loads from the heaviest down, each from the previous point's end
 (``transient.start_from``, a warm start: docs/transient.md, "Warm starts"); ``--chain up`` runs the held rotor
 and the no-load point from the case's start, then each heavier load from the previous one. Where the motor is
 bistable the two directions may follow different branches (docs/motor-studies.md, "Two regimes").
+A warm start pays only with a rule that has no fixed minimum: ``--set 'transient.steady_state.rule="trend"'``
+(docs/transient.md, "Steady-state stop"; measured on the coarse stator in BENCHMARKS.md, "Motor curve: the trend
+steady-state rule and warm starts").
 """
 
 from __future__ import annotations
