@@ -68,7 +68,11 @@ def transient_rows(transient: dict | None) -> list[tuple[str, str, str]]:
     rows.append(("wall time per simulated ms", _number(transient.get("wall_s_per_simulated_ms")), "s"))
     steady = transient.get("steady_state")
     if steady:
-        rows.append(("steady state reached", "yes" if steady["steady"] else "no", f"after {steady['cycles']} periods"))
+        rule = f", {steady['rule']} rule" if steady.get("rule") else ""
+        rows.append(("steady state reached", "yes" if steady["steady"] else "no",
+                     f"after {steady['cycles']} periods{rule}"))
+    if transient.get("warm_start"):
+        rows.append(("warm start from", transient["warm_start"]["directory"], ""))
     stats = transient.get("statistics") or {}
     rates = stats.get("impact_rate_per_s", {})
     for name, contact in (transient.get("contacts") or {}).items():

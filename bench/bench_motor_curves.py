@@ -10,11 +10,17 @@ by an FE run of the case, see BENCHMARKS.md) times the steps the modal tier took
 the same curves.
 
     .venv/bin/python bench/bench_motor_curves.py --out /tmp/motor_curves [--points 8] [--fe-step-s 2.0]
-        [--preloads 4.116] [--set 'transient.contacts[0].sample_points=256' ...]
+        [--preloads 4.116] [--chain up|down] [--set 'transient.contacts[0].sample_points=256' ...]
 
-Each point starts from the stator's harmonic steady state with the rotor seated (the case's start); the start's
-transient (the wave decaying from its free amplitude, 300-700 periods) is paid by every point. Warm starts
-along a curve (a point continuing from its neighbour's end state) are not offered by the run loop yet.
+Without ``--chain`` each point starts from the case's start (the stator's harmonic state or rest, the rotor
+seated), and pays the start's transient (300-700 periods on the case mesh). ``--chain down`` runs the held
+rotor, then the loads from the heaviest down, each from the previous point's end state
+(``transient.start_from``, a warm start: docs/transient.md, "Warm starts"); ``--chain up`` runs the held rotor
+and the no-load point from the case's start, then each heavier load from the previous one. Where the motor is
+bistable the two directions may follow different branches (docs/motor-studies.md, "Two regimes").
+A warm start pays only with a rule that has no fixed minimum: ``--set 'transient.steady_state.rule="trend"'``
+(docs/transient.md, "Steady-state stop"; measured on the coarse stator in BENCHMARKS.md, "Motor curve: the trend
+steady-state rule and warm starts").
 """
 
 from __future__ import annotations
@@ -36,12 +42,15 @@ PRELOADS_N = (0.98, 4.116)
 COLUMNS = ("preload_N", "load_torque_N_m", "speed_rpm", "speed_rad_per_s", "friction_torque_N_m", "output_power_W",
            "electrical_power_W", "efficiency", "normal_force_N", "coulomb_torque_bound_N_m", "separation", "stick",
            "forward_slip", "backward_slip", "energy_balance_relative", "steady", "periods", "steps", "cutbacks",
-           "wall_s")
+           "wall_s", "warm_from")
 
 
-def point(out: Path, sets: list[str]) -> dict:
-    """One operating point: ``piezodyn run`` of the case with ``sets``; its row (the motor scene's statistics)."""
+def point(out: Path, sets: list[str], warm_from: Path | None = None) -> dict:
+    """One operating point: ``piezodyn run`` of the case with ``sets`` (from the end state of the run in
+    ``warm_from`` if given); its row (the motor scene's statistics)."""
     start = time.perf_counter()
+    if warm_from is not None:
+        sets = sets + [f"transient.start_from={str(Path(warm_from).resolve())!r}"]
     tr = run_case(CASE, sets, out, quiet=True)["results"]["transient"]
     wall = time.perf_counter() - start
     m = tr["statistics"]["motor"]
@@ -52,7 +61,8 @@ def point(out: Path, sets: list[str]) -> dict:
            "efficiency": m["efficiency"], "normal_force_N": m["normal_force_N"],
            "coulomb_torque_bound_N_m": m["coulomb_torque_bound_N_m"],
            "energy_balance_relative": m["energy_balance_relative"], "steady": bool(steady.get("steady")),
-           "periods": steady.get("cycles"), "steps": tr["steps"], "cutbacks": tr.get("cutbacks", 0), "wall_s": wall}
+           "periods": steady.get("cycles"), "steps": tr["steps"], "cutbacks": tr.get("cutbacks", 0), "wall_s": wall,
+           "warm_from": Path(warm_from).name if warm_from is not None else ""}
     row.update(m["fractions"])
     return row
 
@@ -87,6 +97,9 @@ def main() -> None:
     parser.add_argument("--preloads", nargs="*", type=float, default=list(PRELOADS_N), metavar="N",
                         help="axial preloads [N] (default: the paper's two)")
     parser.add_argument("--set", nargs="*", default=[], help="further --set overrides for every point")
+    parser.add_argument("--chain", choices=("up", "down"), default=None,
+                        help="warm starts: each load point from the previous one's end state, from the held rotor "
+                             "down, or from the no-load point up (default: every point from the case's start)")
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -98,10 +111,13 @@ def main() -> None:
         stall_torque = stall["friction_torque_N_m"]
         stall.update(preload_N=preload, load_torque_N_m=stall_torque)
         print(f"P = {preload} N: stall torque {stall_torque * 1e3:.4g} mN m ({stall['wall_s']:.0f} s)", flush=True)
-        for k in range(args.points):
+        previous = out / f"P{preload}_stall" if args.chain == "down" else None
+        for k in (reversed(range(args.points)) if args.chain == "down" else range(args.points)):
             load = stall_torque * k / args.points
             sets = base + [f"transient.bodies[0].rotations[0].torque_N_m={-load!r}"]
-            row = point(out / f"P{preload}_T{k}", sets)
+            row = point(out / f"P{preload}_T{k}", sets, previous)
+            if args.chain is not None:
+                previous = out / f"P{preload}_T{k}"
             row["preload_N"] = preload
             rows.append(row)
             print(f"  load {load * 1e3:7.3f} mN m: {row['speed_rpm']:7.2f} rpm, efficiency "
@@ -127,20 +143,22 @@ def main() -> None:
     speed_torque_plot(out / "motor_speed_torque.png", curves, f"WW-USM, modal tier: speed-torque at {vpp:.4g} Vpp, "
                                                 f"{case.transient.drive.frequency_Hz / 1e3:.5g} kHz")
     steps = sum(r["steps"] for r in rows)
-    report = {"points": len(rows), "wall_s": total, "steps": steps, "cutbacks": sum(r["cutbacks"] for r in rows)}
+    report = {"points": len(rows), "wall_s": total, "steps": steps, "cutbacks": sum(r["cutbacks"] for r in rows),
+              "periods": sum(r["periods"] or 0 for r in rows), "chain": args.chain}
     if args.fe_step_s:
         report["fe_tier_estimate_s"] = steps * args.fe_step_s
         report["ratio"] = report["fe_tier_estimate_s"] / total
     (out / "motor_curves.json").write_text(json.dumps({"report": report, "rows": rows}, indent=1))
     print(json.dumps(report, indent=1))
     print("| preload [N] | load [mN m] | speed [rpm] | output [mW] | electrical [mW] | efficiency [%] | "
-          "sep / stick / fwd / bwd | balance | periods |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "sep / stick / fwd / bwd | balance | periods | wall [s] | from |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['preload_N']} | {r['load_torque_N_m'] * 1e3:.3f} | {r['speed_rpm']:.2f} | "
               f"{r['output_power_W'] * 1e3:.3f} | {r['electrical_power_W'] * 1e3:.1f} | {100 * r['efficiency']:.2f} | "
               f"{r['separation']:.2f} / {r['stick']:.2f} / {r['forward_slip']:.2f} / {r['backward_slip']:.2f} | "
-              f"{r['energy_balance_relative']:.1e} | {r['periods']} |")
+              f"{r['energy_balance_relative']:.1e} | {r['periods']} | {r['wall_s']:.1f} | "
+              f"{r['warm_from'] or 'start'} |")
 
 
 if __name__ == "__main__":

@@ -181,6 +181,12 @@ SET_INPUTS = [
     (MOTOR, ["transient.steady_state.min_cycles=0"], "transient.steady_state.min_cycles"),
     (MOTOR, ["transient.steady_state.period_count=3"], "transient.steady_state.period_count"),
     (MOTOR, ["transient.bodies[0].rotations=[]"], "transient.steady_state.body"),
+    (MOTOR, ['transient.steady_state.rule="fit"'], "transient.steady_state.rule"),
+    # warm starts (transient.start_from): the modal tier's, from a result directory with a checkpoint
+    (MOTOR, ['tier="fe"', 'transient.start_from="elsewhere"'], "transient.start_from"),
+    (MOTOR, ['transient.start_from=""'], "transient.start_from"),
+    (MOTOR, ['transient.start_from="no-such-run-directory"'], "transient.start_from"),
+    (STRIP, ['tier="modal"', 'transient.start_from="elsewhere"'], "transient.start_from"),
     # excluded initial gap and seating (docs/contact.md)
     (MOTOR, [f"{_CONE}.exclude_initial_gap=1"], f"{_CONE}.exclude_initial_gap"),
     (MOTOR, [f'{_ROTOR}.seat_on="nowhere"'], f"{_ROTOR}.seat_on"),

@@ -86,6 +86,9 @@ def check_tier(case, file: str, written=None) -> None:
             raise foreign_section(tier.name, section, file)
     if case.output.contact_pressure:
         _check_contact_pressure(case, file)
+    if case.transient is not None and case.transient.start_from is not None and case.tier != "modal":
+        raise CaseError(file, "transient.start_from", f"warm starts are offered by the modal tier only (this case "
+                                                      f"runs tier {case.tier!r})")
 
 
 def _check_contact_pressure(case, file: str) -> None:

@@ -302,6 +302,13 @@ class SteadyStateSection:
     torque)."""
 
     body: str = param(doc="rigid body whose first rotation is watched (the rotor)")
+    rule: Literal["window", "trend"] = param(
+        "window", doc="'window': steady once the last window_cycles + 1 cycle means lie within the tolerance (a "
+                      "slowly drifting plateau passes it); 'trend': that, and an exponential fit of the latter half "
+                      "of the cycle means leaves a change still to come within the tolerance (a drift with no "
+                      "levelling-off is extrapolated over three times the run's age; the test must also have held at "
+                      "1/1.1 of the run's age), so plateaus and turning points do not stop the run "
+                      "(docs/transient.md, 'Steady-state stop')")
     window_cycles: int = param(20, ge=2, doc="periods over which the cycle mean may change by the tolerance")
     relative_tolerance: float = param(0.005, gt=0, lt=1, doc="largest relative change of the cycle mean")
     min_cycles: int = param(40, ge=1, doc="periods always run before the test applies")
@@ -325,6 +332,11 @@ class TransientSection:
     drive: DriveSection = param(default_factory=DriveSection, doc="see [transient.drive]")
     initial_state: Literal["rest", "harmonic"] = param(
         "rest", doc="start at rest, or from the scaled harmonic steady state (drive then V cos wt)")
+    start_from: str | None = param(
+        None, doc="modal tier: a result directory of an earlier run of the same reduced model (relative to the case "
+                  "file); start from its last checkpoint's state (structure and bodies, the clock moved back by "
+                  "whole drive periods) instead of initial_state: a warm start along a curve (docs/transient.md, "
+                  "'Warm starts')")
     loads: LoadSection = param(default_factory=LoadSection, doc="see [transient.loads]")
     bodies: list[BodySection] = param(default_factory=list, doc="rigid bodies")
     contacts: list[ContactSection] = param(default_factory=list, doc="penalty contacts")
@@ -363,6 +375,11 @@ class TransientSection:
                     raise CaseError(file, f"{prefix}.contacts[{i}].{key}",
                                     f"unknown rigid body {name!r} (bodies: {known})")
         self._check_revolution(file, prefix)
+        if self.base_motions and self.start_from is not None:
+            raise CaseError(file, f"{prefix}.start_from",
+                            "base motions ramp up from t = 0: a warm start cannot continue their ramp")
+        if self.start_from is not None and not self.start_from.strip():
+            raise CaseError(file, f"{prefix}.start_from", "is empty: give a result directory")
         if self.base_motions and self.initial_state == "harmonic":
             raise CaseError(file, f"{prefix}.initial_state",
                             "base motions start from rest (their amplitude ramps up): use 'rest'")

@@ -393,3 +393,44 @@ def _check_pointer(directory: Path, tier: str) -> dict:
             return {"error": (str(marker), None, f"run record {why or 'has no case'}")}
         return {"meta": meta, "started_only": True}
     return {"error": (out_dir, "--resume", f"no checkpoint in {out_dir} (expected {pointer})")}
+
+
+def warm_start_directory(case) -> Path:
+    """``transient.start_from`` as a path (relative to the case file)."""
+    path = Path(case.transient.start_from)
+    if not path.is_absolute() and case.source:
+        path = Path(case.source).parent / path
+    return path
+
+
+def read_warm_start(case, comm, tier: str) -> Found:
+    """The last checkpoint of the result directory ``transient.start_from`` names, on every rank: the state a warm
+    start begins from. One-line CaseError naming ``transient.start_from`` (the same on every rank) when the
+    directory holds no complete checkpoint, or one of another tier; the engine checks that the state fits its
+    model (:meth:`app.reduced.engine.ModalEngine.start`)."""
+    key = "transient.start_from"
+    directory = warm_start_directory(case)
+    verdict = None
+    if comm.rank == 0:
+        if not directory.is_dir():
+            verdict = {"error": (case.source, key, f"{directory} is not a directory (a result directory of an earlier "
+                                                   "run is needed)")}
+        elif not (directory / CHECKPOINT_DIR / POINTER).is_file():
+            verdict = {"error": (case.source, key, f"{directory} holds no checkpoint (expected "
+                                                   f"{directory / CHECKPOINT_DIR / POINTER}; a run that ended "
+                                                   "writes one)")}
+        else:
+            verdict = _check_pointer(directory / CHECKPOINT_DIR, tier)
+            if "error" in verdict:
+                file, where, why = verdict["error"]
+                verdict["error"] = (case.source, key, f"{file}{': ' + where if where else ''}: {why}")
+            elif "refused" in verdict:
+                file, where, why = verdict["refused"]
+                verdict = {"error": (case.source, key, f"{file}: {why}")}
+    verdict = comm.bcast(verdict, root=0)
+    if "error" in verdict:
+        raise CaseError(*verdict["error"])
+    meta = verdict["meta"]
+    arrays = read_on_root(directory / CHECKPOINT_DIR / f"state-{meta['seq']}.npz", comm, load_arrays,
+                          "a checkpoint state")
+    return Found(meta, arrays, directory / CHECKPOINT_DIR / POINTER)

@@ -156,7 +156,7 @@ def steady_state_watch(case, columns: dict[str, str], floors: tuple[float, float
         floor = floors[0] if free else floors[1]
     return SteadyStateWatch(cfg.body, S.body_angular_velocity(cfg.body), torques, free,
                             case.transient.drive.frequency_Hz, cfg.window_cycles, cfg.relative_tolerance,
-                            cfg.min_cycles, floor)
+                            cfg.min_cycles, floor, cfg.rule)
 
 
 def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = False,

@@ -20,6 +20,26 @@ The range over the window rather than the change between its ends, so a cycle me
 about a level (a beat between modes) is not mistaken for steady. Everything the test needs (the
 open period's partial integrals and every closed period's means) is in :meth:`snapshot`, which the
 stepper puts into the checkpoint: a resumed run decides exactly as the uninterrupted one.
+
+Two rules (``rule``), both on the closed cycle means only, so a resumed run decides as an uninterrupted one:
+
+* ``"window"`` (:func:`window_is_steady`): the window test above. A plateau that drifts slowly (0.1 % per 60
+  periods, docs/motor-studies.md "Plateaus") passes it, so the curve benches used to add a 500-period minimum.
+* ``"trend"`` (:func:`trend_is_steady`): the window test, and the slow dynamics fitted over the latter half of the
+  run, an exponential approach with a drift, ``m(k) = m_inf + B exp(-(k - k_last) / tau) + s (k - k_last)``
+  (tau on a geometric grid from half a period to a quarter of the fitted span, the three linear coefficients by least
+  squares for each tau, the best fit kept). The run is steady when the change still to come, ``|m_inf - w| +
+  |s| H`` (w the steady window's mean; the drift continued over three times the run's age, H = 3 n), is within
+  the tolerance. The decays fitted are those the span resolves (tau up to a quarter of it); a slower change is
+  fitted as the drift, which keeps decay and drift apart. A plateau drifting at rate s holds the run while
+  ``3 n s`` exceeds the tolerance, and since n grows a drift that goes on never passes: measured on synthetic
+  series shaped like the motor's (tests/test_steady_rules.py), the documented plateau (0.1 % per 60 periods)
+  and plateaus down to 0.05 % per 60 periods hold it, also under 0.1 % cycle-to-cycle noise. A second rise in
+  the fitted span bends the fit the same way. At a turning point (a decay meeting a slower rise) the drift is
+  nil for a moment, so the test must also have held when the run was 1/1.1 of its age (a recorded chained motor
+  point fell to 25.09 rpm and climbed to 26.9 rpm: without this the rule stopped on the minimum). Fitting costs
+  about a millisecond per period and runs only once the window test has passed.
+  docs/transient.md, "Steady-state stop", has the choice and the measurements.
 """
 
 from __future__ import annotations
@@ -43,15 +63,103 @@ def window_is_steady(means, window_cycles: int, relative_tolerance: float, min_c
     return bool(scale > 0 and np.ptp(window) <= relative_tolerance * max(scale, floor))
 
 
+#: the steady-state rules of ``[transient.steady_state]`` (``rule``)
+RULES = ("window", "trend")
+#: the trend rule: share of the closed periods (the latest) its fit spans
+TREND_FIT_FRACTION = 0.5
+#: the trend rule: a drift is extrapolated over this many times the run's age (closed periods)
+TREND_HORIZON = 3.0
+#: the trend rule: the decays fitted are those the span resolves, time constants up to the span / this (a slower
+#: change is fitted as the drift, and extrapolated as one)
+TREND_RESOLVED = 4.0
+#: the trend rule: time constants tried, geometric from half a period to span / TREND_RESOLVED
+TREND_TAUS = 48
+#: the trend rule: the test must hold now and when the run was 1 / (1 + this) of its age (a turning point, where a
+#: decay meets a slower rise, passes it for a moment)
+TREND_PERSISTENCE = 0.1
+
+
+def trend_fit(means, age_periods: int, window_cycles: int) -> dict:
+    """The trend rule's fit of cycle means ``means`` (the fitted span, oldest first) of a run ``age_periods``
+    closed periods old: ``m(k) = m_inf + B exp(-(k - k_last) / tau) + s (k - k_last)``, least squares in
+    (m_inf, B, s) for every tau of a geometric grid from half a period to span / TREND_RESOLVED (a decay the
+    span resolves; a slower one is fitted as the drift s, which keeps the two apart), the best fit kept.
+
+    Returns ``asymptote`` = m_inf (where the decay goes, the drift aside), ``last`` (the fitted last mean),
+    ``decay`` = |B|, ``drift_per_period`` = s, ``horizon_periods`` = TREND_HORIZON * age, ``window_mean`` (of
+    the last ``window_cycles`` means: the steady window a scene reports), ``remaining`` = |m_inf -
+    window_mean| + |s| * horizon (what the reported mean still lacks: the decay's rest seen from the window,
+    and the drift continued over the horizon), ``tau_periods`` and ``rms`` (the residual's)."""
+    y = np.asarray(means, dtype=float)
+    span = y.size
+    horizon = TREND_HORIZON * max(age_periods, span)
+    x = np.arange(-(span - 1), 1, dtype=float)          # periods relative to the last mean
+    best = None
+    for tau in np.geomspace(0.5, max(span / TREND_RESOLVED, 0.5), TREND_TAUS):
+        A = np.column_stack([np.ones(span), np.exp(-(x + (span - 1)) / tau), x])  # decay: 1 at the oldest mean
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        residual = float(np.sum((A @ coef - y) ** 2))
+        if best is None or residual < best[0] * (1 - 1e-12):
+            best = (residual, tau, coef)
+    residual, tau, (level, c, drift) = best
+    decay = float(c * math.exp(-(span - 1) / tau))      # B: the decaying term at the last mean
+    last = float(level) + decay
+    window_mean = float(np.mean(y[-window_cycles:]))
+    return {"asymptote": float(level), "last": last, "decay": abs(decay), "drift_per_period": float(drift),
+            "horizon_periods": horizon, "window_mean": window_mean,
+            "remaining": abs(float(level) - window_mean) + abs(float(drift)) * horizon,
+            "tau_periods": float(tau), "rms": math.sqrt(residual / span)}
+
+
+def trend_is_steady(means, window_cycles: int, relative_tolerance: float, min_cycles: int,
+                    floor: float = 0.0) -> bool:
+    """The trend rule on a list of cycle means: :func:`window_is_steady`, and :func:`trend_fit` of the latest
+    ``TREND_FIT_FRACTION`` of the means (at least ``window_cycles`` + 1 of them) leaves a change still to come
+    (``remaining``: the decay's rest from the steady window's mean, and the drift over three times the run's age) within
+    ``relative_tolerance`` of the larger of the span's largest magnitude and ``floor``."""
+    if not window_is_steady(means, window_cycles, relative_tolerance, min_cycles, floor):
+        return False
+    span = max(window_cycles + 1, int(math.ceil(TREND_FIT_FRACTION * len(means))))
+    recent = np.asarray(means[-span:], dtype=float)
+    scale = max(float(np.max(np.abs(recent))), floor)
+    return trend_fit(recent, len(means), window_cycles)["remaining"] <= relative_tolerance * scale
+
+
+def trend_rule_is_steady(means, window_cycles: int, relative_tolerance: float, min_cycles: int,
+                         floor: float = 0.0) -> bool:
+    """The trend rule after a period closes, n = len(means): :func:`trend_is_steady` holds now and held when the run
+    was n / (1 + TREND_PERSISTENCE) periods old (a turning point, where a decay meets a slower rise, passes the
+    test for a moment only). A function of the means (nothing else to checkpoint)."""
+    if not trend_is_steady(means, window_cycles, relative_tolerance, min_cycles, floor):
+        return False
+    earlier = int(math.floor(len(means) / (1 + TREND_PERSISTENCE)))
+    return trend_is_steady(means[:earlier], window_cycles, relative_tolerance, min_cycles, floor)
+
+
+def stop_period(rule: str, means, window_cycles: int, relative_tolerance: float, min_cycles: int,
+                floor: float = 0.0) -> int | None:
+    """The number of closed periods after which a run whose cycle means are ``means`` stops under ``rule``
+    ("window" or "trend"), as :class:`SteadyStateWatch` decides; None: not within them."""
+    test = {"window": window_is_steady, "trend": trend_rule_is_steady}[rule]
+    for n in range(1, len(means) + 1):
+        if test(means[:n], window_cycles, relative_tolerance, min_cycles, floor):
+            return n
+    return None
+
+
 class SteadyStateWatch:
     """Cycle means of a rotor's speed and contact torque, and the steady-state test."""
 
     def __init__(self, body: str, speed_column: str, torque_columns: list[str], free: bool, frequency_Hz: float,
-                 window_cycles: int, relative_tolerance: float, min_cycles: int, floor: float = 0.0):
+                 window_cycles: int, relative_tolerance: float, min_cycles: int, floor: float = 0.0,
+                 rule: str = "window"):
         """``speed_column``: the time-series column of the body's angular velocities (its first axis is watched);
         ``torque_columns``: the torque columns of the contacts acting on the body (their first axis, summed);
         ``free``: watch the speed (else the torque); ``floor``: the scale below which a change of the watched
-        quantity counts as noise (rad/s or N m, see :func:`window_is_steady`)."""
+        quantity counts as noise (rad/s or N m, see :func:`window_is_steady`); ``rule``: "window" or "trend"."""
+        if rule not in RULES:
+            raise ValueError(f"unknown steady-state rule {rule!r} (rules: {', '.join(RULES)})")
+        self.rule = rule
         self.body, self.speed_column, self.torque_columns, self.free = body, speed_column, torque_columns, free
         self.period_s = 1.0 / frequency_Hz
         self.window_cycles, self.relative_tolerance, self.min_cycles = window_cycles, relative_tolerance, min_cycles
@@ -116,8 +224,9 @@ class SteadyStateWatch:
     def _test(self) -> None:
         if not self.steady:
             column = 0 if self.free else 1
-            self.steady = window_is_steady([m[column] for m in self.means], self.window_cycles,
-                                           self.relative_tolerance, self.min_cycles, self.floor)
+            test = window_is_steady if self.rule == "window" else trend_rule_is_steady
+            self.steady = test([m[column] for m in self.means], self.window_cycles, self.relative_tolerance,
+                               self.min_cycles, self.floor)
 
     # ------------------------------------------------------------ checkpoints and results
     def snapshot(self) -> dict:
@@ -136,8 +245,13 @@ class SteadyStateWatch:
         """The summary.json block: steady or not, closed periods, the last cycle means."""
         last = self.means[-1] if self.means else [None, None]
         column = 0 if self.free else 1
-        return {"body": self.body, "watched": self.watched, "steady": self.steady, "cycles": len(self.means),
-                "window_cycles": self.window_cycles, "relative_tolerance": self.relative_tolerance,
-                "min_cycles": self.min_cycles, "floor": self.floor,
-                "cycle_mean_speed_rad_per_s": last[0], "cycle_mean_torque_N_m": last[1],
-                "cycle_means": [m[column] for m in self.means]}
+        means = [m[column] for m in self.means]
+        out = {"body": self.body, "watched": self.watched, "rule": self.rule, "steady": self.steady,
+               "cycles": len(self.means), "window_cycles": self.window_cycles,
+               "relative_tolerance": self.relative_tolerance, "min_cycles": self.min_cycles, "floor": self.floor,
+               "cycle_mean_speed_rad_per_s": last[0], "cycle_mean_torque_N_m": last[1], "cycle_means": means}
+        if self.rule == "trend" and len(means) > self.window_cycles:
+            # the last fit (of the periods the stop, or the end, saw): what the rule extrapolated
+            span = max(self.window_cycles + 1, int(math.ceil(TREND_FIT_FRACTION * len(means))))
+            out["trend"] = {"fit_periods": span, **trend_fit(means[-span:], len(means), self.window_cycles)}
+        return out

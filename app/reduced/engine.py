@@ -44,6 +44,16 @@ class ModalEngine:
         self.end_time_s = cfg.end_time_s
         self.checkpoint_interval_steps = cfg.checkpoint_interval_steps
         start = time.perf_counter()
+        self._warm = None
+        if found is None and cfg.start_from is not None:
+            # read before the model is built or loaded, and before a fresh run clears its directory (which may be
+            # the one it starts from): a bad directory costs nothing
+            from app.loop.checkpoint import read_warm_start
+
+            warm = read_warm_start(case, comm, self.tier)
+            files = warm.record.get("files") or {}
+            path = warm.pointer.parent / str(files.get("reduced_model", MODEL_FILE))
+            self._warm = (warm, read_on_root(path, comm, ReducedModel.load, "a reduced model"))
         if found is not None:
             path = found.pointer.parent / str((found.record.get("files") or {}).get("reduced_model", MODEL_FILE))
             self.model: ReducedModel = read_on_root(path, comm, ReducedModel.load, "a reduced model")
@@ -62,6 +72,10 @@ class ModalEngine:
             self.cfg = cfg = self.case.transient
             log(drive_lock_line(self.drive_lock))
         self.setup_wall_s = time.perf_counter() - start
+        # electrodes driven A cos(wt + phase) after a harmonic start, A sin from rest; a warm start keeps its
+        # source run's, a resumed run its checkpoint's
+        self.cosine_drive = cfg.initial_state == "harmonic"
+        self.warm_start: dict | None = None
         self._records()
 
     @classmethod
@@ -71,6 +85,10 @@ class ModalEngine:
         from app.fe.model import build_model
         from app.reduced.model import contact_site_sets
 
+        if case.transient.start_from is not None:       # the directory and its checkpoint; the model's fit at run
+            from app.loop.checkpoint import read_warm_start
+
+            read_warm_start(case, comm, cls.tier)
         model = build_model(case, comm)
         if model.electrodes_of("floating"):
             raise CaseError(case.source, "electrodes",
@@ -137,7 +155,7 @@ class ModalEngine:
             ph.append(0.0)
             ramps.append(m.ramp_periods / frequency)
         return lk.Inputs(np.array(kinds, np.int64), np.array(amps, float), np.array(ph, float),
-                         np.array(ramps, float), omega, self.cfg.initial_state == "harmonic")
+                         np.array(ramps, float), omega, self.cosine_drive)
 
     # ---------------------------------------------------------------- start / restore
     def _allocate(self) -> None:
@@ -191,6 +209,9 @@ class ModalEngine:
             point = model.sample_names.index(cfg.drive.point)
             per_volt = abs(model.sample_rows[point] @ self._harmonic(1.0))
             self.scale_V = target_voltage(cfg.drive.tip_amplitude_m, per_volt)
+        if cfg.start_from is not None:
+            self._warm_start()
+            return
         self.inputs_record = self._inputs(self._weights, self._phases, self.scale_V)
         P, F = self.structure.inputs, self.structure.free
         q, v, a = self.q, self.v, self.a
@@ -216,6 +237,50 @@ class ModalEngine:
         a[F] = np.linalg.solve(model.M[np.ix_(F, F)], rhs[F])
         self._bodies_at_rest()
         self._seat()
+        if self.case.output.contact_sites:
+            self.tables.geometry(self.model.site_points, self.model.site_weight)
+        self._started()
+
+    def _warm_start(self) -> None:
+        """``transient.start_from``: the structure's and the bodies' state at the end of an earlier run of the same
+        reduced model, the clock moved back by whole drive periods (the electrodes' phase unchanged, the drive's
+        sine or cosine kept from that run), the counters and energy sums from zero. A held rotation takes this
+        case's rate."""
+        from app.loop.checkpoint import warm_start_directory
+
+        cfg, model, file, key = self.cfg, self.model, self.case.source, "transient.start_from"
+        found, other = self._warm
+        directory = warm_start_directory(self.case)
+        if other.size != model.size or not (np.allclose(other.K, model.K, rtol=1e-10, atol=1e-10 * abs(model.K).max())
+                                            and np.allclose(other.M, model.M, rtol=1e-10,
+                                                            atol=1e-10 * abs(model.M).max())):
+            raise CaseError(file, key, f"the run in {directory} has another reduced model ({other.size} coordinates, "
+                                       f"this case {model.size}, or other matrices): a warm start needs the same "
+                                       "stator, mesh and reduction")
+        data = found.arrays
+        for name in ("q", "v", "a", "z", "zd", "zdd", "fstate", "site_force"):
+            if name not in data:
+                raise CaseError(file, key, f"{found.pointer}: {name!r} missing in the checkpoint's state")
+            if np.shape(data[name]) != np.shape(getattr(self, name)) and name != "fstate":
+                raise CaseError(file, key, f"the run in {directory} has another layout ({name}: "
+                                           f"{np.shape(data[name])}, this case {np.shape(getattr(self, name))}): "
+                                           "a warm start needs the same bodies and contact sites")
+        for name in ("q", "v", "a", "z", "zd", "zdd", "site_force"):
+            getattr(self, name)[:] = data[name]
+        held = ~self.bodies_record.free
+        self.zd[held] = self.bodies_record.rate[held]
+        self.zdd[held] = 0.0
+        period = 1.0 / cfg.drive.frequency_Hz
+        t0 = float(data["fstate"][lk.F_TIME])
+        self.fstate[lk.F_TIME] = max(t0 - math.floor(t0 / period + 1e-9) * period, 0.0)
+        self.fstate[lk.F_CAP] = float(data["fstate"][lk.F_CAP])
+        source_initial = ((found.record.get("case") or {}).get("transient") or {}).get("initial_state", "rest")
+        self.cosine_drive = source_initial == "harmonic"
+        self.inputs_record = self._inputs(self._weights, self._phases, self.scale_V)
+        self.warm_start = {"directory": str(directory), "source_time_s": t0, "start_time_s": self.t,
+                           "source_steps": int(data["istate"][lk.I_STEPS]) if "istate" in data else None}
+        self.log(f"modal tier: warm start from {found.pointer} (its t = {t0 * 1e3:.6g} ms, here t = "
+                 f"{self.t * 1e3:.6g} ms)")
         if self.case.output.contact_sites:
             self.tables.geometry(self.model.site_points, self.model.site_weight)
         self._started()
@@ -307,6 +372,8 @@ class ModalEngine:
             self.site_force[:] = data["site_force"]
         self.tables.restore(data, found.engine)
         self.scale_V = float(found.engine["drive_voltage_V"])
+        self.cosine_drive = bool(found.engine.get("cosine_drive", self.cfg.initial_state == "harmonic"))
+        self.warm_start = found.engine.get("warm_start")
         _, self._weights, self._phases = electrode_amplitudes(self.case, self.electrodes)
         self.inputs_record = self._inputs(self._weights, self._phases, self.scale_V)
         self._started()
@@ -461,7 +528,8 @@ class ModalEngine:
                   "istate": self.istate, "fstate": self.fstate, "sums_dissipated": self.sums.dissipated,
                   "sums_power": self.sums.power, "sums_damping": self.sums.damping, "site_force": self.site_force,
                   **site_arrays}
-        record = {"drive_voltage_V": self.scale_V, **site_record}
+        record = {"drive_voltage_V": self.scale_V, "cosine_drive": self.cosine_drive, "warm_start": self.warm_start,
+                  **site_record}
         return (arrays if self.comm.rank == 0 else None), record
 
     def checkpoint_files(self, out_dir: Path) -> dict[str, str]:
@@ -523,7 +591,8 @@ class ModalEngine:
         out = {"newton_iterations": int(self.istate[lk.I_NEWTON]), "attempts": int(self.istate[lk.I_ATTEMPTS]),
                "cutbacks": int(self.istate[lk.I_CUTBACKS]), "event_refinements": int(self.istate[lk.I_REFINEMENTS]),
                "drive_voltage_V": self.scale_V, "drive_frequency_Hz": cfg.drive.frequency_Hz,
-               "initial_state": cfg.initial_state, "stepping_wall_time_s": self._loop_wall,
+               "initial_state": cfg.initial_state, "warm_start": self.warm_start,
+               "stepping_wall_time_s": self._loop_wall,
                **({"drive": self.drive_lock} if self.drive_lock is not None else {}),
                "reduction": {"interface_dofs": model.n_interface, "electrodes": list(self.electrodes),
                              "inputs": list(model.inputs),
