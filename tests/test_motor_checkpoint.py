@@ -210,7 +210,7 @@ def test_motor_trend_rule_resume_equals_one_run(shared_tmp):
     run_case_quiet(CASE, split, *trend, f"transient.end_time_s={HALF_S!r}")
     from app.runner import run_case
 
-    run_case(CASES / CASE, trend, split, quiet=True, resume=True)
+    run_case(CASE, trend, split, quiet=True, resume=True)
     comm.barrier()
     if comm.rank == 0:
         assert_same_run(whole, split)
@@ -257,7 +257,7 @@ def test_motor_warm_start_continues_the_state_it_starts_from(one_go, tmp_path):
     run_case_quiet(CASE, split, *warm_sets, f"transient.end_time_s={3 / 36065.0!r}")
     from app.runner import run_case
 
-    run_case(CASES / CASE, warm_sets, split, quiet=True, resume=True)
+    run_case(CASE, warm_sets, split, quiet=True, resume=True)
     assert_same_run(warm, split)
 
 
@@ -271,7 +271,7 @@ def test_motor_warm_start_errors_are_one_line(capsys, one_go, tmp_path):
 
     def run(command, source, *more):
         flags = ("--out", tmp_path / "out", "--quiet") if command == "run" else ()
-        return cli_main(capsys, command, CASES / CASE, *flags,
+        return cli_main(capsys, command, CASE, *flags,
                         *_cli_sets(SETS + [f"transient.start_from={str(source)!r}", *more]))
 
     for command in ("validate", "run"):
