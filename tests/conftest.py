@@ -49,3 +49,21 @@ def run_case_quiet(case, out, *overrides):
     from app.runner import run_case
 
     return run_case(CASES / case if not Path(case).is_absolute() else case, list(overrides), out, quiet=True)
+
+
+@pytest.fixture
+def reduced_builds(monkeypatch, tmp_path):
+    """The number of reduced-model builds so far (a list of one count, every call of
+    app.reduced.model.build_reduced_model, the one function that builds), the cache in ``tmp_path``."""
+    from app.reduced import model
+
+    monkeypatch.setenv("PIEZODYN_CACHE_DIR", str(tmp_path / "cache"))
+    count = [0]
+    build = model.build_reduced_model
+
+    def counted(*args, **kwargs):
+        count[0] += 1
+        return build(*args, **kwargs)
+
+    monkeypatch.setattr(model, "build_reduced_model", counted)
+    return count

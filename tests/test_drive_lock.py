@@ -66,24 +66,14 @@ def test_the_fe_tier_locks_to_its_own_modal_resonance(tmp_path):
 
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="counts the builds of one process")
-def test_a_detuning_sweep_of_the_modal_tier_builds_once_and_follows_the_reduced_resonance(monkeypatch, tmp_path):
-    from app.reduced import model
+def test_a_detuning_sweep_of_the_modal_tier_builds_once_and_follows_the_reduced_resonance(reduced_builds, tmp_path):
     from app.sweep import parse_param, run_sweep
 
-    monkeypatch.setenv("PIEZODYN_CACHE_DIR", str(tmp_path / "cache"))
-    count = [0]
-    build = model.build_reduced_model
-
-    def counted(*args, **kwargs):
-        count[0] += 1
-        return build(*args, **kwargs)
-
-    monkeypatch.setattr(model, "build_reduced_model", counted)
     sets = TINY + ['tier="modal"', "reduction.enrich_modes=1", "damping.material_quality=false"]
     rows = run_sweep(str(DRILL), [parse_param("transient.drive.detuning_Hz=-40.0,0.0,40.0")], tmp_path / "sweep",
                      sets=sets, comm=None, progress=False)
     assert rows is not None and not any("_failed" in r for r in rows), rows
-    assert count[0] == 1
+    assert reduced_builds[0] == 1
     drives = []
     for point in sorted((tmp_path / "sweep").glob("*/summary.json")):
         transient = json.loads(point.read_text())["results"]["transient"]

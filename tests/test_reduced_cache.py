@@ -22,20 +22,9 @@ TINY = ['tier="modal"', "geometry.parameters.mesh_size_m=0.004", "geometry.param
 
 
 @pytest.fixture
-def builds(monkeypatch, tmp_path):
-    """The number of reduced-model builds so far (a list of one count), the cache in ``tmp_path``."""
-    from app.reduced import model
-
-    monkeypatch.setenv("PIEZODYN_CACHE_DIR", str(tmp_path / "cache"))
-    count = [0]
-    build = model.build_reduced_model
-
-    def counted(*args, **kwargs):
-        count[0] += 1
-        return build(*args, **kwargs)
-
-    monkeypatch.setattr(model, "build_reduced_model", counted)
-    return count
+def builds(reduced_builds):
+    """The number of reduced-model builds so far (a list of one count), the cache in ``tmp_path`` (conftest.py)."""
+    return reduced_builds
 
 
 def _sweep(tmp_path, name, param, sets=()):
