@@ -317,16 +317,19 @@ def run_fe(case: Case, out: Path, comm, log, timer: PhaseTimer, summary: dict, r
 def run_transient_analysis(case: Case, out: Path, comm, log, resume: bool) -> dict:
     """The transient analysis of ``case`` in its tier's engine, through the one run loop; then the scene's
     statistics and outputs (from the written series)."""
-    from app.drive import locked_case
     from app.loop.loop import run_transient
 
     scene = scene_of(case)
     cls = engine_class(case.tier)
     floors = scene.steady_floors(case) if scene is not None else (0.0, 0.0)
-    results = run_transient(lambda found: cls(case, comm, log, found), case, out, comm, log, resume, floors)
-    if results.get("drive"):
-        # the scene reads the drive frequency the run had (a drive locked to the resonance: app/drive.py)
-        case = locked_case(case, results["drive"]["resonances_Hz"])[0]
+    engines = []
+
+    def make_engine(found):
+        engines.append(cls(case, comm, log, found))
+        return engines[-1]
+
+    results = run_transient(make_engine, case, out, comm, log, resume, floors)
+    case = engines[-1].case     # as the engine ran it: a drive locked to the resonance has its frequency resolved
     results["scene"] = case.scene
     results["plot"] = plot_spec_of_case(to_dict(case))
     add_scene_results(results, case, out, comm)
