@@ -162,6 +162,10 @@ SET_INPUTS = [
     (MOTOR, [f'{_ROTOR}.rotations[0].motion="fixed"', f"{_ROTOR}.rotations[0].brake_N_m_s_per_rad=0.1"],
      f"{_ROTOR}.rotations[0].brake_N_m_s_per_rad"),
     (MOTOR, ["reduction.interface_nodes=100000"], "reduction.interface_nodes"),      # more than the band has
+    # the band interface: ring sampling with interpolated sites only
+    (MOTOR, ['reduction.interface="band"', 'reduction.site_displacement="field"'], "reduction.interface"),
+    (FE, ['tier="modal"', 'reduction.interface="band"'], "reduction.interface"),
+    (MOTOR, ['reduction.interface="ring"'], "reduction.interface"),
     (MOTOR, ["reduction.ring_points=64"], "reduction.ring_points"),                   # a key of the old motor path
     # cone obstacle, brake, steady-state stop (the motor case: caught before its mesh is built)
     (MOTOR, [f"{_CONE}.axis=[0.0, 0.0, 2.0]"], f"{_CONE}.axis"),

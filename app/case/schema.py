@@ -259,6 +259,12 @@ class ReductionSection:
         None, ge=1, le=4096, doc="nodes of each sampled surface kept as interface coordinates (all their displacement "
                                  "DOFs): default all of them (sampling 'nodes'), 64 evenly round the contact circle "
                                  "(sampling 'ring'); fewer: a smaller basis (docs/reduced.md: convergence)")
+    interface: Literal["nodes", "band"] = param(
+        "nodes", doc="a ring-sampled contact's interface coordinates: the displacements of its interface nodes (each "
+                     "carries the sites' forces as a point load, whose local compliance grows as the mesh is refined), "
+                     "or 'band': the same stations, with every node of the contact band following their cubic-in-angle "
+                     "interpolation (the band moves as a ring, the sites' forces spread over it: docs/reduced.md, "
+                     "'The band interface')")
     site_displacement: Literal["interface", "field"] = param(
         "interface", doc="a ring-sampled site's displacement: interpolated from the interface nodes (cubic in angle; "
                          "its force acts on interface coordinates only), or the reduced field at the point")

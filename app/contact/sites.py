@@ -102,9 +102,11 @@ def interpolation_stencil(node_angles: np.ndarray, point_angles: np.ndarray, ord
 
 
 def ring_sites(contact_index: int, section, case, body, nodes, area_m2: float, n_points: int, n_interface: int,
-               rule: str, prefix: str) -> SiteSet:
+               rule: str, prefix: str, band: bool = False) -> SiteSet:
     """Ring sampling of a surface contact (module docstring): ``nodes`` are the facet group's nodes
-    (app/reduced/surface.py SurfaceNodes), ``area_m2`` its area."""
+    (app/reduced/surface.py SurfaceNodes), ``area_m2`` its area. ``band``: the band interface
+    (:func:`ring_band_patterns`): ``n_interface`` stations on each edge of the band (its lowest and highest
+    nodes along the axis), the band and the sites interpolated cubically in angle and linearly in height."""
     file = case.source
     axis, centre, radius = contact_circle(section, case, body)
     e1, e2 = in_plane_basis(axis)
@@ -122,17 +124,40 @@ def ring_sites(contact_index: int, section, case, body, nodes, area_m2: float, n
     if k > nodes.size:
         raise CaseError(file, "reduction.interface_nodes", f"the facet group of {prefix} has only {nodes.size} nodes")
     targets = (2 * math.pi * np.arange(k) / k)
-    target_xyz = centre + h_c * axis + radius * (np.outer(np.cos(targets), e1) + np.outer(np.sin(targets), e2))
-    chosen = [int(np.argmin(np.linalg.norm(xyz - t, axis=1))) for t in target_xyz]
-    if len(set(chosen)) != k:
+    site_angles = 2 * math.pi * (np.arange(n_points) + 0.5) / n_points
+    h_lo, h_hi = float(height.min()), float(height.max())
+    if band and h_hi - h_lo > 1e-9 * max(radius, 1e-30):
+        # stations on both edges of the band: the band can tilt across its height, as the wave's bending tilts it
+        chosen = []
+        for level in (h_lo, h_hi):
+            on_edge = np.flatnonzero(np.abs(height - level) <= 1e-3 * (h_hi - h_lo))
+            gap = np.abs((angles_nodes[on_edge][None, :] - targets[:, None] + math.pi) % (2 * math.pi) - math.pi)
+            chosen += [int(on_edge[i]) for i in np.argmin(gap, axis=1)]
+        heights = np.array([h_lo, h_hi])
+
+        def level_weights(h):
+            upper = np.clip((np.asarray(h) - h_lo) / (h_hi - h_lo), 0.0, 1.0)
+            return np.stack([1.0 - upper, upper], axis=-1)
+    else:
+        target_xyz = centre + h_c * axis + radius * (np.outer(np.cos(targets), e1) + np.outer(np.sin(targets), e2))
+        chosen = [int(np.argmin(np.linalg.norm(xyz - t, axis=1))) for t in target_xyz]
+        heights = np.array([h_c])
+
+        def level_weights(h):
+            return np.ones((np.size(h), 1))
+    if len(set(chosen)) != len(chosen):
         raise CaseError(file, "reduction.interface_nodes", f"more interface nodes than {prefix}'s facet group has "
                                                            "round its contact circle: use fewer")
     if (nodes.global_dofs[chosen] < 0).any():
         raise CaseError(file, f"{prefix}.facets", "the contact surface touches a support")
-    site_angles = 2 * math.pi * (np.arange(n_points) + 0.5) / n_points
     points = centre + h_c * axis + radius * (np.outer(np.cos(site_angles), e1) + np.outer(np.sin(site_angles), e2))
     ring = {"axis": axis, "centre": centre, "e1": e1, "e2": e2, "node_angles": angles_nodes[chosen],
-            "site_angles": site_angles, "rule": rule}
+            "site_angles": site_angles, "rule": rule,
+            # stations: ``levels`` rings of k interface nodes (level-major), each point's weight per level
+            "levels": heights.size, "site_level_weights": level_weights(np.full(n_points, h_c)),
+            # every node of the band, for the band interface (ring_band_patterns)
+            "band_angles": angles_nodes, "band_dofs": nodes.global_dofs, "band_xyz": xyz,
+            "band_level_weights": level_weights(height)}
     return SiteSet(contact_index, section.name, points, np.full(n_points, area_m2 / n_points),
                    nodes.global_dofs[chosen], None, ring)
 
@@ -140,21 +165,73 @@ def ring_sites(contact_index: int, section, case, body, nodes, area_m2: float, n
 def ring_interface_rows(ring: dict, n_interface_before: int, gdim: int, n_columns: int) -> np.ndarray:
     """Rows (n_sites * 3, n_columns) of the ring's sites interpolated from its interface nodes (whose
     coordinates start at ``n_interface_before``, gdim per node in component order): cubic Lagrange in angle of
-    the cylindrical components."""
-    node_angles, site_angles, axis = ring["node_angles"], ring["site_angles"], ring["axis"]
-    idx, weights = interpolation_stencil(node_angles, site_angles)
-    node_frames = cylindrical_frames(node_angles, ring["e1"], ring["e2"], axis)
+    the cylindrical components, within each level of stations (one; two for the band interface, then linear in
+    height between them)."""
+    site_angles, axis = ring["site_angles"], ring["axis"]
+    levels = ring.get("levels", 1)
+    per_level = ring["node_angles"].size // levels
     site_frames = cylindrical_frames(site_angles, ring["e1"], ring["e2"], axis)
     rows = np.zeros((site_angles.size * 3, n_columns))
-    for c in range(site_angles.size):
-        for s in range(idx.shape[1]):
-            j = idx[c, s]
-            # global at the site = F_c^T (local at the site) = F_c^T w F_j (global at node j)
-            block = weights[c, s] * site_frames[c].T @ node_frames[j]
-            for r in range(3):
-                for kk in range(gdim):
-                    rows[3 * c + r, n_interface_before + gdim * j + kk] += block[r, kk]
+    for level in range(levels):
+        node_angles = ring["node_angles"][level * per_level:(level + 1) * per_level]
+        idx, weights = interpolation_stencil(node_angles, site_angles)
+        if levels > 1:
+            weights = weights * ring["site_level_weights"][:, level:level + 1]
+        node_frames = cylindrical_frames(node_angles, ring["e1"], ring["e2"], axis)
+        first = n_interface_before + gdim * level * per_level
+        for c in range(site_angles.size):
+            for s in range(idx.shape[1]):
+                j = idx[c, s]
+                # global at the site = F_c^T (local at the site) = F_c^T w F_j (global at node j)
+                block = weights[c, s] * site_frames[c].T @ node_frames[j]
+                for r in range(3):
+                    for kk in range(gdim):
+                        rows[3 * c + r, first + gdim * j + kk] += block[r, kk]
     return rows
+
+
+def ring_band_patterns(ring: dict, interface_dofs: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """The band interface (``reduction.interface = "band"``): each interface coordinate of a ring, interface node k's
+    global component c (its DOF ``interface_dofs[k, c]``), as a displacement pattern of every node of the contact
+    band: node j moves by w_jk F_j^T F_k e_c, the same periodic cubic Lagrange interpolation in angle of the
+    cylindrical components as the sites' rows (:func:`ring_interface_rows`). Returns {interface DOF: (global DOFs,
+    values)}; held DOFs (-1) are left out. At an interface node the pattern is the unit displacement of that DOF
+    (Lagrange weights), so the coordinate is still the node's displacement; between them the band follows the
+    interpolation instead of being free, so the sites' forces act on the band as loads spread over it rather than
+    as point loads on a few nodes, whose local compliance does not converge (3D: it grows like 1/h)."""
+    band_angles, band_dofs = ring["band_angles"], ring["band_dofs"]
+    levels = ring.get("levels", 1)
+    per_level = ring["node_angles"].size // levels
+    band_frames = cylindrical_frames(band_angles, ring["e1"], ring["e2"], ring["axis"])
+    gdim = band_dofs.shape[1]
+    collected: dict[int, tuple[list, list]] = {}
+    for level in range(levels):
+        station_angles = ring["node_angles"][level * per_level:(level + 1) * per_level]
+        idx, weights = interpolation_stencil(station_angles, band_angles)
+        weights = weights * ring["band_level_weights"][:, level:level + 1]
+        station_frames = cylindrical_frames(station_angles, ring["e1"], ring["e2"], ring["axis"])
+        for j in range(band_angles.size):
+            for s in range(idx.shape[1]):
+                if weights[j, s] == 0.0:
+                    continue
+                k = level * per_level + idx[j, s]
+                # global at band node j = F_j^T w F_k (global at station k)
+                block = weights[j, s] * band_frames[j].T @ station_frames[idx[j, s]]
+                for c in range(gdim):
+                    key = int(interface_dofs[k, c])
+                    if key < 0:
+                        continue
+                    dofs, values = collected.setdefault(key, ([], []))
+                    for r in range(gdim):
+                        if band_dofs[j, r] >= 0 and block[r, c] != 0.0:
+                            dofs.append(int(band_dofs[j, r]))
+                            values.append(float(block[r, c]))
+    out = {}
+    for key, (dofs, values) in collected.items():
+        dofs_arr, values_arr = np.asarray(dofs, dtype=np.int64), np.asarray(values)
+        unique, inverse = np.unique(dofs_arr, return_inverse=True)
+        out[key] = (unique, np.bincount(inverse, weights=values_arr, minlength=unique.size))
+    return out
 
 
 def site_frames(points: np.ndarray, normals: np.ndarray, spin_axis: np.ndarray | None, lever_origin: np.ndarray
@@ -255,9 +332,12 @@ def contact_site_sets(case, model):
             raise CaseError(file, f"{key}.facets", f"facet group {c.facets!r} has no nodes")
         areas[i] = float(nodes.area_m2.sum())
         if c.sampling == "ring":
+            if case.reduction.interface == "band" and case.reduction.site_displacement != "interface":
+                raise CaseError(file, "reduction.interface", '"band" needs reduction.site_displacement = "interface" '
+                                                             "(the sites interpolated from the band's stations)")
             k = case.reduction.interface_nodes or min(64, nodes.size)
             sets.append(ring_sites(i, c, case, bodies[c.body], nodes, areas[i], c.sample_points, k,
-                                   case.reduction.site_displacement, key))
+                                   case.reduction.site_displacement, key, band=case.reduction.interface == "band"))
             continue
         points = np.zeros((nodes.size, 3))
         points[:, :gdim] = nodes.coordinates_m
@@ -266,6 +346,8 @@ def contact_site_sets(case, model):
             raise CaseError(file, "reduction.interface_nodes", f"the facet group of {key} has only {nodes.size} nodes")
         chosen = np.arange(nodes.size) if k is None else farthest_point_subset(points, k)
         sets.append(SiteSet(i, c.name, points, nodes.area_m2, nodes.global_dofs[chosen], nodes.global_dofs))
+    if case.reduction.interface == "band" and not any(s.ring is not None for s in sets):
+        raise CaseError(file, "reduction.interface", '"band" needs a surface contact with sampling = "ring"')
     interface: list[int] = []
     seen = set()
     for s in sets:

@@ -121,7 +121,8 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
                  n_modes: int | None = None, cutoff_Hz: float | None = None,
                  damping_vectors: bool = True, n_enrich: int = 0,
                  enrich_near_Hz: float | None = None,
-                 patterns: dict[str, tuple[np.ndarray, np.ndarray]] | None = None) -> ReducedBasis:
+                 patterns: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
+                 interface_patterns: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> ReducedBasis:
     """Craig-Bampton basis and projected operators.
 
     ``K, M, C``: assembled without boundary conditions (full u-phi numbering). ``fixed_local``: local
@@ -132,7 +133,10 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
     ``n_enrich`` > 0 adds the full model's ``n_enrich`` modes nearest ``enrich_near_Hz`` (interface free,
     electrodes held) to the basis. ``patterns``: prescribed displacement patterns (a base motion's spatial
     parts), name -> (local DOFs, their values at unit amplitude): each an input coordinate after the
-    electrodes, its static mode the response to that pattern with every other boundary held."""
+    electrodes, its static mode the response to that pattern with every other boundary held.
+    ``interface_patterns``: interface DOF -> (global DOFs, values): that interface coordinate's static mode
+    prescribes this pattern instead of the DOF's unit displacement (the band interface,
+    app/contact/sites.py ring_band_patterns); every DOF of a pattern is held in the fixed-interface modes."""
     if n_modes is None and cutoff_Hz is None:
         raise ValueError("give n_modes or cutoff_Hz")
     comm = K.getComm().tompi4py()
@@ -153,7 +157,11 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
         g = local_to_global[np.asarray(local, dtype=np.int32)]
         keep = (g >= lo) & (g < hi)
         pattern_owned[name] = (g[keep].astype(PETSc.IntType), np.asarray(values, dtype=float)[keep])
-    held = np.unique(np.concatenate([owned_global(fixed_local), _owned_rows(K, interface)]
+    interface_patterns = interface_patterns or {}
+    band_owned = np.unique(np.concatenate([np.zeros(0, np.int64)] + [
+        _owned_rows(K, np.asarray(dofs, dtype=np.int64)) for dofs, _ in interface_patterns.values()])
+    ).astype(PETSc.IntType)
+    held = np.unique(np.concatenate([owned_global(fixed_local), _owned_rows(K, interface), band_owned]
                                     + list(electrode_owned.values())
                                     + [g for g, _ in pattern_owned.values()])).astype(PETSc.IntType)
 
@@ -170,9 +178,16 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
     columns: list[PETSc.Vec] = []
     boundary_values = K.createVecRight()
     rhs = K.createVecLeft()
-    unit_sets = [np.array([g], dtype=PETSc.IntType) if lo <= g < hi else np.zeros(0, PETSc.IntType)
-                 for g in interface]
-    unit_sets = [(owned, np.ones(owned.size)) for owned in unit_sets]
+    unit_sets = []
+    for g in interface:
+        if int(g) in interface_patterns:
+            dofs, values = interface_patterns[int(g)]
+            dofs = np.asarray(dofs, dtype=np.int64)
+            mine = (dofs >= lo) & (dofs < hi)
+            unit_sets.append((dofs[mine].astype(PETSc.IntType), np.asarray(values, dtype=float)[mine]))
+        else:
+            owned = np.array([g], dtype=PETSc.IntType) if lo <= g < hi else np.zeros(0, PETSc.IntType)
+            unit_sets.append((owned, np.ones(owned.size)))
     unit_sets += [(electrode_owned[name], np.ones(electrode_owned[name].size)) for name in electrodes]
     unit_sets += [pattern_owned[name] for name in patterns]
     from app.progress import Progress
@@ -210,7 +225,7 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
                                                           + [g for g, _ in pattern_owned.values()])
                                            ).astype(PETSc.IntType)
         enrichment_Hz, extra = _enrichment_vectors(K, M, W, support_and_electrodes - lo, n_enrich, enrich_near_Hz,
-                                                   columns[:interface.size], interface, modes, comm)
+                                                   columns[:interface.size], interface, modes, comm, band_owned)
         modes += extra
     if C is not None and damping_vectors:
         modes += _damping_vectors(C, M, ksp, held, columns[interface.size:interface.size + len(electrodes)], modes,
@@ -233,10 +248,14 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
                         charge_rows, columns, comm, enrichment_Hz)
 
 
-def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint_modes, interface, modes, comm):
+def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint_modes, interface, modes, comm,
+                        band_owned=None):
     """The full model's ``n_enrich`` modes nearest ``near_Hz`` (``held_owned_local`` held, the interface free), each
     less its constraint-mode part (so it vanishes on the interface, like Phi) and M-orthogonalised against
-    ``modes`` and each other: interior vectors whose span, with the constraint modes, holds the full modes."""
+    ``modes`` and each other: interior vectors whose span, with the constraint modes, holds the full modes.
+    With the band interface (``band_owned``: the band's owned DOFs) what is left on the band between the stations
+    (the mode's band displacement less its interpolation) is set to zero: the basis holds the full mode as the
+    band interface constrains it."""
     from app.fe.operators import Operators
     from app.modal import solve_modes
 
@@ -259,6 +278,9 @@ def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint
         for value, psi in zip(at_interface, constraint_modes):
             if value:
                 z.axpy(-float(value), psi)
+        if band_owned is not None and band_owned.size:
+            z.setValues(band_owned, np.zeros(band_owned.size))
+            z.assemble()
         norm0 = math.sqrt(abs(z.dot(_mult(M, z, M_z))))
         for _ in range(2):      # classical Gram-Schmidt, twice (Kahan's "twice is enough")
             for phi in modes + out:

@@ -153,6 +153,8 @@ def cache_key(case) -> str:
     reduction = dict(data["reduction"])
     for key in ("cutoff_Hz", "cutoff_factor", "enrich_near_Hz"):
         reduction.pop(key, None)
+    if reduction.get("interface") == "nodes":       # the default: the keys of models built before the key existed
+        reduction.pop("interface")
     red = case.reduction
     reduction["cutoff_Hz_used"] = None if red.n_modes is not None else (
         red.cutoff_Hz if red.cutoff_Hz is not None else red.cutoff_factor * cfg["drive"]["frequency_Hz"])
@@ -252,9 +254,19 @@ def build_reduced_model(case, comm, log) -> ReducedModel:
         f"{len(patterns)} base-motion patterns, fixed-interface modes "
         + (f"up to {cutoff:.0f} Hz" if cutoff is not None else f"{red.n_modes}"))
     mark = time.perf_counter()
+    band_patterns = {}
+    if red.interface == "band":
+        from app.contact.sites import ring_band_patterns
+
+        for s in sets:
+            if s.ring is not None:
+                band_patterns.update(ring_band_patterns(s.ring, s.interface_dofs))
+        log(f"modal tier: band interface: {sum(v[0].size for v in band_patterns.values())} band DOF entries follow "
+            f"{len(band_patterns)} interface coordinates")
     basis = reduce_model(ops.K, ops.M, ops.C, model.W, fixed, interface, electrodes, n_modes=red.n_modes,
                          cutoff_Hz=cutoff, n_enrich=red.enrich_modes,
-                         enrich_near_Hz=red.enrich_near_Hz or cfg.drive.frequency_Hz, patterns=patterns)
+                         enrich_near_Hz=red.enrich_near_Hz or cfg.drive.frequency_Hz, patterns=patterns,
+                         interface_patterns=band_patterns)
     phases["reduction (static modes, eigen, enrichment, projection)"] = time.perf_counter() - mark
     mark = time.perf_counter()
     n = basis.size
