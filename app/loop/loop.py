@@ -11,12 +11,13 @@ returns their time-series rows; the loop then exports (series, fields), checkpoi
     found ? engine.restore(found) : (mark started, engine.start())
     while t < end and not steady:
         rows = engine.advance(end, steps to the next checkpoint, next field output or period end)
-        series.write_block(rows); fields; steady.update_block(rows); progress
-        checkpoint when due
+        series.write_block(rows); fields (buffered); steady.update_block(rows); progress
+        checkpoint when due (the buffered field frames written first)
     checkpoint at the end; results = the common keys + engine.results()
 
-A checkpoint is written after complete steps only (series flushed to the rows it names), so a run killed at
-any moment resumes to the same series, bit for bit (tests/test_*_checkpoint.py kill it at every named point).
+A checkpoint is written after complete steps only (series flushed to the rows it names, the buffered field frames
+written), so a run killed at any moment resumes to the same series, bit for bit (tests/test_*_checkpoint.py kill it
+at every named point).
 """
 
 from __future__ import annotations
@@ -82,7 +83,7 @@ class Engine(Protocol):
         """Files of its own the engine writes into the checkpoint directory once per run (key -> name)."""
 
     def field_export(self, out_dir: Path, resume_from_s: float | None):
-        """An :class:`app.transient.fields.FieldSeriesExport`-like object (``write(t, z)``, ``next_s``,
+        """An :class:`app.transient.fields.FieldSeriesExport`-like object (``write(t, z)``, ``flush()``, ``next_s``,
         ``interval_s``, ``close()``, ``files()``, ``path``, ``written``) or None (no FE fields)."""
 
     def body_positions(self) -> np.ndarray:
@@ -229,13 +230,16 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
                 field_wall += time.perf_counter() - mark
             progress.update(engine.t)
             if checkpoint.due(engine.steps) or steady:
+                field_wall += _flush(fields)
                 mark = time.perf_counter()
                 checkpointed = _checkpoint(engine, checkpoint, series, watch)
                 checkpoint_wall += time.perf_counter() - mark
         if checkpointed != engine.steps:
+            field_wall += _flush(fields)
             mark = time.perf_counter()
             _checkpoint(engine, checkpoint, series, watch)
             checkpoint_wall += time.perf_counter() - mark
+        field_wall += _flush(fields)
     finally:
         progress.close()
         series.close()
@@ -268,6 +272,17 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
         results["outputs"].append(S.SERIES_CSV)
     engine.close()
     return results
+
+
+def _flush(fields) -> float:
+    """Write the field frames the export buffers (app/transient/fields.py): before every checkpoint, so each frame
+    at or before the checkpoint's time is on disk when the checkpoint is (a resumed run writes only the later
+    ones again). Returns its wall time [s]."""
+    if fields is None:
+        return 0.0
+    mark = time.perf_counter()
+    fields.flush()
+    return time.perf_counter() - mark
 
 
 def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, watch) -> int:

@@ -620,7 +620,8 @@ class ModalEngine:
 
 class ReducedVertexFields:
     """The field output's vertex values from the reduced model's vertex basis (app/exports.py VertexFields'
-    interface): displacement [m] and potential [V] at the mesh vertices = V q, on rank 0."""
+    interface): displacement [m] and potential [V] at the mesh vertices = V q, on rank 0; ``expand`` forms a
+    batch of frames at once (app/transient/fields.py writes the modal tier's frames through it)."""
 
     def __init__(self, model: ReducedModel, comm, derived=()):
         self.comm = comm
@@ -648,6 +649,29 @@ class ReducedVertexFields:
         values = self.model.vertex_basis @ q
         n = self.n_nodes
         return values[:3 * n].reshape(n, 3), values[3 * n:]
+
+    def expand(self, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, dict, dict | None]]:
+        """The frames of the coordinates ``q`` (size, frames) on rank 0: [(displacement (n, 3) [m], potential (n,)
+        [V], derived vertex fields, peaks per region or None)], one per column. One product of the vertex basis
+        (and of the derived basis) with all the columns: the basis is read once per batch, not once per frame."""
+        from app.fe.derived import RAW_COLUMNS, node_fields, region_peaks
+
+        q = np.asarray(q, dtype=float).reshape(self.model.vertex_basis.shape[1], -1)
+        n, frames = self.n_nodes, q.shape[1]
+        values = self.model.vertex_basis @ q
+        u, phi = values[:3 * n].reshape(n, 3, frames), values[3 * n:]
+        pairs = None
+        if self.derived:
+            pairs = (self.model.derived_basis @ q).reshape(self.averaging.size, RAW_COLUMNS, frames)
+        out = []
+        for k in range(frames):
+            fields, peaks = {}, None
+            if pairs is not None:
+                frame = np.ascontiguousarray(pairs[:, :, k])
+                fields = node_fields(self.averaging.at_vertices(frame), self.derived)
+                peaks = region_peaks(frame, self.averaging.pair_region, self.regions)
+            out.append((np.ascontiguousarray(u[:, :, k]), np.ascontiguousarray(phi[:, k]), fields, peaks))
+        return out
 
     def derived_frame(self, q: np.ndarray):
         """(derived vertex fields, peaks per region) of the frame (rank 0; (None, None) elsewhere): the basis's
