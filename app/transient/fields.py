@@ -155,6 +155,27 @@ class _Frame:
     sites: tuple | None = None
 
 
+class _StepTemplate:
+    """A frame's serialised XML element with two placeholders, the time value and the frame's data path
+    (``<folder>/<file>:/<group>``); ``fill(t, data_at)`` returns the frame's bytes."""
+
+    TIME = "@time@"
+    DATA = "@data@:"             # with a colon: data_item then writes an HDF5 DataItem
+
+    def __init__(self, text: bytes):
+        self.parts = [part.split(self.DATA.encode()) for part in text.split(self.TIME.encode())]
+        if len(self.parts) != 2:
+            raise ValueError("a frame template holds one time value")
+
+    def fill(self, t: str, data_at: str) -> bytes:
+        at = data_at.encode()
+        return t.encode().join(at.join(part) for part in self.parts)
+
+
+def _time_text(t: float | str) -> str:
+    return t if isinstance(t, str) else repr(float(t))
+
+
 class FieldSeriesExport:
     """``write(t, body_positions)`` takes a frame of the current displacement [m] and electric potential [V]
     (``vertex.sample(solution())``: :class:`app.exports.VertexFields` of the FE model and a full u-phi PETSc
@@ -193,6 +214,7 @@ class FieldSeriesExport:
         self.steps: list[bytes] = []         # each output's XML, serialised once
         self.body_steps: list[bytes] = []
         self.data_files: list[str] = []      # the frame files the XML names, in order (every rank)
+        self._templates: dict[tuple, _StepTemplate] = {}
         self.next_s = self._first()
         if resume_from_s is not None:
             self.next_s = self._next_after(resume_from_s)
@@ -343,27 +365,42 @@ class FieldSeriesExport:
             kill_point("fields_data")                   # the batch file exists, the XML does not name it yet
             at = f"{self.dir.name}/{name}:"
             for k, frame in enumerate(frames, start=first):
-                group, t = f"step_{k:06d}", frame.t
-                extra = {key: v for key, (v, _) in frame.fields.items() if key not in ("displacement", "potential")}
-                extra.update({key: v for key, (v, _) in frame.scalars.items()})
-                step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{at}/{group}",
-                                 extra_fields(extra))
-                step.insert(0, ET.Element("Time", Value=repr(float(t))))
-                self.steps.append(step_bytes(step))
+                data_at, t = f"{at}/step_{k:06d}", repr(float(frame.t))
+                extra = extra_fields({**{key: v for key, (v, _) in frame.fields.items()
+                                         if key not in ("displacement", "potential")},
+                                      **{key: v for key, (v, _) in frame.scalars.items()}})
+                self.steps.append(self._template("fe", tuple(extra)).fill(t, data_at))
                 if self.bodies is not None:
-                    self.body_steps.append(step_bytes(body_grid(self.bodies, t, self.dir.name, f"{at}/{group}")))
+                    self.body_steps.append(self._template("bodies").fill(t, data_at))
                 if self.sites is not None:
-                    self.site_steps.append(step_bytes(self._site_grid(t, f"{at}/{group}")))
+                    self.site_steps.append(self._template("sites").fill(t, data_at))
             self._replace_documents()
         self.data_files.append(name)
 
-    def _site_grid(self, t: float, data_at: str) -> ET.Element:
+    def _template(self, grid: str, extra: tuple = ()) -> _StepTemplate:
+        """A frame's XML element of ``grid`` ("fe" with the vertex fields ``extra``, "bodies", "sites") as bytes
+        with the time and the frame's data path left to fill: built and serialised once per series, not once per
+        frame (the elements of a series differ only there)."""
+        key = (grid, extra)
+        if key not in self._templates:
+            t, at = _StepTemplate.TIME, _StepTemplate.DATA
+            if grid == "fe":
+                step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", at, list(extra))
+                step.insert(0, ET.Element("Time", Value=t))
+            elif grid == "bodies":
+                step = body_grid(self.bodies, t, self.dir.name, at)
+            else:
+                step = self._site_grid(t, at)
+            self._templates[key] = _StepTemplate(step_bytes(step))
+        return self._templates[key]
+
+    def _site_grid(self, t: float | str, data_at: str) -> ET.Element:
         """One output of the contact sites: the points at their reference position, one vertex cell each, the
         displacement and pressure at ``data_at`` (``<folder>/<file>:/<group>``), the static area and contact
         index."""
         n, where = len(self.sites.points), f"{self.dir.name}/contact_sites.h5"
         grid = ET.Element("Grid", Name=SITE_GRID, GridType="Uniform")
-        ET.SubElement(grid, "Time", Value=repr(float(t)))
+        ET.SubElement(grid, "Time", Value=_time_text(t))
         topo = ET.SubElement(grid, "Topology", TopologyType="Polyvertex", NumberOfElements=str(n), NodesPerElement="1")
         data_item(topo, f"{where}:/vertices", (n, 1), "Int")
         geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
@@ -403,12 +440,12 @@ def write_bodies_h5(path: Path, bodies) -> None:
                      "sector": {"meaning": "alternating stripes round a body of revolution (its spin)"}})
 
 
-def body_grid(bodies, t: float, folder: str, data_at: str) -> ET.Element:
+def body_grid(bodies, t: float | str, folder: str, data_at: str) -> ET.Element:
     """One output of the bodies: their triangles at the start (``<folder>/bodies.h5``) and the displacement at
     ``data_at`` (``<folder>/<file>:/<group>``, its dataset ``bodies/displacement``)."""
     b, where = bodies, f"{folder}/bodies.h5"
     grid = ET.Element("Grid", Name=BODY_GRID, GridType="Uniform")
-    ET.SubElement(grid, "Time", Value=repr(float(t)))
+    ET.SubElement(grid, "Time", Value=_time_text(t))
     topo = ET.SubElement(grid, "Topology", TopologyType="Triangle", NumberOfElements=str(len(b.triangles)),
                          NodesPerElement="3")
     data_item(topo, f"{where}:/triangles", b.triangles.shape, "Int")
