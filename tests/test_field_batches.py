@@ -189,3 +189,76 @@ def test_killed_inside_a_batch_resumes_to_the_one_go_series(tmp_path, point, nam
 
     with h5py.File(out / "transient_fields" / "frames_000005.h5", "r") as f:
         assert FRAME_PEAKS in f["step_000005/displacement"].attrs
+
+
+def test_modal_expansion_of_a_batch_equals_frame_by_frame():
+    """app/reduced/engine.py ReducedVertexFields: ``expand`` of a batch of coordinates (one product of each basis
+    with all the columns, the derived fields and peaks of all the frames at once) against ``sample`` and
+    ``derived_frame`` of each column alone (the per-frame path), on random bases over the 2 x 3 quad mesh with a
+    piezoelectric region (so principal stresses and |E| enter the peaks). Tolerance 1e-13 of each field's largest
+    value: the same sums in another BLAS call (gemm against gemv)."""
+    from types import SimpleNamespace
+
+    from app.fe.derived import RAW_COLUMNS, RegionAveraging
+    from app.reduced.engine import ReducedVertexFields
+
+    rng = np.random.default_rng(11)
+    mesh = FakeBasis().mesh_arrays
+    pairs = RegionAveraging(mesh["topology"], mesh["region"], 12, [2]).size
+    model = SimpleNamespace(vertex_basis=rng.standard_normal((48, MODES)),
+                            derived_basis=rng.standard_normal((pairs * RAW_COLUMNS, MODES)) * 1e6,
+                            region_table=np.array(["1|horn|0", "2|piezo|1"]), mesh_geometry=mesh["geometry"],
+                            mesh_topology=mesh["topology"], mesh_region=mesh["region"],
+                            mesh_topology_type="Quadrilateral")
+    vertex = ReducedVertexFields(model, MPI.COMM_SELF, ("von_mises", "principal_stress", "electric_field", "stress"))
+    q = rng.standard_normal((MODES, 5))
+    batch = vertex.expand(q)
+    assert len(batch) == 5
+    for k, (u, phi, fields, peaks) in enumerate(batch):
+        u1, phi1 = vertex.sample(q[:, k])
+        fields1, peaks1 = vertex.derived_frame(q[:, k])
+        for a, b in ((u, u1), (phi, phi1), *((fields[name], fields1[name]) for name in fields1)):
+            assert a.shape == b.shape and np.abs(a - b).max() <= 1e-13 * np.abs(b).max()
+        assert sorted(fields) == sorted(fields1) == ["electric_field_V_per_m", "principal_stress_Pa", "stress_Pa",
+                                                     "von_mises_Pa"]
+        assert sorted(peaks) == sorted(peaks1) == ["horn", "piezo"]
+        assert sorted(peaks["piezo"]) == ["electric_field_V_per_m", "max_principal_stress_Pa", "von_mises_Pa"]
+        for region, values in peaks1.items():
+            assert peaks[region] == pytest.approx(values, rel=1e-13)
+
+
+def test_fast_hdf5_writer_reads_back_as_h5py_high_level(tmp_path):
+    """app/files.py write_h5_atomic (h5py's low-level API for numeric arrays and float/int/str attributes) against
+    the same file written with h5py's high-level API: the same datasets, values, dtypes and attributes (str read
+    back as str, lists through the high level)."""
+    import h5py
+
+    from app.files import write_h5_atomic
+
+    rng = np.random.default_rng(5)
+    datasets = {"step_000003/displacement": rng.standard_normal((7, 3)),
+                "step_000003/potential": rng.standard_normal(7),
+                "mesh/in_region_1": (rng.uniform(size=9) > 0.5).astype(np.int8),
+                "mesh/topology": np.arange(12).reshape(3, 4), "names": np.array(["a", "bc"], dtype=object)}
+    attrs = {"step_000003/displacement": {"units": "m", "time_s": 2.5e-4, "region_peaks_json": '{"horn": {"x": 1}}'},
+             "mesh/in_region_1": {"name": "region: horn", "tag": 3}, "mesh/topology": {"names": ["ab", "c"]}}
+    write_h5_atomic(tmp_path / "fast.h5", datasets, attrs)
+    with h5py.File(tmp_path / "slow.h5", "w") as f:
+        for name, values in datasets.items():
+            ds = f.create_dataset(name, data=values)
+            for key, value in attrs.get(name, {}).items():
+                ds.attrs[key] = value
+    assert not list(tmp_path.glob("*.tmp"))
+    with h5py.File(tmp_path / "fast.h5", "r") as a, h5py.File(tmp_path / "slow.h5", "r") as b:
+        names = []
+        a.visit(names.append)
+        other = []
+        b.visit(other.append)
+        assert names == other
+        for name in datasets:
+            assert a[name].dtype == b[name].dtype and a[name].shape == b[name].shape
+            assert np.array_equal(a[name][()], b[name][()])
+            assert sorted(a[name].attrs) == sorted(b[name].attrs)
+            for key in b[name].attrs:
+                x, y = a[name].attrs[key], b[name].attrs[key]
+                assert type(x) is type(y) and np.array_equal(x, y), (name, key)

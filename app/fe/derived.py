@@ -273,27 +273,40 @@ def region_peaks(values: np.ndarray, pair_region: np.ndarray, regions, values_im
     and each pair's region tag): the largest von Mises stress [Pa]; in piezoelectric regions also the largest
     principal stress [Pa] and the largest |E| [V/m]. With ``values_im`` (a harmonic solution) each is the
     maximum over the cycle. Keys :data:`PEAK_KEYS`."""
+    if values_im is None:
+        return frame_region_peaks(values[None], pair_region, regions)[0]
     out = {}
     for region in regions:
         mask = pair_region == region.tag
         if not mask.any():
             continue
-        re = values[mask]
-        im = values_im[mask] if values_im is not None else None
+        re, im = values[mask], values_im[mask]
         T_re = re[:, RAW["stress"]]
-        if im is None:
-            peaks = {"von_mises_Pa": float(von_mises(T_re).max())}
-        else:
-            peaks = {"von_mises_Pa": float(von_mises_cycle_max(T_re, im[:, RAW["stress"]]).max())}
+        peaks = {"von_mises_Pa": float(von_mises_cycle_max(T_re, im[:, RAW["stress"]]).max())}
         if region.e is not None:
             E_re = re[:, RAW["electric_field"]]
-            if im is None:
-                peaks["max_principal_stress_Pa"] = float(principal_stresses(T_re)[:, 0].max())
-                peaks["electric_field_V_per_m"] = float(np.linalg.norm(E_re, axis=1).max())
-            else:
-                peaks["max_principal_stress_Pa"] = float(largest_principal_cycle_max(T_re, im[:, RAW["stress"]]).max())
-                peaks["electric_field_V_per_m"] = float(norm_cycle_max(E_re, im[:, RAW["electric_field"]]).max())
+            peaks["max_principal_stress_Pa"] = float(largest_principal_cycle_max(T_re, im[:, RAW["stress"]]).max())
+            peaks["electric_field_V_per_m"] = float(norm_cycle_max(E_re, im[:, RAW["electric_field"]]).max())
         out[region.name] = peaks
+    return out
+
+
+def frame_region_peaks(values: np.ndarray, pair_region: np.ndarray, regions) -> list[dict]:
+    """:func:`region_peaks` of each of a batch of real frames, (frames, pairs, 18) region-wise averaged values,
+    computed for all the frames at once (the field output's batches)."""
+    out: list[dict] = [{} for _ in range(values.shape[0])]
+    for region in regions:
+        mask = pair_region == region.tag
+        if not mask.any():
+            continue
+        re = values[:, mask]
+        T = re[..., RAW["stress"]]
+        columns = {"von_mises_Pa": von_mises(T).max(axis=1)}
+        if region.e is not None:
+            columns["max_principal_stress_Pa"] = principal_stresses(T)[..., 0].max(axis=1)
+            columns["electric_field_V_per_m"] = np.linalg.norm(re[..., RAW["electric_field"]], axis=-1).max(axis=1)
+        for k, frame in enumerate(out):
+            frame[region.name] = {key: float(v[k]) for key, v in columns.items()}
     return out
 
 

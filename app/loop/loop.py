@@ -11,7 +11,8 @@ returns their time-series rows; the loop then exports (series, fields), checkpoi
     found ? engine.restore(found) : (mark started, engine.start())
     while t < end and not steady:
         rows = engine.advance(end, steps to the next checkpoint, next field output or period end)
-        series.write_block(rows); fields (buffered); steady.update_block(rows); progress
+        steady.update_block(rows); series.write_block(rows since the last write) at each progress step;
+        fields (buffered); progress
         checkpoint when due (the buffered field frames written first)
     checkpoint at the end; results = the common keys + engine.results()
 
@@ -207,6 +208,8 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     steady = watch is not None and watch.steady
     # a resumed run's state is its checkpoint's: nothing to write again unless it takes a step
     checkpointed = engine.steps if found is not None else -1
+    unwritten: list[dict] = []          # row blocks of the engine not yet in the series file
+    series_due = t_start + progress_step
     try:
         while engine.t < end * (1 - 1e-12) and not steady:
             stop_at = math.inf
@@ -217,13 +220,18 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
             stop_at = min(stop_at, engine.t + progress_step)     # progress lines on time
             rows = engine.advance(end, checkpoint.steps_to_next(engine.steps), stop_at)
             if rows and len(rows[S.TIME]):
-                series.write_block(rows)
-            for name, (units, table) in engine.take_tables().items():
-                series.append_table(name, table, units)
-            if rows and len(rows[S.TIME]):
-                kill_point("series_block")
+                unwritten.append(rows)
                 if watch is not None:
                     steady = watch.update_block(rows)
+            # a stop for a field frame only: its rows go to the file with the next block (an HDF5 append costs
+            # milliseconds, a frame burst stops the engine every few steps); a checkpoint writes them first
+            if unwritten and (engine.t >= series_due - 1e-9 * progress_step or checkpoint.due(engine.steps) or steady
+                              or engine.t >= end * (1 - 1e-12)):
+                _write_rows(series, unwritten)
+                series_due = engine.t + progress_step
+                kill_point("series_block")
+            for name, (units, table) in engine.take_tables().items():
+                series.append_table(name, table, units)
             if fields is not None:           # writes only when an output is due
                 mark = time.perf_counter()
                 fields.write(engine.t, engine.body_positions())
@@ -234,6 +242,7 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
                 mark = time.perf_counter()
                 checkpointed = _checkpoint(engine, checkpoint, series, watch)
                 checkpoint_wall += time.perf_counter() - mark
+        _write_rows(series, unwritten)
         if checkpointed != engine.steps:
             field_wall += _flush(fields)
             mark = time.perf_counter()
@@ -242,6 +251,7 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
         field_wall += _flush(fields)
     finally:
         progress.close()
+        _write_rows(series, unwritten)          # a failed step: the rows of the steps before it
         series.close()
         if fields is not None:
             fields.close()
@@ -272,6 +282,15 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
         results["outputs"].append(S.SERIES_CSV)
     engine.close()
     return results
+
+
+def _write_rows(series: TimeSeriesWriter, blocks: list[dict]) -> None:
+    """Append the engine's row blocks to the series file as one block, and empty ``blocks``."""
+    if not blocks:
+        return
+    block = blocks[0] if len(blocks) == 1 else {name: np.concatenate([b[name] for b in blocks]) for name in blocks[0]}
+    blocks.clear()
+    series.write_block(block)
 
 
 def _flush(fields) -> float:
