@@ -12,6 +12,7 @@ in one go does (at the checkpoint), so there: bit for bit."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -77,19 +78,25 @@ def coordinates(k: int) -> np.ndarray:
 
 def scenario(out: Path, batch_frames: int, checkpoints=(), resume_from: int | None = None, expand: bool = True,
              frames=range(FRAMES)) -> FieldSeriesExport:
-    """Frames ``frames`` at t = k PERIOD_S of coordinates(k), ``flush()`` after the frames in ``checkpoints``
-    (what the run loop does before a checkpoint), resumed after frame ``resume_from``; closed at the end."""
+    """Frames ``frames`` at t = k PERIOD_S of coordinates(k) and a 'checkpoint' after the frames in
+    ``checkpoints`` as the run loop makes one (app/loop/loop.py: ``flush()`` unless the buffer rides in the
+    checkpoint, then the export's ``checkpoint_record()``, saved as ``out/checkpoint.json``); resumed after frame
+    ``resume_from`` from that record; closed at the end."""
     state = {"q": None}
     vertex = FakeBasis(expand)
     export = FieldSeriesExport(out / "transient_fields.xdmf", vertex, lambda: state["q"],
                                FrameSchedule(PERIOD_S, 1, interval_periods=1),
                                resume_from_s=None if resume_from is None else resume_from * PERIOD_S,
                                batch_frames=batch_frames)
+    if resume_from is not None:
+        export.resume(json.loads((out / "checkpoint.json").read_text()))
     for k in frames:
         state["q"] = coordinates(k)
         export.write(k * PERIOD_S)
         if k in checkpoints:
-            export.flush()
+            if not export.carries:
+                export.flush()
+            (out / "checkpoint.json").write_text(json.dumps(export.checkpoint_record()))
     export.close()
     return export
 
@@ -124,10 +131,13 @@ def test_batched_series_equals_the_per_frame_series(tmp_path):
                 t, point_data, _ = reader.read_data(k)
                 assert t == k * PERIOD_S
                 np.testing.assert_array_equal(point_data["displacement"], frames[k][1]["displacement"])
-    # one frame per file, and batches of 4 cut at the checkpoint after frame 5: frames 0-3, 4-5, 6-9, 10
+    # one frame per file; batches of 4, the modal tier's (its buffer rides in the checkpoint after frame 5):
+    # frames 0-3, 4-7, 8-10; the FE tier's, cut at that checkpoint: 0-3, 4-5, 6-9, 10
     assert sorted(p.name for p in (tmp_path / "per_frame" / "transient_fields").glob("frames_*")) == [
         f"frames_{k:06d}.h5" for k in range(FRAMES)]
     assert sorted(p.name for p in (tmp_path / "batched" / "transient_fields").glob("frames_*")) == [
+        "frames_000000.h5", "frames_000004.h5", "frames_000008.h5"]
+    assert sorted(p.name for p in (tmp_path / "fe_batched" / "transient_fields").glob("frames_*")) == [
         "frames_000000.h5", "frames_000004.h5", "frames_000006.h5", "frames_000010.h5"]
     for (_, a), (_, b) in zip(series["batched"], series["fe_batched"]):
         for name in a:
@@ -139,33 +149,36 @@ import sys
 from pathlib import Path
 sys.path.insert(0, {tests!r})
 import test_field_batches as t
-t.scenario(Path({out!r}), batch_frames={batch}, checkpoints=(4,))
+t.scenario(Path({out!r}), batch_frames={batch}, checkpoints=(4,), expand={expand})
 """
 
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="drives a serial subprocess")
-@pytest.mark.parametrize("point, named, batch, resumed_batch", [("fields_written:9", 8, 3, 3),
-                                                                 ("fields_data:3", 5, 3, 3),
-                                                                 ("fields_written:10", 9, 2, 3)])
-def test_killed_inside_a_batch_resumes_to_the_one_go_series(tmp_path, point, named, batch, resumed_batch):
-    """A process SIGKILLed (app/killpoint.py) after the 'checkpoint' at frame 4 (its flush), in batches of 3 with
-    frames 5-7 written as a batch and frame 8 buffered (``fields_written:9``), or with the batch 5-7 written and
-    not yet named by the XML (``fields_data:3``); in batches of 2 with frames 5-6 and 7-8 written and 9 buffered
-    (``fields_written:10``). The XML names only complete files (frames 0-7, 0-4, 0-8); resumed from frame 4 the
-    series is the one-go series (values, times, peaks): bit for bit when the resumed run cuts its batches as the
-    killed one did, else to round-off (another cut of the batches: resuming with another checkpoint interval), and
-    the folder holds exactly the files the XML names (the killed run's frames_000007.h5 removed in the last
-    case)."""
-    one_go = scenario(tmp_path / "one_go", batch_frames=resumed_batch, checkpoints=(4,))
+@pytest.mark.parametrize("point, named, batch, resumed_batch, expand", [
+    ("fields_written:9", 6, 3, 3, True), ("fields_data:3", 6, 3, 3, True), ("fields_written:10", 8, 2, 3, True),
+    ("fields_written:9", 8, 3, 3, False), ("fields_data:3", 5, 3, 3, False)])
+def test_killed_inside_a_batch_resumes_to_the_one_go_series(tmp_path, point, named, batch, resumed_batch, expand):
+    """A process SIGKILLed (app/killpoint.py) after the 'checkpoint' at frame 4. The modal tier's buffer rides in
+    the checkpoint (frames 3 and 4 buffered there in batches of 3): killed with frames 6-8 buffered
+    (``fields_written:9``: 0-5 on disk, frames 3-5 of the batch after the checkpoint too), or with the batch 6-8
+    written and not yet named by the XML (``fields_data:3``), or in batches of 2 with frames 0-7 on disk and 8 and
+    9 buffered (``fields_written:10``), resumed in batches of 3. The FE tier's flushes before the checkpoint
+    (batches 0-2, 3-4, 5-7, ...): killed with frame 8 buffered, or with the batch 5-7 written and not named. The
+    XML names only complete files (``named`` frames); resumed from the checkpoint (its record) the series is the
+    one-go series (values, times, peaks): bit for bit when the resumed run cuts its batches as the killed one
+    did, else to round-off (another cut of the batches), and the folder holds exactly the files the XML names
+    (e.g. the killed run's frames_000003.h5, with frames after the checkpoint, removed)."""
+    one_go = scenario(tmp_path / "one_go", batch_frames=resumed_batch, checkpoints=(4,), expand=expand)
     out = tmp_path / "killed"
     env = {**os.environ, "PIEZODYN_KILL_AT": point}
-    script = KILL_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out), batch=batch)
+    script = KILL_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out), batch=batch, expand=expand)
     killed = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
                             cwd=Path(__file__).parents[1])
     assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
     left = read_frames(out / "transient_fields.xdmf")           # every file the XML names is complete
     assert len(left) == named
-    resumed = scenario(out, batch_frames=resumed_batch, checkpoints=(4,), resume_from=4, frames=range(5, FRAMES))
+    resumed = scenario(out, batch_frames=resumed_batch, checkpoints=(4,), resume_from=4, frames=range(5, FRAMES),
+                       expand=expand)
     names = ("displacement", "potential", "von_mises_Pa")
     a, b = read_frames(tmp_path / "one_go" / "transient_fields.xdmf", names), read_frames(
         out / "transient_fields.xdmf", names)
@@ -187,8 +200,8 @@ def test_killed_inside_a_batch_resumes_to_the_one_go_series(tmp_path, point, nam
     # each frame keeps its own peaks (what a resumed run merges)
     import h5py
 
-    with h5py.File(out / "transient_fields" / "frames_000005.h5", "r") as f:
-        assert FRAME_PEAKS in f["step_000005/displacement"].attrs
+    with h5py.File(out / "transient_fields" / resumed.data_files[1], "r") as f:
+        assert FRAME_PEAKS in f["step_000003/displacement"].attrs
 
 
 def test_modal_expansion_of_a_batch_equals_frame_by_frame():

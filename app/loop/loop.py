@@ -17,8 +17,8 @@ returns their time-series rows; the loop then exports (series, fields), checkpoi
     checkpoint at the end; results = the common keys + engine.results()
 
 A checkpoint is written after complete steps only (series flushed to the rows it names, the buffered field frames
-written), so a run killed at any moment resumes to the same series, bit for bit (tests/test_*_checkpoint.py kill it
-at every named point).
+written or, the modal tier's, carried in its record), so a run killed at any moment resumes to the same series,
+bit for bit (tests/test_*_checkpoint.py kill it at every named point).
 """
 
 from __future__ import annotations
@@ -196,6 +196,8 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     if watch is not None and found is not None and found.loop.get("steady_state") is not None:
         watch.restore(found.loop["steady_state"])
     fields = engine.field_export(out_dir, t_start if found is not None else None)
+    if fields is not None and found is not None and hasattr(fields, "resume"):
+        fields.resume(found.loop.get("fields"))        # the frames the checkpoint buffered, buffered again
     if fields is not None and found is None:
         fields.write(engine.t, engine.body_positions())
     end = engine.end_time_s
@@ -238,15 +240,15 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
                 field_wall += time.perf_counter() - mark
             progress.update(engine.t)
             if checkpoint.due(engine.steps) or steady:
-                field_wall += _flush(fields)
+                field_wall += _flush(fields, before_checkpoint=True)
                 mark = time.perf_counter()
-                checkpointed = _checkpoint(engine, checkpoint, series, watch)
+                checkpointed = _checkpoint(engine, checkpoint, series, watch, fields)
                 checkpoint_wall += time.perf_counter() - mark
         _write_rows(series, unwritten)
         if checkpointed != engine.steps:
             field_wall += _flush(fields)
             mark = time.perf_counter()
-            _checkpoint(engine, checkpoint, series, watch)
+            _checkpoint(engine, checkpoint, series, watch, fields)
             checkpoint_wall += time.perf_counter() - mark
         field_wall += _flush(fields)
     finally:
@@ -293,21 +295,24 @@ def _write_rows(series: TimeSeriesWriter, blocks: list[dict]) -> None:
     series.write_block(block)
 
 
-def _flush(fields) -> float:
+def _flush(fields, before_checkpoint: bool = False) -> float:
     """Write the field frames the export buffers (app/transient/fields.py): before every checkpoint, so each frame
     at or before the checkpoint's time is on disk when the checkpoint is (a resumed run writes only the later
-    ones again). Returns its wall time [s]."""
-    if fields is None:
+    ones again), unless the buffer rides in the checkpoint (``carries``: the modal tier's frames, a few
+    coordinates each); and at the end. Returns its wall time [s]."""
+    if fields is None or (before_checkpoint and getattr(fields, "carries", False)):
         return 0.0
     mark = time.perf_counter()
     fields.flush()
     return time.perf_counter() - mark
 
 
-def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, watch) -> int:
+def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, watch, fields=None) -> int:
     """Write a checkpoint of the engine's state after complete steps; returns the step count it holds."""
     series.flush()
     arrays, record = engine.snapshot()
     loop = {"steady_state": watch.snapshot() if watch is not None else None, "tables": dict(series.table_rows)}
+    if fields is not None and hasattr(fields, "checkpoint_record"):
+        loop["fields"] = fields.checkpoint_record()
     checkpoint.write(engine.t, arrays, record, loop, series.rows_written)
     return engine.steps

@@ -151,6 +151,7 @@ class _Frame:
     fields: dict | None = None
     scalars: dict | None = None
     peaks: dict | None = None
+    z: np.ndarray | None = None
     bodies: np.ndarray | None = None
     sites: tuple | None = None
 
@@ -215,6 +216,7 @@ class FieldSeriesExport:
         self.body_steps: list[bytes] = []
         self.data_files: list[str] = []      # the frame files the XML names, in order (every rank)
         self._templates: dict[tuple, _StepTemplate] = {}
+        self._kept: list[ET.Element] = []
         self.next_s = self._first()
         if resume_from_s is not None:
             self.next_s = self._next_after(resume_from_s)
@@ -238,10 +240,8 @@ class FieldSeriesExport:
                 self.body_steps = [step_bytes(step) for step in body_steps[:n]]
                 self.site_steps = [step_bytes(step) for step in site_steps[:n]]
                 kept_peaks = _kept_peaks(self.path.parent, kept)
-            self.data_files = _data_files(kept, self.dir.name)
-            for stale in [*self.dir.glob("frames_*.h5*"), *self.dir.glob("step_*.h5*")]:
-                if stale.name not in self.data_files:      # frames of a killed run past the checkpoint
-                    stale.unlink()
+            self._kept = kept
+            self._drop_stale(kept)
             write_mesh_h5(self.dir / "mesh.h5", self.vertex)
             if self.bodies is not None:
                 write_bodies_h5(self.dir / "bodies.h5", self.bodies)
@@ -261,6 +261,9 @@ class FieldSeriesExport:
             self._replace_documents()
         self.written = self.comm.bcast(len(self.steps), root=0)
         self.data_files = self.comm.bcast(self.data_files, root=0)
+        # the modal tier's buffered frames are a few coordinates each: they ride in the checkpoint
+        # (checkpoint_record, resume) instead of being written before it, so batches are not cut there
+        self.carries = self.expands and not self.comm.bcast(self.sites is not None, root=0)
         self.has_bodies = self.comm.bcast(self.bodies is not None, root=0)
         self.has_sites = self.comm.bcast(self.sites is not None, root=0)
         # peaks per region over the frames of the series (app.fe.derived.region_peaks), every rank; a resumed run
@@ -274,6 +277,50 @@ class FieldSeriesExport:
 
     def _next_after(self, t: float) -> float:
         return self.schedule.next_after(t)
+
+    def _drop_stale(self, kept: list[ET.Element]) -> None:
+        """Keep the frame files the steps ``kept`` name; remove the others (a killed run's past the checkpoint)."""
+        self.data_files = _data_files(kept, self.dir.name)
+        for stale in [*self.dir.glob("frames_*.h5*"), *self.dir.glob("step_*.h5*")]:
+            if stale.name not in self.data_files:
+                stale.unlink()
+
+    def checkpoint_record(self) -> dict:
+        """The series' part of a checkpoint (JSON-able; rank 0's is stored): the number of frames on disk and,
+        when the buffer rides in the checkpoint (``carries``: the modal tier), the buffered frames' times,
+        coordinates q and body coordinates z. Without ``carries`` the run loop flushes before the checkpoint."""
+        frames = []
+        if self.carries and self.rank0:
+            frames = [{"t_s": f.t, "q": f.state.tolist(), "z": None if f.z is None else f.z.tolist()}
+                      for f in self.pending]
+        return {"on_disk": self.written - len(self.pending), "buffered": frames}
+
+    def resume(self, record: dict | None) -> None:
+        """Continue from a checkpoint's :meth:`checkpoint_record` (collective): the series cut to the frames that
+        were on disk then (a batch written after the checkpoint can hold frames at or before its time: they are
+        in its record) and its buffered frames buffered again, so the batches are the run in one go's. A
+        checkpoint without a record (an older version's) had every frame at or before its time on disk."""
+        if not record:
+            return
+        on_disk = int(record["on_disk"])
+        if self.rank0 and on_disk < len(self.steps):
+            self._kept = self._kept[:on_disk]
+            self.steps, self.body_steps = self.steps[:on_disk], self.body_steps[:on_disk]
+            self.site_steps = self.site_steps[:on_disk]
+            self._drop_stale(self._kept)
+            self._replace_documents()
+            if self.peaks is not None:
+                self.peaks = _kept_peaks(self.path.parent, self._kept)
+        self.data_files = self.comm.bcast(self.data_files, root=0)
+        if self.peaks is not None:
+            self.peaks = self.comm.bcast(self.peaks, root=0)
+        self.written = self.comm.bcast(len(self.steps), root=0)
+        for frame in record.get("buffered") or []:
+            z = frame.get("z")
+            self.pending.append(_Frame(float(frame["t_s"]), state=np.asarray(frame["q"], dtype=float),
+                                       z=None if z is None else np.asarray(z, dtype=float),
+                                       scalars={}))
+            self.written += 1
 
     def files(self) -> list[str]:
         """Names of the files of the series, relative to the output directory (after ``close()``)."""
@@ -312,8 +359,8 @@ class FieldSeriesExport:
         site_state = self.sites.state() if self.sites is not None else None
         if self.rank0:
             frame.scalars = scalars
-            if self.bodies is not None:
-                frame.bodies = self.bodies.displacement(body_positions)
+            if self.bodies is not None and body_positions is not None:
+                frame.z = np.array(body_positions, dtype=float, copy=True)     # displaced at the flush
             frame.sites = site_state
         self.pending.append(frame)
         self.written += 1
@@ -353,6 +400,8 @@ class FieldSeriesExport:
                     attrs[f"{group}/{key}"] = {"units": units, "time_s": t} if units is not None else {}
                 if frame.peaks is not None:
                     attrs[f"{group}/displacement"][FRAME_PEAKS] = json.dumps(frame.peaks)
+                if self.bodies is not None and frame.z is not None:
+                    frame.bodies = self.bodies.displacement(frame.z)
                 if frame.bodies is not None:
                     datasets[f"{group}/bodies/displacement"] = frame.bodies
                     attrs[f"{group}/bodies/displacement"] = {"units": "m", "time_s": t}
