@@ -11,27 +11,33 @@ ParaView's XDMF readers both read. The rigid bodies, drawn with their shapes
 (:mod:`app.transient.body_shapes`), are the companion file ``transient_bodies.xdmf`` written at the same
 times: one triangle grid of all bodies (``rigid_bodies``: cell values ``body``, the index into the
 ``names`` attribute of ``<stem>/bodies.h5``, and ``sector``, stripes that show a spin) at their start,
-with each vertex's displacement [m] in the frame's group (``step_<k>/bodies/displacement``). Both files are written
-in the reference configuration with their displacement, so one Warp By Vector (scale 1) on each puts
+with each vertex's displacement [m] in the frame's group (``step_<k>/bodies/displacement``). Both files are
+written in the reference configuration with their displacement, so one Warp By Vector (scale 1) on each puts
 the transducer and the bodies where they are; meshio reads the points once and the displacement per time.
 The modal tier's contact sites with ``output.contact_pressure`` are a second companion,
 ``transient_contact_sites.xdmf`` (:class:`ContactSiteCloud`: a point cloud with the sites' displacement and
 ``contact_pressure_Pa``, their area and contact index in ``<stem>/contact_sites.h5``).
 
-Why batches, and why a file per batch: writing a frame at once cost more than the modal tier's steps (one
-HDF5 file per frame, the whole XML rewritten per frame, one basis product per frame). So frames are buffered
-(at most ``FRAMES_PER_FILE``) and written together: one HDF5 file, one rewrite of the XML, and in the modal
-tier one product of each basis with all the batch's coordinates (app/reduced/engine.py ReducedVertexFields's
-``expand``). The run loop flushes the buffer before every checkpoint (app/loop/loop.py), so every frame at or before a
-checkpoint's time is on disk when the checkpoint is: a kill loses only frames after the last checkpoint,
-which the resumed run writes again, and no batch file holds frames on both sides of a checkpoint. A
-process killed while writing HDF5 can leave that file unreadable; here it can only hit a batch file that
-the XML does not name yet (it is written under a temporary name and renamed), and the XML is replaced
-atomically after the batch file exists. So after a kill at any moment the XML and every file it names are
-complete. A resumed run keeps the steps at or before the checkpoint's time (XML entries and the batch
-files they name), removes the other frame files and continues the series; its batches are the one-go
-run's (both cut at the same checkpoints), so its values are the one-go run's bit for bit, and equal to
-round-off when the resumed run changes the checkpoint interval (another cut of the batches).
+Why batches, and why a file per batch: writing each frame at once cost the modal tier more than its steps
+(one HDF5 file per frame, the whole XML rewritten per frame, one product of the bases per frame). So frames
+are buffered (at most ``FRAMES_PER_FILE``) and written together by ``flush()``: one HDF5 file, one rewrite of
+the XML, and in the modal tier one product of each basis with all the batch's coordinates
+(app/reduced/engine.py ReducedVertexFields's ``expand``). A process killed while writing HDF5 can leave that
+file unreadable; here it can only hit a batch file that the XML does not name yet (it is written under a
+temporary name and renamed), and the XML is replaced atomically after the batch file exists. So after a
+kill at any moment the XML and every file it names are complete.
+
+Checkpoints (app/loop/loop.py): a frame at or before a checkpoint's time is either on disk when the checkpoint
+is written or in the checkpoint itself. The FE tier's buffered frames (sampled fields, large) are written
+before every checkpoint; the modal tier's (a time, its coordinates q and body coordinates z: a few hundred
+numbers) ride in the checkpoint's record (:meth:`FieldSeriesExport.checkpoint_record`), so its batches are not
+cut at checkpoints (with a contact site cloud, ``output.contact_pressure``, whose site states are larger, they
+are written before it as the FE tier's). A resumed run (``resume_from_s``, then
+:meth:`FieldSeriesExport.resume` with the checkpoint's record) keeps the frames that were on disk at the
+checkpoint (XML entries and the batch files they name), removes every other frame file (a batch written after
+the checkpoint, or not yet named), buffers the checkpoint's frames again and continues the series. Its batches
+are the run in one go's (cut at the same frames), so its values are that run's bit for bit; resumed with
+another checkpoint interval, the FE tier's cut differs and the values agree to round-off.
 """
 
 from __future__ import annotations
@@ -184,8 +190,9 @@ class FieldSeriesExport:
     until the batch is written and expanded then, all of the batch at once) and the rigid bodies'
     displacement (``body_positions``: the packed body coordinates z [m, rad]) when t has reached the next
     frame time of ``schedule`` (:class:`FrameSchedule`). Frames are written in batches of at most
-    ``batch_frames`` and by ``flush()`` (collective: the run loop calls it before every checkpoint) and
-    ``close()``. ``bodies``: None, or a function of the scene size [m] (the FE mesh's largest extent)
+    ``batch_frames``, by ``flush()`` (collective: the run loop calls it before every checkpoint unless
+    ``carries``) and by ``close()``; ``checkpoint_record()`` and ``resume(record)`` carry the buffer through a
+    checkpoint (module docstring). ``bodies``: None, or a function of the scene size [m] (the FE mesh's largest extent)
     returning the :class:`app.transient.body_shapes.BodyMeshes` of the run (called on rank 0).
     ``resume_from_s``: continue the existing series after that time (later steps are dropped).
     ``scalars``: a callable returning further vertex fields of the current state, {name: (values at the
