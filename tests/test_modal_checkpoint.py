@@ -136,9 +136,9 @@ KILL_POINTS = [
     "checkpoint_state:1",      # the first checkpoint's state file written, its JSON not
     "checkpoint_tmp:1",        # half the first checkpoint JSON in its temporary file
     "series_block:5",          # rows of a later block written, 5 steps after a checkpoint
-    "fields_data:2",           # the second batch's HDF5 (frames after checkpoint 1, flushed before checkpoint 2)
-                               # written, the XDMF not yet naming it, checkpoint 2 not yet written
-    "fields_written:7",        # right after a field output, frames buffered since checkpoint 1 (inside a batch)
+    "fields_data:1",           # the one batch's HDF5 (frames 0-7, carried in checkpoints 1-8's records) written
+                               # at the end, the XDMF not yet naming it: resumed from checkpoint 8's buffer
+    "fields_written:7",        # right after a field output, frames buffered (the batch) across checkpoint 1
     "checkpoint_tmp:5",        # a later checkpoint half written
     "checkpoint_state:8",      # the last interval checkpoint
     "fields_written:8",        # right after the last output (the end of the first period's burst)
