@@ -192,7 +192,7 @@ def frame_group(out: Path, k: int):
 def test_drill_at_an_impact_in_paraview(x_display, transient_result):
     """The drill at the frame where the tip strikes the ball hardest (docs/figures/paraview_drill_impact.png),
     coloured by von Mises stress: the frame is inside a tip-ball impact (the series says the contact is closed
-    and carries tens of newtons), and the stress ParaView reads there is the step file's (the same numbers
+    and carries tens of newtons), and the stress ParaView reads there is the frame's HDF5 data (the same numbers
     through another reader: XDMF + HDF5 in ParaView against h5py)."""
     import h5py
 
@@ -227,7 +227,7 @@ def test_motor_result_in_paraview(x_display, tmp_path):
     """The motor (docs/figures/paraview_motor.png: the stator's wave and the rotor, coloured by von Mises): the
     three readers show one FE grid carrying displacement, potential and the default derived fields with their
     units in the names, the regions, and the companion file's rotor as triangles at the same times. The von Mises
-    and electric field ParaView reads at the last frame are the step file's (h5py) and below the run's peaks per
+    and electric field ParaView reads at the last frame are the frame's HDF5 data (h5py) and below the run's peaks per
     region in summary.json (field_peaks: the maxima over the frames); the rotor's vertices move. Region names:
     summary.json ``regions`` and the file's ``region_names`` Information give the same table, and the tags
     ParaView reads are exactly its keys; ParaView shows the names as one cell array per region
