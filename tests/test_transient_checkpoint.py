@@ -36,8 +36,9 @@ def frame_group(out: Path, k: int, xdmf: str = "transient_fields.xdmf"):
 
     step = ET.parse(out / xdmf).getroot().find("Domain/Grid").findall("Grid")[k]
     where, path = attribute_source(step, "displacement")
+    parts = path.strip("/").split("/")
     with h5py.File(out / where, "r") as f:
-        yield f[path.rsplit("/", 1)[0] or "/"]
+        yield f["/" + parts[0] if len(parts) > 1 else "/"]       # the frame's group, step_<k>
 
 
 def frame_files(out: Path) -> set[str]:
