@@ -72,6 +72,10 @@ DEFAULT_PHASES = 8
 #: at most this many frames are buffered before they are written (one HDF5 file, one rewrite of the XML); the run
 #: loop also flushes before every checkpoint and at the end
 FRAMES_PER_FILE = 64
+#: and at most about this much memory for a batch's vertex values (a large mesh writes smaller batches): an FE frame
+#: buffers its sampled fields, a modal batch expands all its frames at once; estimated as 64 doubles per vertex and
+#: frame (displacement, potential, the derived fields and the region-wise averaged values they come from)
+BATCH_BYTES = 256 * 2**20
 
 
 class FrameSchedule:
@@ -187,17 +191,17 @@ class FieldSeriesExport:
     """``write(t, body_positions)`` takes a frame of the current displacement [m] and electric potential [V]
     (``vertex.sample(solution())``: :class:`app.exports.VertexFields` of the FE model and a full u-phi PETSc
     vector; or, with a ``vertex`` that has ``expand`` (the modal tier's vertex basis), its coordinates, kept
-    until the batch is written and expanded then, all of the batch at once) and the rigid bodies'
-    displacement (``body_positions``: the packed body coordinates z [m, rad]) when t has reached the next
-    frame time of ``schedule`` (:class:`FrameSchedule`). Frames are written in batches of at most
-    ``batch_frames``, by ``flush()`` (collective: the run loop calls it before every checkpoint unless
-    ``carries``) and by ``close()``; ``checkpoint_record()`` and ``resume(record)`` carry the buffer through a
-    checkpoint (module docstring). ``bodies``: None, or a function of the scene size [m] (the FE mesh's largest extent)
-    returning the :class:`app.transient.body_shapes.BodyMeshes` of the run (called on rank 0).
-    ``resume_from_s``: continue the existing series after that time (later steps are dropped).
-    ``scalars``: a callable returning further vertex fields of the current state, {name: (values at the
-    vertices on rank 0 (None elsewhere), units)}, e.g. ``contact_pressure_Pa`` (collective). ``sites``: None, or
-    the :class:`ContactSiteCloud` written as the companion ``<stem minus _fields>_contact_sites.xdmf``."""
+    until the batch is written and expanded then, all of the batch at once) and the rigid bodies' displacement
+    (``body_positions``: the packed body coordinates z [m, rad]) when t has reached the next frame time of
+    ``schedule`` (:class:`FrameSchedule`). Frames are written in batches of at most ``batch_frames`` (and about
+    BATCH_BYTES of vertex values), by ``flush()`` (collective: the run loop calls it before every checkpoint
+    unless ``carries``) and by ``close()``; ``checkpoint_record()`` and ``resume(record)`` carry the buffer
+    through a checkpoint (module docstring). ``bodies``: None, or a function of the scene size [m] (the FE
+    mesh's largest extent) returning the :class:`app.transient.body_shapes.BodyMeshes` of the run (called on
+    rank 0). ``resume_from_s``: continue the existing series after that time (later steps are dropped).
+    ``scalars``: a callable returning further vertex fields of the current state, {name: (values at the vertices
+    on rank 0 (None elsewhere), units)}, e.g. ``contact_pressure_Pa`` (collective). ``sites``: None, or the
+    :class:`ContactSiteCloud` written as the companion ``<stem minus _fields>_contact_sites.xdmf``."""
 
     def __init__(self, path: Path, vertex, solution, schedule: FrameSchedule, bodies=None,
                  resume_from_s: float | None = None, scalars=None, sites: ContactSiteCloud | None = None,
@@ -268,6 +272,8 @@ class FieldSeriesExport:
             self._replace_documents()
         self.written = self.comm.bcast(len(self.steps), root=0)
         self.data_files = self.comm.bcast(self.data_files, root=0)
+        frame_bytes = self.comm.bcast(8 * 64 * int(getattr(vertex, "n_nodes", 0)) if self.rank0 else None, root=0)
+        self.batch_frames = max(1, min(self.batch_frames, BATCH_BYTES // max(frame_bytes, 1)))
         # the modal tier's buffered frames are a few coordinates each: they ride in the checkpoint
         # (checkpoint_record, resume) instead of being written before it, so batches are not cut there
         self.carries = self.expands and not self.comm.bcast(self.sites is not None, root=0)
