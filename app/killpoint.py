@@ -5,10 +5,10 @@ this process send SIGKILL to itself: no clean-up, no flush, no atexit, like a ki
 normal case) it costs one dictionary look-up. Events (where they are called):
 
 - ``step``: after an accepted FE step was recorded (app/transient/engine.py);
-- ``series_block``: the run loop wrote a block of time-series rows (app/loop/loop.py; every tier),
-  before the field output and checkpoint that may follow it;
-- ``fields_data``: a field output's HDF5 file is written, the XDMF does not name it yet;
-- ``fields_written``: right after a field output (app/transient/fields.py);
+- ``series_block``: the run loop wrote a block of time-series rows (app/loop/loop.py; every tier: at
+  each progress step, checkpoint and the end), before the field output and checkpoint that may follow it;
+- ``fields_data``: a batch of field frames' HDF5 file is written, the XDMF does not name it yet;
+- ``fields_written``: right after a field frame is taken (buffered; app/transient/fields.py);
 - ``checkpoint_state``: the checkpoint's state file is written, its JSON not yet;
 - ``checkpoint_tmp``: the checkpoint JSON is half written to its temporary file
   (app/loop/checkpoint.py);

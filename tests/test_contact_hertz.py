@@ -55,9 +55,11 @@ import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
+from test_transient_checkpoint import frame_group
 
 from app.case.schema import load_case
 from app.runner import run_transient_analysis
+from app.transient.fields import read_frames
 from geometry.meshdata import GmshSession  # imported on every rank: it imports dolfinx (PETSc's set-up)
 
 E_PA, NU = 200e9, 0.30              # the library's "structural-steel"
@@ -204,8 +206,8 @@ def measure(out: Path) -> dict:
     fields = out / "transient_fields"
     with h5py.File(fields / "mesh.h5", "r") as f:
         x = f["mesh/geometry"][()]
-    last = sorted(fields.glob("step_*.h5"))[-1]
-    with h5py.File(last, "r") as f:
+    last = len(read_frames(out / "transient_fields.xdmf", ())) - 1
+    with frame_group(out, last) as f:
         pressure = f["contact_pressure_Pa"][()]
         units = f["contact_pressure_Pa"].attrs["units"]
     top = np.abs(x[:, 1]) < 1e-12

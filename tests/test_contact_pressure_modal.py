@@ -19,6 +19,7 @@ import meshio
 import numpy as np
 import pytest
 from conftest import run_case_quiet
+from test_transient_checkpoint import frame_group
 
 MOTOR_COARSE = ["geometry.parameters.mesh_size_m=0.004", "geometry.parameters.tip_mesh_size_m=0.002",
                 "reduction.interface_nodes=16", "transient.contacts[0].sample_points=64", "output.plots=false"]
@@ -34,11 +35,11 @@ def motor(tmp_path_factory):
 
 
 def frames(out) -> list[tuple[float, np.ndarray, np.ndarray]]:
-    """(time [s], site displacement, site pressure) of every frame of the cloud, from its step files."""
+    """(time [s], site displacement, site pressure) of every frame of the cloud, from its frames' groups."""
     times = [float(v) for v in re.findall(r'<Time Value="([^"]+)"', (out / "transient_contact_sites.xdmf").read_text())]
     out_frames = []
     for k, t in enumerate(times):
-        with h5py.File(out / "transient_fields" / f"step_{k:06d}.h5", "r") as f:
+        with frame_group(out, k, "transient_contact_sites.xdmf") as f:
             pressure = f["contact_sites/contact_pressure_Pa"]
             assert pressure.attrs["units"] == "Pa"
             out_frames.append((t, f["contact_sites/displacement"][:], pressure[:]))

@@ -339,3 +339,23 @@ def test_transducer_files_carry_derived_fields_and_region_names(tmp_path):
     peaks = summary["results"]["harmonic"]["field_peaks"]
     assert set(peaks) == set(names.values())
     assert set(peaks["piezo_0"]) == set(derived.PEAK_KEYS) and set(peaks["horn"]) == {"von_mises_Pa"}
+
+
+def test_principal_stresses_agree_with_lapack_near_repeated_values():
+    """The closed-form principal stresses (app.fe.derived.principal_stresses, the field output's) against LAPACK's
+    eigvalsh on rotated tensors whose two principal stresses differ by 1e-1 ... 1e-13 of the largest, and on random
+    tensors over 12 decades: within 1e-12 of the tensor's largest component. Why 1e-12: LAPACK's own error is a few
+    machine epsilons of |T|; the closed form alone loses up to sqrt(epsilon) |T| = 1.5e-8 near repeated values (the
+    cases it hands to eigvalsh), so a threshold set wrong fails here."""
+    rng = np.random.default_rng(3)
+    rotation, _ = np.linalg.qr(rng.standard_normal((1300, 3, 3)))
+    gaps = np.repeat(10.0 ** -np.arange(1, 14), 100)
+    diagonal = np.zeros((1300, 3, 3))
+    diagonal[:, 0, 0], diagonal[:, 1, 1], diagonal[:, 2, 2] = 1e8, 1e8 * (1 - gaps), rng.uniform(-2e8, 2e8, 1300)
+    M = rotation @ diagonal @ rotation.transpose(0, 2, 1)
+    near = np.stack([M[:, 0, 0], M[:, 1, 1], M[:, 2, 2], M[:, 1, 2], M[:, 0, 2], M[:, 0, 1]], axis=-1)
+    spread = rng.standard_normal((20000, 6)) * 10.0 ** rng.uniform(-3, 9, (20000, 1))
+    for T in (near, spread, np.array([[1e8, 0, 0, 0, 0, 0], [0.0] * 6])):
+        reference = np.linalg.eigvalsh(derived.voigt_tensor(T))[..., ::-1]
+        error = np.abs(derived.principal_stresses(T) - reference) / np.maximum(np.abs(T).max(axis=-1), 1e-300)[:, None]
+        assert error.max() <= 1e-12

@@ -24,6 +24,9 @@ from test_transient_checkpoint import (
     PARALLEL_RTOL,
     assert_readable_outputs,
     assert_same_series,
+    frame_files,
+    frame_group,
+    named_frame_files,
     read_series,
     xdmf_times,
 )
@@ -57,11 +60,9 @@ def assert_resumed_equals(reference: Path, out: Path, other_partition: bool = Fa
     assert_same_series(read_series(reference / "transient.h5"), read_series(out / "transient.h5"),
                        rtol=0.0 if exact else PARALLEL_RTOL)
     np.testing.assert_allclose(xdmf_times(out), xdmf_times(reference), rtol=0.0 if exact else 1e-12)
-    import h5py
-
     for k in range(len(xdmf_times(reference))):
-        name = f"transient_fields/step_{k:06d}.h5"
-        with h5py.File(reference / name, "r") as f, h5py.File(out / name, "r") as g:
+        name = f"frame {k}"
+        with frame_group(reference, k) as f, frame_group(out, k) as g:
             for field in ("displacement", "potential"):
                 a, b = f[field][:], g[field][:]
                 if exact and not other_partition:
@@ -135,8 +136,9 @@ KILL_POINTS = [
     "checkpoint_state:1",      # the first checkpoint's state file written, its JSON not
     "checkpoint_tmp:1",        # half the first checkpoint JSON in its temporary file
     "series_block:5",          # rows of a later block written, 5 steps after a checkpoint
-    "fields_data:6",           # a field output's HDF5 written, the XDMF not yet naming it (after checkpoint 1)
-    "fields_written:7",        # right after a field output, steps after the last checkpoint
+    "fields_data:1",           # the one batch's HDF5 (frames 0-7, carried in checkpoints 1-8's records) written
+                               # at the end, the XDMF not yet naming it: resumed from checkpoint 8's buffer
+    "fields_written:7",        # right after a field output, frames buffered (the batch) across checkpoint 1
     "checkpoint_tmp:5",        # a later checkpoint half written
     "checkpoint_state:8",      # the last interval checkpoint
     "fields_written:8",        # right after the last output (the end of the first period's burst)
@@ -158,7 +160,7 @@ def kill_and_resume(point: str, out: Path, reference: Path, mpi: int = 0) -> Non
     summary = json.loads((out / "summary.json").read_text())
     for name in summary["outputs"]:
         assert (out / name).is_file(), f"{point}: {name}"
-    assert len(list((out / "transient_fields").glob("step_*"))) == len(xdmf_times(reference))
+    assert frame_files(out) == named_frame_files(out)          # no frame file of the killed run left over
     assert not list((out / "checkpoint").glob("*.tmp"))
 
 
@@ -204,7 +206,7 @@ def test_expanded_fields_equal_the_reduced_solution_at_the_output_times(one_go_c
     assert np.linalg.norm(geometry[tip]) < 1e-12
     for k, t in enumerate(times):
         assert k / 20100.0 / 8 <= t < k / 20100.0 / 8 + 1e-6 + 1e-12
-        with h5py.File(out / "transient_fields" / f"step_{k:06d}.h5", "r") as f:
+        with frame_group(out, k) as f:
             u, phi = f["displacement"][:], f["potential"][:]
             assert u.shape == (geometry.shape[0], 3) and phi.shape == (geometry.shape[0],)
             assert f["displacement"].attrs["time_s"] == t
@@ -221,7 +223,7 @@ def test_expanded_fields_equal_the_reduced_solution_at_the_output_times(one_go_c
     assert text.count('<Grid Name="rigid_bodies"') == len(times)
     with h5py.File(out / "transient_fields" / "bodies.h5", "r") as f:
         assert [str(n) for n in f["body"].attrs["names"]] == ["ball", "stem", "rock"]
-    for name in ("transient_fields.xdmf", "transient_fields/mesh.h5", "transient_fields/step_000002.h5",
+    for name in ("transient_fields.xdmf", "transient_fields/mesh.h5", "transient_fields/frames_000000.h5",
                  "transient_bodies.xdmf", "transient_fields/bodies.h5",
                  "checkpoint/checkpoint.json", "checkpoint/reduced-model.npz", "summary.json"):
         assert name in summary["outputs"]

@@ -181,15 +181,18 @@ def frame_times(xdmf: Path) -> list[float]:
     return [float(v) for v in re.findall(r'<Time Value="([^"]+)"', xdmf.read_text())]
 
 
-def step_file(out: Path, k: int) -> Path:
-    return out / "transient_fields" / f"step_{k:06d}.h5"
+def frame_group(out: Path, k: int):
+    """Frame k's HDF5 group (a group of a batch file, app/transient/fields.py), found through the XML."""
+    from test_transient_checkpoint import frame_group
+
+    return frame_group(out, k)
 
 
 @needs_paraview
 def test_drill_at_an_impact_in_paraview(x_display, transient_result):
     """The drill at the frame where the tip strikes the ball hardest (docs/figures/paraview_drill_impact.png),
     coloured by von Mises stress: the frame is inside a tip-ball impact (the series says the contact is closed
-    and carries tens of newtons), and the stress ParaView reads there is the step file's (the same numbers
+    and carries tens of newtons), and the stress ParaView reads there is the frame's HDF5 data (the same numbers
     through another reader: XDMF + HDF5 in ParaView against h5py)."""
     import h5py
 
@@ -205,7 +208,7 @@ def test_drill_at_an_impact_in_paraview(x_display, transient_result):
     report = open_in_paraview(x_display, out / "transient_fields.xdmf", out / "paraview_drill_impact.png",
                               at=times[k], colour="von_mises_Pa")
     assert report["warped"]["time"] == pytest.approx(times[k], rel=1e-12)
-    with h5py.File(step_file(out, k), "r") as f:
+    with frame_group(out, k) as f:
         von_mises = f["von_mises_Pa"][:]
     assert report["fe_ranges"]["von_mises_Pa"] == pytest.approx([von_mises.min(), von_mises.max()], rel=1e-9)
     assert von_mises.max() > 1e6                        # the horn carries MPa under a 15 um drive
@@ -224,14 +227,13 @@ def test_motor_result_in_paraview(x_display, tmp_path):
     """The motor (docs/figures/paraview_motor.png: the stator's wave and the rotor, coloured by von Mises): the
     three readers show one FE grid carrying displacement, potential and the default derived fields with their
     units in the names, the regions, and the companion file's rotor as triangles at the same times. The von Mises
-    and electric field ParaView reads at the last frame are the step file's (h5py) and below the run's peaks per
+    and electric field ParaView reads at the last frame are the frame's HDF5 data (h5py) and below the run's peaks per
     region in summary.json (field_peaks: the maxima over the frames); the rotor's vertices move. Region names:
     summary.json ``regions`` and the file's ``region_names`` Information give the same table, and the tags
     ParaView reads are exactly its keys; ParaView shows the names as one cell array per region
     (check_region_names: ParaView 5.11's XDMF readers do not expose Information elements, docs/fields.md)."""
     import xml.etree.ElementTree as ET
 
-    import h5py
 
     result = run_cli("run", CASES / "wwusm-motor.toml", "--out", tmp_path, "--quiet",
                      *[a for o in MOTOR_ONE_PERIOD for a in ("--set", o)])
@@ -248,7 +250,7 @@ def test_motor_result_in_paraview(x_display, tmp_path):
         (rotor,) = report[reader]["body_blocks"]
         assert report[reader]["body_times"] == pytest.approx(report[reader]["times"], rel=1e-12)
         assert rotor["cells"] > 40 and set(rotor["cell_arrays"]) == {"body", "sector"}
-    with h5py.File(step_file(tmp_path, n_outputs - 1), "r") as f:
+    with frame_group(tmp_path, n_outputs - 1) as f:
         von_mises = f["von_mises_Pa"][:]
         field = np.linalg.norm(f["electric_field_V_per_m"][:], axis=1)
         rotor_moved = np.linalg.norm(f["bodies/displacement"][:], axis=1).max()

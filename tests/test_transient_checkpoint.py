@@ -4,6 +4,7 @@ run killed with SIGKILL leaves a readable time series and a checkpoint it can re
 from __future__ import annotations
 
 import json
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,36 @@ def read_series(path: Path) -> dict[str, np.ndarray]:
     from app.series import read_time_series
 
     return read_time_series(path)
+
+
+@contextmanager
+def frame_group(out: Path, k: int, xdmf: str = "transient_fields.xdmf"):
+    """Frame k's HDF5 group (its displacement, potential, ...) where the XML's displacement DataItem points: a
+    group ``step_<k>`` of a batch file (app/transient/fields.py)."""
+    import xml.etree.ElementTree as ET
+
+    import h5py
+
+    from app.transient.fields import attribute_source
+
+    step = ET.parse(out / xdmf).getroot().find("Domain/Grid").findall("Grid")[k]
+    where, path = attribute_source(step, "displacement")
+    parts = path.strip("/").split("/")
+    with h5py.File(out / where, "r") as f:
+        yield f["/" + parts[0] if len(parts) > 1 else "/"]       # the frame's group, step_<k>
+
+
+def frame_files(out: Path) -> set[str]:
+    """The frame files in ``out/transient_fields`` (batch files, their temporaries, files of another layout)."""
+    return {p.name for p in (out / "transient_fields").glob("*") if p.name not in ("mesh.h5", "bodies.h5",
+                                                                                     "contact_sites.h5")}
+
+
+def named_frame_files(out: Path, xdmf: str = "transient_fields.xdmf") -> set[str]:
+    """The frame files the XML names."""
+    import re
+
+    return set(re.findall(r"transient_fields/(frames_\d+\.h5):", (out / xdmf).read_text()))
 
 
 def xdmf_times(out: Path) -> list[float]:
@@ -250,14 +281,14 @@ def test_field_frames_of_the_default_drill_run_cover_the_drive_phase(one_go):
     assert np.linalg.norm(geometry[tip]) < 1e-12
     tip_z = []
     for k in range(len(times)):
-        with h5py.File(out / "transient_fields" / f"step_{k:06d}.h5", "r") as f:
+        with frame_group(out, k) as f:
             tip_z.append(f["displacement"][tip, 1])
     assert np.ptp(tip_z) >= 0.8 * 2 * 15e-6
 
 
 def test_field_series_written_at_the_frame_times(one_go):
     """P1 displacement and potential at the frame times (t = 0 and the first step reaching each of the
-    first burst's j / 8 periods), one HDF5 file per output, and the rigid bodies."""
+    first burst's j / 8 periods), in batch files (app/transient/fields.py), and the rigid bodies."""
     import h5py
 
     out, summary = one_go
@@ -273,7 +304,7 @@ def test_field_series_written_at_the_frame_times(one_go):
     assert len(regions) >= 3                            # steel, ceramic, horn ... tagged per cell
     amplitude = 0.0
     for k in range(len(times)):
-        with h5py.File(out / "transient_fields" / f"step_{k:06d}.h5", "r") as f:
+        with frame_group(out, k) as f:
             assert f["displacement"].shape == (vertices, 3)       # P1: one value per vertex
             assert f["potential"].shape == (vertices,)
             amplitude = max(amplitude, np.abs(f["displacement"][:, 1]).max())
@@ -285,10 +316,10 @@ def test_field_series_written_at_the_frame_times(one_go):
     with h5py.File(out / "transient_fields" / "bodies.h5", "r") as f:
         assert [str(n) for n in f["body"].attrs["names"]] == ["ball", "stem", "rock"]
     outputs = summary["outputs"]
-    for name in ("transient.h5", "transient_fields.xdmf", "transient_fields/mesh.h5", "transient_fields/step_000002.h5",
-                 "transient_bodies.xdmf", "transient_fields/bodies.h5",
-                 "checkpoint/checkpoint.json", "summary.json"):
+    for name in ("transient.h5", "transient_fields.xdmf", "transient_fields/mesh.h5", "transient_bodies.xdmf",
+                 "transient_fields/bodies.h5", "checkpoint/checkpoint.json", "summary.json"):
         assert name in outputs
+    assert named_frame_files(out) == frame_files(out) == {n.split("/")[1] for n in outputs if "/frames_" in n}
     for name in outputs:
         assert (out / name).is_file(), name
 
@@ -326,8 +357,9 @@ KILL_POINTS = [
     "checkpoint_state:1",      # the first checkpoint's state file written, its JSON not
     "checkpoint_tmp:1",        # half the first checkpoint JSON in its temporary file
     "step:250",                # between checkpoints
-    "fields_data:6",           # a field output's HDF5 written, the XDMF not yet naming it (after checkpoint 1)
-    "fields_written:7",        # right after a field output, steps after the last checkpoint
+    "fields_data:2",           # the second batch's HDF5 (frames after checkpoint 1, flushed before checkpoint 2)
+                               # written, the XDMF not yet naming it, checkpoint 2 not yet written
+    "fields_written:7",        # right after a field output, frames buffered since checkpoint 1 (inside a batch)
     "checkpoint_tmp:5",        # a later checkpoint half written
     "checkpoint_state:8",      # the last interval checkpoint
     "fields_written:8",        # right after the last output (the end of the first period's burst)
@@ -393,7 +425,7 @@ def kill_and_resume(point: str, out: Path, reference: Path, mpi: int = 0) -> Non
     assert sorted(peaks) == sorted(peaks_ref) and peaks_ref, point
     for region, ref in peaks_ref.items():
         assert peaks[region] == pytest.approx(ref, rel=SERIAL_RTOL if not mpi else PARALLEL_RTOL), (point, region)
-    assert len(list((out / "transient_fields").glob("step_*"))) == len(xdmf_times(reference))
+    assert frame_files(out) == named_frame_files(out)          # no frame file of the killed run left over
 
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="drives serial subprocesses")

@@ -11,12 +11,14 @@ returns their time-series rows; the loop then exports (series, fields), checkpoi
     found ? engine.restore(found) : (mark started, engine.start())
     while t < end and not steady:
         rows = engine.advance(end, steps to the next checkpoint, next field output or period end)
-        series.write_block(rows); fields; steady.update_block(rows); progress
-        checkpoint when due
+        steady.update_block(rows); series.write_block(rows since the last write) at each progress step;
+        fields (buffered); progress
+        checkpoint when due (the buffered field frames written first)
     checkpoint at the end; results = the common keys + engine.results()
 
-A checkpoint is written after complete steps only (series flushed to the rows it names), so a run killed at
-any moment resumes to the same series, bit for bit (tests/test_*_checkpoint.py kill it at every named point).
+A checkpoint is written after complete steps only (series flushed to the rows it names, the buffered field frames
+written or, the modal tier's, carried in its record), so a run killed at any moment resumes to the same series,
+bit for bit (tests/test_*_checkpoint.py kill it at every named point).
 """
 
 from __future__ import annotations
@@ -82,7 +84,7 @@ class Engine(Protocol):
         """Files of its own the engine writes into the checkpoint directory once per run (key -> name)."""
 
     def field_export(self, out_dir: Path, resume_from_s: float | None):
-        """An :class:`app.transient.fields.FieldSeriesExport`-like object (``write(t, z)``, ``next_s``,
+        """An :class:`app.transient.fields.FieldSeriesExport`-like object (``write(t, z)``, ``flush()``, ``next_s``,
         ``interval_s``, ``close()``, ``files()``, ``path``, ``written``) or None (no FE fields)."""
 
     def body_positions(self) -> np.ndarray:
@@ -194,6 +196,8 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     if watch is not None and found is not None and found.loop.get("steady_state") is not None:
         watch.restore(found.loop["steady_state"])
     fields = engine.field_export(out_dir, t_start if found is not None else None)
+    if fields is not None and found is not None and hasattr(fields, "resume"):
+        fields.resume(found.loop.get("fields"))        # the frames the checkpoint buffered, buffered again
     if fields is not None and found is None:
         fields.write(engine.t, engine.body_positions())
     end = engine.end_time_s
@@ -206,6 +210,8 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     steady = watch is not None and watch.steady
     # a resumed run's state is its checkpoint's: nothing to write again unless it takes a step
     checkpointed = engine.steps if found is not None else -1
+    unwritten: list[dict] = []          # row blocks of the engine not yet in the series file
+    series_due = t_start + progress_step
     try:
         while engine.t < end * (1 - 1e-12) and not steady:
             stop_at = math.inf
@@ -216,28 +222,38 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
             stop_at = min(stop_at, engine.t + progress_step)     # progress lines on time
             rows = engine.advance(end, checkpoint.steps_to_next(engine.steps), stop_at)
             if rows and len(rows[S.TIME]):
-                series.write_block(rows)
-            for name, (units, table) in engine.take_tables().items():
-                series.append_table(name, table, units)
-            if rows and len(rows[S.TIME]):
-                kill_point("series_block")
+                unwritten.append(rows)
                 if watch is not None:
                     steady = watch.update_block(rows)
+            # a stop for a field frame only: its rows go to the file with the next block (an HDF5 append costs
+            # milliseconds, a frame burst stops the engine every few steps); a checkpoint writes them first
+            if unwritten and (engine.t >= series_due - 1e-9 * progress_step or checkpoint.due(engine.steps) or steady
+                              or engine.t >= end * (1 - 1e-12)):
+                _write_rows(series, unwritten)
+                series_due = engine.t + progress_step
+                kill_point("series_block")
+            for name, (units, table) in engine.take_tables().items():
+                series.append_table(name, table, units)
             if fields is not None:           # writes only when an output is due
                 mark = time.perf_counter()
                 fields.write(engine.t, engine.body_positions())
                 field_wall += time.perf_counter() - mark
             progress.update(engine.t)
             if checkpoint.due(engine.steps) or steady:
+                field_wall += _flush(fields, before_checkpoint=True)
                 mark = time.perf_counter()
-                checkpointed = _checkpoint(engine, checkpoint, series, watch)
+                checkpointed = _checkpoint(engine, checkpoint, series, watch, fields)
                 checkpoint_wall += time.perf_counter() - mark
+        _write_rows(series, unwritten)
         if checkpointed != engine.steps:
+            field_wall += _flush(fields)
             mark = time.perf_counter()
-            _checkpoint(engine, checkpoint, series, watch)
+            _checkpoint(engine, checkpoint, series, watch, fields)
             checkpoint_wall += time.perf_counter() - mark
+        field_wall += _flush(fields)
     finally:
         progress.close()
+        _write_rows(series, unwritten)          # a failed step: the rows of the steps before it
         series.close()
         if fields is not None:
             fields.close()
@@ -270,10 +286,33 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     return results
 
 
-def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, watch) -> int:
+def _write_rows(series: TimeSeriesWriter, blocks: list[dict]) -> None:
+    """Append the engine's row blocks to the series file as one block, and empty ``blocks``."""
+    if not blocks:
+        return
+    block = blocks[0] if len(blocks) == 1 else {name: np.concatenate([b[name] for b in blocks]) for name in blocks[0]}
+    blocks.clear()
+    series.write_block(block)
+
+
+def _flush(fields, before_checkpoint: bool = False) -> float:
+    """Write the field frames the export buffers (app/transient/fields.py): before every checkpoint, so each frame
+    at or before the checkpoint's time is on disk when the checkpoint is (a resumed run writes only the later
+    ones again), unless the buffer rides in the checkpoint (``carries``: the modal tier's frames, a few
+    coordinates each); and at the end. Returns its wall time [s]."""
+    if fields is None or (before_checkpoint and getattr(fields, "carries", False)):
+        return 0.0
+    mark = time.perf_counter()
+    fields.flush()
+    return time.perf_counter() - mark
+
+
+def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, watch, fields=None) -> int:
     """Write a checkpoint of the engine's state after complete steps; returns the step count it holds."""
     series.flush()
     arrays, record = engine.snapshot()
     loop = {"steady_state": watch.snapshot() if watch is not None else None, "tables": dict(series.table_rows)}
+    if fields is not None and hasattr(fields, "checkpoint_record"):
+        loop["fields"] = fields.checkpoint_record()
     checkpoint.write(engine.t, arrays, record, loop, series.rows_written)
     return engine.steps

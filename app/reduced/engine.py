@@ -620,7 +620,8 @@ class ModalEngine:
 
 class ReducedVertexFields:
     """The field output's vertex values from the reduced model's vertex basis (app/exports.py VertexFields'
-    interface): displacement [m] and potential [V] at the mesh vertices = V q, on rank 0."""
+    interface): displacement [m] and potential [V] at the mesh vertices = V q, on rank 0; ``expand`` forms a
+    batch of frames at once (app/transient/fields.py writes the modal tier's frames through it)."""
 
     def __init__(self, model: ReducedModel, comm, derived=()):
         self.comm = comm
@@ -648,6 +649,30 @@ class ReducedVertexFields:
         values = self.model.vertex_basis @ q
         n = self.n_nodes
         return values[:3 * n].reshape(n, 3), values[3 * n:]
+
+    def expand(self, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, dict, dict | None]]:
+        """The frames of the coordinates ``q`` (size, frames) on rank 0: [(displacement (n, 3) [m], potential (n,)
+        [V], derived vertex fields, peaks per region or None)], one per column. One product of the vertex basis
+        (and of the derived basis) with all the columns: the basis is read once per batch, not once per frame."""
+        from app.fe.derived import RAW_COLUMNS, frame_region_peaks, node_fields
+
+        q = np.asarray(q, dtype=float).reshape(self.model.vertex_basis.shape[1], -1)
+        n, frames = self.n_nodes, q.shape[1]
+        values = self.model.vertex_basis @ q
+        u, phi = values[:3 * n].reshape(n, 3, frames), values[3 * n:]
+        fields: list[dict] = [{} for _ in range(frames)]
+        peaks: list = [None] * frames
+        if self.derived:
+            # (frames, pairs, columns): every frame's region-wise averaged values, then the vertex fields and the
+            # peaks of all the frames at once
+            pairs = np.ascontiguousarray(np.moveaxis(
+                (self.model.derived_basis @ q).reshape(self.averaging.size, RAW_COLUMNS, frames), -1, 0))
+            at_vertices = pairs[:, self.averaging.vertex_pair].reshape(frames * n, RAW_COLUMNS)
+            batch = node_fields(at_vertices, self.derived)
+            fields = [{key: v.reshape(frames, n, *v.shape[1:])[k] for key, v in batch.items()} for k in range(frames)]
+            peaks = frame_region_peaks(pairs, self.averaging.pair_region, self.regions)
+        return [(np.ascontiguousarray(u[:, :, k]), np.ascontiguousarray(phi[:, k]), fields[k], peaks[k])
+                for k in range(frames)]
 
     def derived_frame(self, q: np.ndarray):
         """(derived vertex fields, peaks per region) of the frame (rank 0; (None, None) elsewhere): the basis's

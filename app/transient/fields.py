@@ -2,26 +2,42 @@
 phase-locked to the drive (:func:`frame_schedule`: bursts of frames spread over a drive period, so an
 animation shows the vibration, not one phase of it).
 
-Layout: ``<stem>.xdmf`` (the XML, ours) and ``<stem>/mesh.h5`` (vertices, cells, region tags)
-plus one ``<stem>/step_<k>.h5`` per output (displacement [m], potential [V] at the vertices; see
-:class:`app.exports.VertexFields`). Each output time is one uniform grid of the FE mesh (``fe_body``:
+Layout: ``<stem>.xdmf`` (the XML, ours) and ``<stem>/mesh.h5`` (vertices, cells, region tags) plus
+``<stem>/frames_<k>.h5``, one HDF5 file per batch of frames named by its first frame k, with frame k's
+displacement [m] and potential [V] at the vertices (see :class:`app.exports.VertexFields`) in its group
+``step_<k>``. Each output time is one uniform grid of the FE mesh (``fe_body``:
 displacement, potential, region) in a temporal collection, the layout meshio's TimeSeriesReader and
 ParaView's XDMF readers both read. The rigid bodies, drawn with their shapes
 (:mod:`app.transient.body_shapes`), are the companion file ``transient_bodies.xdmf`` written at the same
 times: one triangle grid of all bodies (``rigid_bodies``: cell values ``body``, the index into the
 ``names`` attribute of ``<stem>/bodies.h5``, and ``sector``, stripes that show a spin) at their start,
-with each vertex's displacement [m] in the step file (``bodies/displacement``). Both files are written
-in the reference configuration with their displacement, so one Warp By Vector (scale 1) on each puts
+with each vertex's displacement [m] in the frame's group (``step_<k>/bodies/displacement``). Both files are
+written in the reference configuration with their displacement, so one Warp By Vector (scale 1) on each puts
 the transducer and the bodies where they are; meshio reads the points once and the displacement per time.
 The modal tier's contact sites with ``output.contact_pressure`` are a second companion,
 ``transient_contact_sites.xdmf`` (:class:`ContactSiteCloud`: a point cloud with the sites' displacement and
 ``contact_pressure_Pa``, their area and contact index in ``<stem>/contact_sites.h5``).
 
-Why a file per output: a process killed while writing HDF5 can leave that file unreadable; here
-it can only hit a step file that the XML does not name yet (step files are written under a
-temporary name and renamed), and the XML is replaced atomically after the step file exists. So
-after a kill at any moment the XML and every file it names are complete. A resumed run drops the
-steps after the checkpoint's time (XML entries and their files) and continues the series.
+Why batches, and why a file per batch: writing each frame at once cost the modal tier more than its steps
+(one HDF5 file per frame, the whole XML rewritten per frame, one product of the bases per frame). So frames
+are buffered (at most ``FRAMES_PER_FILE``) and written together by ``flush()``: one HDF5 file, one rewrite of
+the XML, and in the modal tier one product of each basis with all the batch's coordinates
+(app/reduced/engine.py ReducedVertexFields's ``expand``). A process killed while writing HDF5 can leave that
+file unreadable; here it can only hit a batch file that the XML does not name yet (it is written under a
+temporary name and renamed), and the XML is replaced atomically after the batch file exists. So after a
+kill at any moment the XML and every file it names are complete.
+
+Checkpoints (app/loop/loop.py): a frame at or before a checkpoint's time is either on disk when the checkpoint
+is written or in the checkpoint itself. The FE tier's buffered frames (sampled fields, large) are written
+before every checkpoint; the modal tier's (a time, its coordinates q and body coordinates z: a few hundred
+numbers) ride in the checkpoint's record (:meth:`FieldSeriesExport.checkpoint_record`), so its batches are not
+cut at checkpoints (with a contact site cloud, ``output.contact_pressure``, whose site states are larger, they
+are written before it as the FE tier's). A resumed run (``resume_from_s``, then
+:meth:`FieldSeriesExport.resume` with the checkpoint's record) keeps the frames that were on disk at the
+checkpoint (XML entries and the batch files they name), removes every other frame file (a batch written after
+the checkpoint, or not yet named), buffers the checkpoint's frames again and continues the series. Its batches
+are the run in one go's (cut at the same frames), so its values are that run's bit for bit; resumed with
+another checkpoint interval, the FE tier's cut differs and the values agree to round-off.
 """
 
 from __future__ import annotations
@@ -51,8 +67,15 @@ from app.killpoint import kill_point
 BODY_GRID = "rigid_bodies"      # name of the bodies' grid in the companion file
 SITE_GRID = "contact_sites"     # name of the contact sites' grid in their companion file
 CONTACT_PRESSURE = "contact_pressure_Pa"     # the contact pressure's name in every tier's files [Pa]
-FRAME_PEAKS = "region_peaks_json"       # attribute of a step file's displacement: that frame's peaks per region
+FRAME_PEAKS = "region_peaks_json"       # attribute of a frame's displacement: that frame's peaks per region
 DEFAULT_PHASES = 8
+#: at most this many frames are buffered before they are written (one HDF5 file, one rewrite of the XML); the run
+#: loop also flushes before every checkpoint and at the end
+FRAMES_PER_FILE = 64
+#: and at most about this much memory for a batch's vertex values (a large mesh writes smaller batches): an FE frame
+#: buffers its sampled fields, a modal batch expands all its frames at once; estimated as 64 doubles per vertex and
+#: frame (displacement, potential, the derived fields and the region-wise averaged values they come from)
+BATCH_BYTES = 256 * 2**20
 
 
 class FrameSchedule:
@@ -127,20 +150,62 @@ class ContactSiteCloud:
     state: Callable
 
 
+@dataclass
+class _Frame:
+    """A frame written by ``write`` and not yet flushed. Rank 0 holds the data: the modal tier's coordinates
+    ``state`` (expanded at the flush), or the sampled ``fields`` (name -> (values, units or None)) of the FE
+    tier, the further vertex ``scalars`` (name -> (values, units)), the bodies' and the sites' state."""
+
+    t: float
+    state: np.ndarray | None = None
+    fields: dict | None = None
+    scalars: dict | None = None
+    peaks: dict | None = None
+    z: np.ndarray | None = None
+    bodies: np.ndarray | None = None
+    sites: tuple | None = None
+
+
+class _StepTemplate:
+    """A frame's serialised XML element with two placeholders, the time value and the frame's data path
+    (``<folder>/<file>:/<group>``); ``fill(t, data_at)`` returns the frame's bytes."""
+
+    TIME = "@time@"
+    DATA = "@data@:"             # with a colon: data_item then writes an HDF5 DataItem
+
+    def __init__(self, text: bytes):
+        self.parts = [part.split(self.DATA.encode()) for part in text.split(self.TIME.encode())]
+        if len(self.parts) != 2:
+            raise ValueError("a frame template holds one time value")
+
+    def fill(self, t: str, data_at: str) -> bytes:
+        at = data_at.encode()
+        return t.encode().join(at.join(part) for part in self.parts)
+
+
+def _time_text(t: float | str) -> str:
+    return t if isinstance(t, str) else repr(float(t))
+
+
 class FieldSeriesExport:
-    """``write(t, body_positions)`` appends the current displacement [m] and electric potential [V]
+    """``write(t, body_positions)`` takes a frame of the current displacement [m] and electric potential [V]
     (``vertex.sample(solution())``: :class:`app.exports.VertexFields` of the FE model and a full u-phi PETSc
-    vector, or the modal tier's vertex basis and its coordinates) and the rigid bodies' displacement
+    vector; or, with a ``vertex`` that has ``expand`` (the modal tier's vertex basis), its coordinates, kept
+    until the batch is written and expanded then, all of the batch at once) and the rigid bodies' displacement
     (``body_positions``: the packed body coordinates z [m, rad]) when t has reached the next frame time of
-    ``schedule`` (:class:`FrameSchedule`). ``bodies``: None, or a function of the scene size [m] (the FE mesh's
-    largest extent) returning the :class:`app.transient.body_shapes.BodyMeshes` of the run (called on rank 0).
-    ``resume_from_s``: continue the existing series after that time (later steps are dropped).
-    ``scalars``: a callable returning further vertex fields of the current state, {name: (values at the
-    vertices on rank 0 (None elsewhere), units)}, e.g. ``contact_pressure_Pa`` (collective). ``sites``: None, or
-    the :class:`ContactSiteCloud` written as the companion ``<stem minus _fields>_contact_sites.xdmf``."""
+    ``schedule`` (:class:`FrameSchedule`). Frames are written in batches of at most ``batch_frames`` (and about
+    BATCH_BYTES of vertex values), by ``flush()`` (collective: the run loop calls it before every checkpoint
+    unless ``carries``) and by ``close()``; ``checkpoint_record()`` and ``resume(record)`` carry the buffer
+    through a checkpoint (module docstring). ``bodies``: None, or a function of the scene size [m] (the FE
+    mesh's largest extent) returning the :class:`app.transient.body_shapes.BodyMeshes` of the run (called on
+    rank 0). ``resume_from_s``: continue the existing series after that time (later steps are dropped).
+    ``scalars``: a callable returning further vertex fields of the current state, {name: (values at the vertices
+    on rank 0 (None elsewhere), units)}, e.g. ``contact_pressure_Pa`` (collective). ``sites``: None, or the
+    :class:`ContactSiteCloud` written as the companion ``<stem minus _fields>_contact_sites.xdmf``."""
 
     def __init__(self, path: Path, vertex, solution, schedule: FrameSchedule, bodies=None,
-                 resume_from_s: float | None = None, scalars=None, sites: ContactSiteCloud | None = None):
+                 resume_from_s: float | None = None, scalars=None, sites: ContactSiteCloud | None = None,
+                 batch_frames: int = FRAMES_PER_FILE):
         self.path = Path(path)
         self.dir = self.path.with_suffix("")
         self.bodies_path = self.path.with_name(self.path.stem.replace("_fields", "") + "_bodies.xdmf")
@@ -151,35 +216,43 @@ class FieldSeriesExport:
         self.schedule = schedule
         self.interval_s = schedule.spacing_s          # the loop's tolerance scale
         self.vertex = vertex
+        self.expands = hasattr(vertex, "expand")      # the modal tier: coordinates now, vertex values per batch
         self.scalars = scalars
+        self.batch_frames = max(1, int(batch_frames))
+        self.pending: list[_Frame] = []
         self.comm = vertex.comm
         self.rank0 = self.comm.rank == 0
         self.bodies = None
         self.steps: list[bytes] = []         # each output's XML, serialised once
         self.body_steps: list[bytes] = []
+        self.data_files: list[str] = []      # the frame files the XML names, in order (every rank)
+        self._templates: dict[tuple, _StepTemplate] = {}
+        self._kept: list[ET.Element] = []
         self.next_s = self._first()
         if resume_from_s is not None:
             self.next_s = self._next_after(resume_from_s)
+        kept_peaks: dict = {}
         if self.rank0:
             if bodies is not None:
                 x = vertex.mesh_arrays["geometry"]
                 meshes = bodies(float(np.ptp(x, axis=0).max()) if len(x) else 1.0)
                 self.bodies = meshes if meshes.names else None
             self.dir.mkdir(parents=True, exist_ok=True)
+            kept = []
             if resume_from_s is not None:
-                self.steps = [step_bytes(step) for step in _steps_until(self.path, resume_from_s)]
-                if self.bodies is not None:
-                    self.body_steps = [step_bytes(step) for step in _steps_until(self.bodies_path, resume_from_s)]
-                if self.sites is not None:
-                    self.site_steps = [step_bytes(step) for step in _steps_until(self.sites_path, resume_from_s)]
+                kept = _steps_until(self.path, resume_from_s)
+                body_steps = _steps_until(self.bodies_path, resume_from_s) if self.bodies is not None else []
+                site_steps = _steps_until(self.sites_path, resume_from_s) if self.sites is not None else []
                 # a kill between the XMLs (companions first): keep the frames every file has
-                n = min(len(self.steps), *([len(self.body_steps)] if self.bodies is not None else []),
-                        *([len(self.site_steps)] if self.sites is not None else []))
-                self.steps, self.body_steps, self.site_steps = (self.steps[:n], self.body_steps[:n],
-                                                                self.site_steps[:n])
-            for stale in self.dir.glob("step_*.h5*"):       # steps of a killed run past the checkpoint
-                if _step_index(stale) >= len(self.steps):
-                    stale.unlink()
+                n = min([len(kept), *([len(body_steps)] if self.bodies is not None else []),
+                         *([len(site_steps)] if self.sites is not None else [])])
+                kept = kept[:n]
+                self.steps = [step_bytes(step) for step in kept]
+                self.body_steps = [step_bytes(step) for step in body_steps[:n]]
+                self.site_steps = [step_bytes(step) for step in site_steps[:n]]
+                kept_peaks = _kept_peaks(self.path.parent, kept)
+            self._kept = kept
+            self._drop_stale(kept)
             write_mesh_h5(self.dir / "mesh.h5", self.vertex)
             if self.bodies is not None:
                 write_bodies_h5(self.dir / "bodies.h5", self.bodies)
@@ -198,30 +271,19 @@ class FieldSeriesExport:
                                              "names": list(c.names)}})
             self._replace_documents()
         self.written = self.comm.bcast(len(self.steps), root=0)
+        self.data_files = self.comm.bcast(self.data_files, root=0)
+        frame_bytes = self.comm.bcast(8 * 64 * int(getattr(vertex, "n_nodes", 0)) if self.rank0 else None, root=0)
+        self.batch_frames = max(1, min(self.batch_frames, BATCH_BYTES // max(frame_bytes, 1)))
+        # the modal tier's buffered frames are a few coordinates each: they ride in the checkpoint
+        # (checkpoint_record, resume) instead of being written before it, so batches are not cut there
+        self.carries = self.expands and not self.comm.bcast(self.sites is not None, root=0)
         self.has_bodies = self.comm.bcast(self.bodies is not None, root=0)
         self.has_sites = self.comm.bcast(self.sites is not None, root=0)
         # peaks per region over the frames of the series (app.fe.derived.region_peaks), every rank; a resumed run
-        # starts from the kept frames' own peaks (each step file keeps its frame's), so a kill changes nothing
+        # starts from the kept frames' own peaks (each frame keeps its own), so a kill changes nothing
         self.peaks: dict | None = None
         if getattr(vertex, "derived", ()):
-            self.peaks = self.comm.bcast(self._kept_peaks() if self.rank0 else None, root=0)
-
-    def _kept_peaks(self) -> dict:
-        """The running peaks of the frames kept on resume (rank 0): the merge of each step file's own."""
-        import h5py
-
-        from app.fe.derived import merge_peaks
-
-        peaks: dict = {}
-        for k in range(len(self.steps)):
-            try:
-                with h5py.File(self.dir / f"step_{k:06d}.h5", "r") as f:
-                    frame = f["displacement"].attrs.get(FRAME_PEAKS)
-            except OSError:
-                frame = None
-            if frame is not None:
-                merge_peaks(peaks, json.loads(frame))
-        return peaks
+            self.peaks = self.comm.bcast(kept_peaks if self.rank0 else None, root=0)
 
     def _first(self) -> float:
         return float(self.schedule.frames[0])          # t = 0 for regular bursts, else the first burst
@@ -229,12 +291,56 @@ class FieldSeriesExport:
     def _next_after(self, t: float) -> float:
         return self.schedule.next_after(t)
 
+    def _drop_stale(self, kept: list[ET.Element]) -> None:
+        """Keep the frame files the steps ``kept`` name; remove the others (a killed run's past the checkpoint)."""
+        self.data_files = _data_files(kept, self.dir.name)
+        for stale in [*self.dir.glob("frames_*.h5*"), *self.dir.glob("step_*.h5*")]:
+            if stale.name not in self.data_files:
+                stale.unlink()
+
+    def checkpoint_record(self) -> dict:
+        """The series' part of a checkpoint (JSON-able; rank 0's is stored): the number of frames on disk and,
+        when the buffer rides in the checkpoint (``carries``: the modal tier), the buffered frames' times,
+        coordinates q and body coordinates z. Without ``carries`` the run loop flushes before the checkpoint."""
+        frames = []
+        if self.carries and self.rank0:
+            frames = [{"t_s": f.t, "q": f.state.tolist(), "z": None if f.z is None else f.z.tolist()}
+                      for f in self.pending]
+        return {"on_disk": self.written - len(self.pending), "buffered": frames}
+
+    def resume(self, record: dict | None) -> None:
+        """Continue from a checkpoint's :meth:`checkpoint_record` (collective): the series cut to the frames that
+        were on disk then (a batch written after the checkpoint can hold frames at or before its time: they are
+        in its record) and its buffered frames buffered again, so the batches are the run in one go's. A
+        checkpoint without a record (an older version's) had every frame at or before its time on disk."""
+        if not record:
+            return
+        on_disk = int(record["on_disk"])
+        if self.rank0 and on_disk < len(self.steps):
+            self._kept = self._kept[:on_disk]
+            self.steps, self.body_steps = self.steps[:on_disk], self.body_steps[:on_disk]
+            self.site_steps = self.site_steps[:on_disk]
+            self._drop_stale(self._kept)
+            self._replace_documents()
+            if self.peaks is not None:
+                self.peaks = _kept_peaks(self.path.parent, self._kept)
+        self.data_files = self.comm.bcast(self.data_files, root=0)
+        if self.peaks is not None:
+            self.peaks = self.comm.bcast(self.peaks, root=0)
+        self.written = self.comm.bcast(len(self.steps), root=0)
+        for frame in record.get("buffered") or []:
+            z = frame.get("z")
+            self.pending.append(_Frame(float(frame["t_s"]), state=np.asarray(frame["q"], dtype=float),
+                                       z=None if z is None else np.asarray(z, dtype=float),
+                                       scalars={}))
+            self.written += 1
+
     def files(self) -> list[str]:
-        """Names of the files of the series, relative to the output directory."""
+        """Names of the files of the series, relative to the output directory (after ``close()``)."""
         bodies = [self.bodies_path.name, f"{self.dir.name}/bodies.h5"] if self.has_bodies else []
         sites = [self.sites_path.name, f"{self.dir.name}/contact_sites.h5"] if self.has_sites else []
-        return [self.path.name, f"{self.dir.name}/mesh.h5", *bodies, *sites] + [f"{self.dir.name}/step_{k:06d}.h5"
-                                                                        for k in range(self.written)]
+        return [self.path.name, f"{self.dir.name}/mesh.h5", *bodies, *sites] + [f"{self.dir.name}/{name}"
+                                                                        for name in self.data_files]
 
     def _document(self) -> bytes:
         return xdmf_document(self.steps, self.path.stem, getattr(self.vertex, "region_names", None))
@@ -251,59 +357,119 @@ class FieldSeriesExport:
         if t < self.next_s - 1e-9 * self.interval_s:
             return
         x = self.solution()
-        sampled = self.vertex.sample(x)
-        derived, frame_peaks = self._derived(x)
+        frame = _Frame(float(t))
+        if self.expands:
+            if self.rank0:
+                frame.state = np.array(x, dtype=float, copy=True)
+        else:
+            sampled = self.vertex.sample(x)
+            derived, frame.peaks = self._derived(x)
+            if self.rank0:
+                u, phi = sampled
+                frame.fields = {"displacement": (u, "m"), "potential": (phi, "V"),
+                                **{key: (v, None) for key, v in derived.items()}}
         scalars = self.scalars() if self.scalars is not None else {}
         site_state = self.sites.state() if self.sites is not None else None
         if self.rank0:
-            u, phi = sampled
-            k = len(self.steps)
-            name = f"step_{k:06d}.h5"
-            datasets = {"displacement": u, "potential": phi, **derived,
-                        **{key: v for key, (v, _) in scalars.items()}}
-            attrs = {"displacement": {"units": "m", "time_s": t}, "potential": {"units": "V", "time_s": t},
-                     **{key: {"units": units, "time_s": t} for key, (_, units) in scalars.items()}}
-            if frame_peaks is not None:
-                attrs["displacement"][FRAME_PEAKS] = json.dumps(frame_peaks)
-            if self.bodies is not None:
-                datasets["bodies/displacement"] = self.bodies.displacement(body_positions)
-                attrs["bodies/displacement"] = {"units": "m", "time_s": t}
-            if site_state is not None:
-                datasets["contact_sites/displacement"], datasets[f"contact_sites/{CONTACT_PRESSURE}"] = site_state
-                attrs["contact_sites/displacement"] = {"units": "m", "time_s": t}
-                attrs[f"contact_sites/{CONTACT_PRESSURE}"] = {"units": "Pa", "time_s": t}
-            write_h5_atomic(self.dir / name, datasets, attrs)
-            kill_point("fields_data")                   # the step file exists, the XML does not name it yet
-            step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{self.dir.name}/{name}:",
-                             extra_fields({**derived, **{key: v for key, (v, _) in scalars.items()}}))
-            step.insert(0, ET.Element("Time", Value=repr(float(t))))
-            self.steps.append(step_bytes(step))
-            if self.bodies is not None:
-                self.body_steps.append(step_bytes(self._body_grid(t, name)))
-            if self.sites is not None:
-                self.site_steps.append(step_bytes(self._site_grid(t, name)))
-            self._replace_documents()
+            frame.scalars = scalars
+            if self.bodies is not None and body_positions is not None:
+                frame.z = np.array(body_positions, dtype=float, copy=True)     # displaced at the flush
+            frame.sites = site_state
+        self.pending.append(frame)
         self.written += 1
         self.next_s = self._next_after(t)
         kill_point("fields_written")
+        if len(self.pending) >= self.batch_frames:
+            self.flush()
 
-    def _body_grid(self, t: float, step_file: str) -> ET.Element:
-        """One output of the bodies: their triangles at the start and the displacement of ``step_file``."""
-        return body_grid(self.bodies, t, self.dir.name, step_file)
+    def flush(self) -> None:
+        """Write the buffered frames: one HDF5 file (under a temporary name, renamed), then the XMLs naming them.
+        Collective (the modal tier's peaks are computed on rank 0 and broadcast)."""
+        if not self.pending:
+            return
+        frames, self.pending = self.pending, []
+        first = self.written - len(frames)
+        name = f"frames_{first:06d}.h5"
+        if self.expands:
+            expanded = self.vertex.expand(np.column_stack([f.state for f in frames])) if self.rank0 else None
+            peaks = self.comm.bcast([e[3] for e in expanded] if self.rank0 else None, root=0)
+            for k, frame in enumerate(frames):
+                frame.peaks = peaks[k]
+                if self.peaks is not None and frame.peaks is not None:
+                    from app.fe.derived import merge_peaks
 
-    def _site_grid(self, t: float, step_file: str) -> ET.Element:
+                    merge_peaks(self.peaks, frame.peaks)
+                if self.rank0:
+                    u, phi, derived, _ = expanded[k]
+                    frame.fields = {"displacement": (u, "m"), "potential": (phi, "V"),
+                                    **{key: (v, None) for key, v in derived.items()}}
+                    frame.state = None
+        if self.rank0:
+            datasets, attrs = {}, {}
+            for k, frame in enumerate(frames, start=first):
+                group, t = f"step_{k:06d}", frame.t
+                for key, (values, units) in {**frame.fields, **frame.scalars}.items():
+                    datasets[f"{group}/{key}"] = values
+                    attrs[f"{group}/{key}"] = {"units": units, "time_s": t} if units is not None else {}
+                if frame.peaks is not None:
+                    attrs[f"{group}/displacement"][FRAME_PEAKS] = json.dumps(frame.peaks)
+                if self.bodies is not None and frame.z is not None:
+                    frame.bodies = self.bodies.displacement(frame.z)
+                if frame.bodies is not None:
+                    datasets[f"{group}/bodies/displacement"] = frame.bodies
+                    attrs[f"{group}/bodies/displacement"] = {"units": "m", "time_s": t}
+                if frame.sites is not None:
+                    (datasets[f"{group}/contact_sites/displacement"],
+                     datasets[f"{group}/contact_sites/{CONTACT_PRESSURE}"]) = frame.sites
+                    attrs[f"{group}/contact_sites/displacement"] = {"units": "m", "time_s": t}
+                    attrs[f"{group}/contact_sites/{CONTACT_PRESSURE}"] = {"units": "Pa", "time_s": t}
+            write_h5_atomic(self.dir / name, datasets, attrs)
+            kill_point("fields_data")                   # the batch file exists, the XML does not name it yet
+            at = f"{self.dir.name}/{name}:"
+            for k, frame in enumerate(frames, start=first):
+                data_at, t = f"{at}/step_{k:06d}", repr(float(frame.t))
+                extra = extra_fields({**{key: v for key, (v, _) in frame.fields.items()
+                                         if key not in ("displacement", "potential")},
+                                      **{key: v for key, (v, _) in frame.scalars.items()}})
+                self.steps.append(self._template("fe", tuple(extra)).fill(t, data_at))
+                if self.bodies is not None:
+                    self.body_steps.append(self._template("bodies").fill(t, data_at))
+                if self.sites is not None:
+                    self.site_steps.append(self._template("sites").fill(t, data_at))
+            self._replace_documents()
+        self.data_files.append(name)
+
+    def _template(self, grid: str, extra: tuple = ()) -> _StepTemplate:
+        """A frame's XML element of ``grid`` ("fe" with the vertex fields ``extra``, "bodies", "sites") as bytes
+        with the time and the frame's data path left to fill: built and serialised once per series, not once per
+        frame (the elements of a series differ only there)."""
+        key = (grid, extra)
+        if key not in self._templates:
+            t, at = _StepTemplate.TIME, _StepTemplate.DATA
+            if grid == "fe":
+                step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", at, list(extra))
+                step.insert(0, ET.Element("Time", Value=t))
+            elif grid == "bodies":
+                step = body_grid(self.bodies, t, self.dir.name, at)
+            else:
+                step = self._site_grid(t, at)
+            self._templates[key] = _StepTemplate(step_bytes(step))
+        return self._templates[key]
+
+    def _site_grid(self, t: float | str, data_at: str) -> ET.Element:
         """One output of the contact sites: the points at their reference position, one vertex cell each, the
-        displacement and pressure of ``step_file``, the static area and contact index."""
-        n, where, step = len(self.sites.points), f"{self.dir.name}/contact_sites.h5", f"{self.dir.name}/{step_file}"
+        displacement and pressure at ``data_at`` (``<folder>/<file>:/<group>``), the static area and contact
+        index."""
+        n, where = len(self.sites.points), f"{self.dir.name}/contact_sites.h5"
         grid = ET.Element("Grid", Name=SITE_GRID, GridType="Uniform")
-        ET.SubElement(grid, "Time", Value=repr(float(t)))
+        ET.SubElement(grid, "Time", Value=_time_text(t))
         topo = ET.SubElement(grid, "Topology", TopologyType="Polyvertex", NumberOfElements=str(n), NodesPerElement="1")
         data_item(topo, f"{where}:/vertices", (n, 1), "Int")
         geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
         data_item(geo, f"{where}:/points", (n, 3))
         for attr_name, kind, source, shape, number in (
-                ("displacement", "Vector", f"{step}:/contact_sites/displacement", (n, 3), "Float"),
-                (CONTACT_PRESSURE, "Scalar", f"{step}:/contact_sites/{CONTACT_PRESSURE}", (n,), "Float"),
+                ("displacement", "Vector", f"{data_at}/contact_sites/displacement", (n, 3), "Float"),
+                (CONTACT_PRESSURE, "Scalar", f"{data_at}/contact_sites/{CONTACT_PRESSURE}", (n,), "Float"),
                 ("site_area_m2", "Scalar", f"{where}:/site_area_m2", (n,), "Float"),
                 ("contact", "Scalar", f"{where}:/contact", (n,), "Int")):
             attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center="Node")
@@ -323,7 +489,8 @@ class FieldSeriesExport:
         return fields or {}, peaks
 
     def close(self) -> None:
-        """Nothing stays open between outputs."""
+        """Write the buffered frames (collective); nothing stays open between outputs."""
+        self.flush()
 
 
 def write_bodies_h5(path: Path, bodies) -> None:
@@ -335,19 +502,19 @@ def write_bodies_h5(path: Path, bodies) -> None:
                      "sector": {"meaning": "alternating stripes round a body of revolution (its spin)"}})
 
 
-def body_grid(bodies, t: float, folder: str, step_file: str) -> ET.Element:
-    """One output of the bodies: their triangles at the start (``<folder>/bodies.h5``) and the displacement of
-    ``<folder>/<step_file>`` (``bodies/displacement``)."""
+def body_grid(bodies, t: float | str, folder: str, data_at: str) -> ET.Element:
+    """One output of the bodies: their triangles at the start (``<folder>/bodies.h5``) and the displacement at
+    ``data_at`` (``<folder>/<file>:/<group>``, its dataset ``bodies/displacement``)."""
     b, where = bodies, f"{folder}/bodies.h5"
     grid = ET.Element("Grid", Name=BODY_GRID, GridType="Uniform")
-    ET.SubElement(grid, "Time", Value=repr(float(t)))
+    ET.SubElement(grid, "Time", Value=_time_text(t))
     topo = ET.SubElement(grid, "Topology", TopologyType="Triangle", NumberOfElements=str(len(b.triangles)),
                          NodesPerElement="3")
     data_item(topo, f"{where}:/triangles", b.triangles.shape, "Int")
     geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
     data_item(geo, f"{where}:/points", b.points.shape)
     for attr_name, kind, center, source, shape, number in (
-            ("displacement", "Vector", "Node", f"{folder}/{step_file}:/bodies/displacement", b.points.shape, "Float"),
+            ("displacement", "Vector", "Node", f"{data_at}/bodies/displacement", b.points.shape, "Float"),
             ("body", "Scalar", "Cell", f"{where}:/body", b.body.shape, "Int"),
             ("sector", "Scalar", "Cell", f"{where}:/sector", b.sector.shape, "Int")):
         attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
@@ -358,60 +525,145 @@ def body_grid(bodies, t: float, folder: str, step_file: str) -> ET.Element:
 class BodySeriesExport:
     """The rigid bodies with their shapes alone, for a tier without an FE mesh (the lumped tier): the file
     ``path`` (``transient_bodies.xdmf``, the same grid as :class:`FieldSeriesExport`'s companion) with its data in
-    ``<path stem>/``: ``bodies.h5`` once and one ``step_<k>.h5`` per frame (``bodies/displacement`` [m]). A frame
-    at t = 0 and at the first output at or after each multiple of ``interval_s``; ``write(t, z)`` as
-    FieldSeriesExport's (``z``: the packed body coordinates ``bodies`` displaces by). ``bodies``: a function
-    returning the :class:`app.transient.body_shapes.BodyMeshes` (called on rank 0). Kill-safe and resumable as
+    ``<path stem>/``: ``bodies.h5`` once and one ``frames_<k>.h5`` per batch of frames (frame k's
+    ``step_<k>/bodies/displacement`` [m]). A frame at t = 0 and at the first output at or after each multiple of
+    ``interval_s``; ``write(t, z)``, ``flush()`` and ``close()`` as FieldSeriesExport's (``z``: the packed body
+    coordinates ``bodies`` displaces by). ``bodies``: a function returning the
+    :class:`app.transient.body_shapes.BodyMeshes` (called on rank 0). Kill-safe and resumable as
     FieldSeriesExport."""
 
-    def __init__(self, path: Path, bodies, interval_s: float, comm, resume_from_s: float | None = None):
+    def __init__(self, path: Path, bodies, interval_s: float, comm, resume_from_s: float | None = None,
+                 batch_frames: int = FRAMES_PER_FILE):
         self.path = Path(path)
         self.dir = self.path.with_suffix("")
         self.comm = comm
         self.schedule = FrameSchedule(interval_s, 1, interval_periods=1)
         self.interval_s = self.schedule.spacing_s
         self.next_s = 0.0 if resume_from_s is None else self.schedule.next_after(resume_from_s)
+        self.batch_frames = max(1, int(batch_frames))
+        self.pending: list[tuple[float, np.ndarray | None]] = []
         self.steps: list[bytes] = []
+        self.data_files: list[str] = []
         self.bodies = None
         if comm.rank == 0:
             self.bodies = bodies()
             self.dir.mkdir(parents=True, exist_ok=True)
-            if resume_from_s is not None:
-                self.steps = [step_bytes(step) for step in _steps_until(self.path, resume_from_s)]
-            for stale in self.dir.glob("step_*.h5*"):       # steps of a killed run past the checkpoint
-                if _step_index(stale) >= len(self.steps):
+            kept = _steps_until(self.path, resume_from_s) if resume_from_s is not None else []
+            self.steps = [step_bytes(step) for step in kept]
+            self.data_files = _data_files(kept, self.dir.name)
+            for stale in [*self.dir.glob("frames_*.h5*"), *self.dir.glob("step_*.h5*")]:
+                if stale.name not in self.data_files:      # frames of a killed run past the checkpoint
                     stale.unlink()
             write_bodies_h5(self.dir / "bodies.h5", self.bodies)
             replace_file(self.path, xdmf_document(self.steps, self.path.stem))
         self.written = comm.bcast(len(self.steps), root=0)
+        self.data_files = comm.bcast(self.data_files, root=0)
 
     def files(self) -> list[str]:
-        return [self.path.name, f"{self.dir.name}/bodies.h5"] + [f"{self.dir.name}/step_{k:06d}.h5"
-                                                                 for k in range(self.written)]
+        return [self.path.name, f"{self.dir.name}/bodies.h5"] + [f"{self.dir.name}/{name}" for name in self.data_files]
 
     def write(self, t: float, body_positions=None) -> None:
         if t < self.next_s - 1e-9 * self.interval_s:
             return
-        if self.comm.rank == 0:
-            name = f"step_{len(self.steps):06d}.h5"
-            write_h5_atomic(self.dir / name, {"bodies/displacement": self.bodies.displacement(body_positions)},
-                            {"bodies/displacement": {"units": "m", "time_s": t}})
-            kill_point("fields_data")
-            self.steps.append(step_bytes(body_grid(self.bodies, t, self.dir.name, name)))
-            replace_file(self.path, xdmf_document(self.steps, self.path.stem))
+        self.pending.append((float(t), self.bodies.displacement(body_positions) if self.comm.rank == 0 else None))
         self.written += 1
         self.next_s = self.schedule.next_after(t)
         kill_point("fields_written")
+        if len(self.pending) >= self.batch_frames:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the buffered frames: one HDF5 file, then the XML naming them."""
+        if not self.pending:
+            return
+        frames, self.pending = self.pending, []
+        first = self.written - len(frames)
+        name = f"frames_{first:06d}.h5"
+        if self.comm.rank == 0:
+            groups = [f"step_{k:06d}" for k in range(first, first + len(frames))]
+            write_h5_atomic(self.dir / name,
+                            {f"{g}/bodies/displacement": u for g, (_, u) in zip(groups, frames)},
+                            {f"{g}/bodies/displacement": {"units": "m", "time_s": t}
+                             for g, (t, _) in zip(groups, frames)})
+            kill_point("fields_data")
+            self.steps += [step_bytes(body_grid(self.bodies, t, self.dir.name, f"{self.dir.name}/{name}:/{g}"))
+                           for g, (t, _) in zip(groups, frames)]
+            replace_file(self.path, xdmf_document(self.steps, self.path.stem))
+        self.data_files.append(name)
 
     def close(self) -> None:
-        """Nothing stays open between outputs."""
+        """Write the buffered frames; nothing stays open between outputs."""
+        self.flush()
 
 
-def _step_index(path: Path) -> int:
+def _data_files(steps: list[ET.Element], folder: str) -> list[str]:
+    """The names of the files in ``folder`` that the HDF5 DataItems of ``steps`` name, in order of first use."""
+    names: dict[str, None] = {}
+    for step in steps:
+        for item in step.iter("DataItem"):
+            if item.get("Format") == "HDF":
+                where = Path(item.text.strip().split(":", 1)[0])
+                if where.parent.name == folder and where.name not in ("mesh.h5", "bodies.h5", "contact_sites.h5"):
+                    names[where.name] = None
+    return list(names)
+
+
+def _kept_peaks(out_dir: Path, steps: list[ET.Element]) -> dict:
+    """The running peaks of the frames kept on resume (rank 0): the merge of each frame's own (the attribute
+    FRAME_PEAKS of the displacement the step names)."""
+    import h5py
+
+    from app.fe.derived import merge_peaks
+
+    peaks: dict = {}
+    for step in steps:
+        source = attribute_source(step, "displacement")
+        if source is None:
+            continue
+        try:
+            with h5py.File(out_dir / source[0], "r") as f:
+                frame = f[source[1]].attrs.get(FRAME_PEAKS)
+        except (OSError, KeyError):
+            frame = None
+        if frame is not None:
+            merge_peaks(peaks, json.loads(frame))
+    return peaks
+
+
+def attribute_source(step: ET.Element, name: str) -> tuple[str, str] | None:
+    """(file relative to the XML's directory, dataset path) of the HDF5 DataItem of a step's attribute ``name``."""
+    for attr in step.iter("Attribute"):
+        if attr.get("Name") == name:
+            item = attr.find("DataItem")
+            if item is not None and item.get("Format") == "HDF":
+                where, path = item.text.strip().split(":", 1)
+                return where, path
+    return None
+
+
+def read_frames(path: Path, names=("displacement", "potential")) -> list[tuple[float, dict[str, np.ndarray]]]:
+    """The frames of a field series ``path`` (an XDMF file of these writers), as ParaView and meshio see them:
+    [(time, {attribute name: values})] for the node/cell attributes ``names`` of every step, read where its
+    DataItem points (any layout: a file per batch or, from older runs, a file per frame)."""
+    import h5py
+
+    path = Path(path)
+    frames, files = [], {}
     try:
-        return int(path.name.split("_", 1)[1].split(".", 1)[0])
-    except (IndexError, ValueError):
-        return -1
+        for step in ET.parse(path).getroot().find("Domain/Grid").findall("Grid"):
+            values = {}
+            for name in names:
+                source = attribute_source(step, name)
+                if source is None:
+                    continue
+                if source[0] not in files:
+                    files[source[0]] = h5py.File(path.parent / source[0], "r")
+                values[name] = files[source[0]][source[1]][()]
+            frames.append((float(step.find("Time").get("Value")), values))
+    finally:
+        for f in files.values():
+            f.close()
+    return frames
 
 
 def _steps_until(path: Path, t_s: float) -> list[ET.Element]:

@@ -1,0 +1,277 @@
+"""The field series written in batches (app/transient/fields.py FieldSeriesExport): the batched series is the
+per-frame one (times, values, peaks), and a process killed inside a batch, after a checkpoint, and resumed
+from that checkpoint leaves the series of a run in one go.
+
+Reference: the frames' values formed directly, V q_k for each frame k on its own (the modal tier's expansion),
+and the writer with one frame per batch (the old layout's one file per frame). A fake vertex basis on a
+2 x 3 quad mesh stands in for the reduced model, so each test takes well under a second (the physics of the
+expansion is tests/test_modal_checkpoint.py's: the written field equals the time series' tip displacement).
+Tolerance: the batched product V Q and the per-frame V q_k sum the same terms, in an order BLAS may choose per
+call, so 1e-13 of the field's largest value (round-off of 6 terms); a resumed run cuts its batches where the run
+in one go does (at the checkpoint), so there: bit for bit."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from app.transient.fields import FRAME_PEAKS, FieldSeriesExport, FrameSchedule, read_frames
+
+PERIOD_S = 1e-4
+FRAMES = 11
+MODES = 6
+
+
+class FakeBasis:
+    """The vertex-values interface of the modal tier (app/reduced/engine.py ReducedVertexFields) on a 3 x 4
+    vertex quad mesh: values = V q, a 'von Mises' field |u| and its peak per region. ``expand=False``: the FE
+    tier's interface (``sample`` per frame, no ``expand``)."""
+
+    def __init__(self, expand: bool = True):
+        rng = np.random.default_rng(7)
+        x, y = np.meshgrid(np.arange(4.0), np.arange(3.0))
+        self.comm = MPI.COMM_SELF
+        self.n_nodes, self.n_cells = 12, 6
+        ids = np.arange(12).reshape(3, 4)
+        cells = np.array([[ids[j, i], ids[j, i + 1], ids[j + 1, i + 1], ids[j + 1, i]]
+                          for j in range(2) for i in range(3)], dtype=np.int64)
+        self.mesh_arrays = {"geometry": np.column_stack([x.ravel(), y.ravel(), np.zeros(12)]) * 1e-3,
+                            "topology": cells, "region": np.array([1, 1, 1, 2, 2, 2], dtype=np.int32)}
+        self.topology_type = "Quadrilateral"
+        self.region_names = {1: "horn", 2: "piezo"}
+        self.derived = ("von_mises",)
+        self.basis = rng.standard_normal((4 * 12, MODES)) * 1e-6
+        if expand:
+            self.expand = self._expand
+
+    def _frame(self, values: np.ndarray):
+        u, phi = values[:36].reshape(12, 3), values[36:]
+        vm = np.linalg.norm(u, axis=1) * 1e11
+        peaks = {"horn": {"von_mises_Pa": float(vm[:8].max())}, "piezo": {"von_mises_Pa": float(vm[4:].max())}}
+        return u, phi, {"von_mises_Pa": vm}, peaks
+
+    def _expand(self, q: np.ndarray):
+        values = self.basis @ q
+        return [self._frame(values[:, k]) for k in range(q.shape[1])]
+
+    def sample(self, q):
+        u, phi, _, _ = self._frame(self.basis @ q)
+        return u, phi
+
+    def derived_frame(self, q):
+        _, _, fields, peaks = self._frame(self.basis @ q)
+        return fields, peaks
+
+
+def coordinates(k: int) -> np.ndarray:
+    return np.cos(np.arange(1, MODES + 1) * (0.7 * k + 0.3))
+
+
+def scenario(out: Path, batch_frames: int, checkpoints=(), resume_from: int | None = None, expand: bool = True,
+             frames=range(FRAMES)) -> FieldSeriesExport:
+    """Frames ``frames`` at t = k PERIOD_S of coordinates(k) and a 'checkpoint' after the frames in
+    ``checkpoints`` as the run loop makes one (app/loop/loop.py: ``flush()`` unless the buffer rides in the
+    checkpoint, then the export's ``checkpoint_record()``, saved as ``out/checkpoint.json``); resumed after frame
+    ``resume_from`` from that record; closed at the end."""
+    state = {"q": None}
+    vertex = FakeBasis(expand)
+    export = FieldSeriesExport(out / "transient_fields.xdmf", vertex, lambda: state["q"],
+                               FrameSchedule(PERIOD_S, 1, interval_periods=1),
+                               resume_from_s=None if resume_from is None else resume_from * PERIOD_S,
+                               batch_frames=batch_frames)
+    if resume_from is not None:
+        export.resume(json.loads((out / "checkpoint.json").read_text()))
+    for k in frames:
+        state["q"] = coordinates(k)
+        export.write(k * PERIOD_S)
+        if k in checkpoints:
+            if not export.carries:
+                export.flush()
+            (out / "checkpoint.json").write_text(json.dumps(export.checkpoint_record()))
+    export.close()
+    return export
+
+
+def test_batched_series_equals_the_per_frame_series(tmp_path):
+    """Times, displacement, potential and the derived field of every frame, read back through the XML (the
+    writer's reader and meshio's TimeSeriesReader), against V q_k formed frame by frame; the batched writer's
+    against the one-frame-per-batch writer's; and the frame files are the batches."""
+    vertex = FakeBasis()
+    expected = [vertex._frame(vertex.basis @ coordinates(k)) for k in range(FRAMES)]
+    scale = max(np.abs(e[0]).max() for e in expected)
+    series = {}
+    for name, batch, expand, checkpoints in (("per_frame", 1, True, ()), ("batched", 4, True, (5,)),
+                                             ("fe_batched", 4, False, (5,))):
+        out = tmp_path / name
+        export = scenario(out, batch, checkpoints, expand=expand)
+        frames = read_frames(out / "transient_fields.xdmf", ("displacement", "potential", "von_mises_Pa"))
+        assert [t for t, _ in frames] == [k * PERIOD_S for k in range(FRAMES)]
+        for (_, values), (u, phi, derived, _) in zip(frames, expected):
+            assert np.abs(values["displacement"] - u).max() <= 1e-13 * scale
+            assert np.abs(values["potential"] - phi).max() <= 1e-13 * scale
+            np.testing.assert_allclose(values["von_mises_Pa"], derived["von_mises_Pa"], rtol=1e-12)
+        series[name] = frames
+        files = sorted(p.name for p in (out / "transient_fields").glob("frames_*"))
+        assert files == sorted(export.data_files) == sorted(f.split("/")[1] for f in export.files()
+                                                            if "/frames_" in f)
+        # meshio reads the batched layout: the same times and values
+        with meshio.xdmf.TimeSeriesReader(out / "transient_fields.xdmf") as reader:
+            points, _ = reader.read_points_cells()
+            assert reader.num_steps == FRAMES
+            for k in range(FRAMES):
+                t, point_data, _ = reader.read_data(k)
+                assert t == k * PERIOD_S
+                np.testing.assert_array_equal(point_data["displacement"], frames[k][1]["displacement"])
+    # one frame per file; batches of 4, the modal tier's (its buffer rides in the checkpoint after frame 5):
+    # frames 0-3, 4-7, 8-10; the FE tier's, cut at that checkpoint: 0-3, 4-5, 6-9, 10
+    assert sorted(p.name for p in (tmp_path / "per_frame" / "transient_fields").glob("frames_*")) == [
+        f"frames_{k:06d}.h5" for k in range(FRAMES)]
+    assert sorted(p.name for p in (tmp_path / "batched" / "transient_fields").glob("frames_*")) == [
+        "frames_000000.h5", "frames_000004.h5", "frames_000008.h5"]
+    assert sorted(p.name for p in (tmp_path / "fe_batched" / "transient_fields").glob("frames_*")) == [
+        "frames_000000.h5", "frames_000004.h5", "frames_000006.h5", "frames_000010.h5"]
+    for (_, a), (_, b) in zip(series["batched"], series["fe_batched"]):
+        for name in a:
+            assert np.abs(a[name] - b[name]).max() <= 1e-13 * np.abs(b[name]).max()
+
+
+KILL_SCRIPT = """
+import sys
+from pathlib import Path
+sys.path.insert(0, {tests!r})
+import test_field_batches as t
+t.scenario(Path({out!r}), batch_frames={batch}, checkpoints=(4,), expand={expand})
+"""
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="drives a serial subprocess")
+@pytest.mark.parametrize("point, named, batch, resumed_batch, expand", [
+    ("fields_written:9", 6, 3, 3, True), ("fields_data:3", 6, 3, 3, True), ("fields_written:10", 8, 2, 3, True),
+    ("fields_written:9", 8, 3, 3, False), ("fields_data:3", 5, 3, 3, False)])
+def test_killed_inside_a_batch_resumes_to_the_one_go_series(tmp_path, point, named, batch, resumed_batch, expand):
+    """A process SIGKILLed (app/killpoint.py) after the 'checkpoint' at frame 4. The modal tier's buffer rides in
+    the checkpoint (frames 3 and 4 buffered there in batches of 3): killed with frames 6-8 buffered
+    (``fields_written:9``: 0-5 on disk, frames 3-5 of the batch after the checkpoint too), or with the batch 6-8
+    written and not yet named by the XML (``fields_data:3``), or in batches of 2 with frames 0-7 on disk and 8 and
+    9 buffered (``fields_written:10``), resumed in batches of 3. The FE tier's flushes before the checkpoint
+    (batches 0-2, 3-4, 5-7, ...): killed with frame 8 buffered, or with the batch 5-7 written and not named. The
+    XML names only complete files (``named`` frames); resumed from the checkpoint (its record) the series is the
+    one-go series (values, times, peaks): bit for bit when the resumed run cuts its batches as the killed one
+    did, else to round-off (another cut of the batches), and the folder holds exactly the files the XML names
+    (e.g. the killed run's frames_000003.h5, with frames after the checkpoint, removed)."""
+    one_go = scenario(tmp_path / "one_go", batch_frames=resumed_batch, checkpoints=(4,), expand=expand)
+    out = tmp_path / "killed"
+    env = {**os.environ, "PIEZODYN_KILL_AT": point}
+    script = KILL_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out), batch=batch, expand=expand)
+    killed = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
+                            cwd=Path(__file__).parents[1])
+    assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
+    left = read_frames(out / "transient_fields.xdmf")           # every file the XML names is complete
+    assert len(left) == named
+    resumed = scenario(out, batch_frames=resumed_batch, checkpoints=(4,), resume_from=4, frames=range(5, FRAMES),
+                       expand=expand)
+    names = ("displacement", "potential", "von_mises_Pa")
+    a, b = read_frames(tmp_path / "one_go" / "transient_fields.xdmf", names), read_frames(
+        out / "transient_fields.xdmf", names)
+    assert [t for t, _ in a] == [t for t, _ in b]
+    for (_, x), (_, y) in zip(a, b):
+        for name in names:
+            if batch == resumed_batch:
+                np.testing.assert_array_equal(x[name], y[name])
+            else:
+                assert np.abs(x[name] - y[name]).max() <= 1e-13 * np.abs(x[name]).max()
+    assert sorted(resumed.peaks) == sorted(one_go.peaks) == ["horn", "piezo"]
+    for region, peaks in one_go.peaks.items():
+        assert resumed.peaks[region] == pytest.approx(peaks, rel=0 if batch == resumed_batch else 1e-13)
+    assert resumed.written == FRAMES
+    # no file of the killed run left over: the folder holds the mesh and the frame files the XML names
+    assert sorted(p.name for p in (out / "transient_fields").iterdir()) == sorted(["mesh.h5", *resumed.data_files])
+    if batch == resumed_batch:
+        assert resumed.data_files == one_go.data_files
+    # each frame keeps its own peaks (what a resumed run merges)
+    import h5py
+
+    with h5py.File(out / "transient_fields" / resumed.data_files[1], "r") as f:
+        assert FRAME_PEAKS in f["step_000003/displacement"].attrs
+
+
+def test_modal_expansion_of_a_batch_equals_frame_by_frame():
+    """app/reduced/engine.py ReducedVertexFields: ``expand`` of a batch of coordinates (one product of each basis
+    with all the columns, the derived fields and peaks of all the frames at once) against ``sample`` and
+    ``derived_frame`` of each column alone (the per-frame path), on random bases over the 2 x 3 quad mesh with a
+    piezoelectric region (so principal stresses and |E| enter the peaks). Tolerance 1e-13 of each field's largest
+    value: the same sums in another BLAS call (gemm against gemv)."""
+    from types import SimpleNamespace
+
+    from app.fe.derived import RAW_COLUMNS, RegionAveraging
+    from app.reduced.engine import ReducedVertexFields
+
+    rng = np.random.default_rng(11)
+    mesh = FakeBasis().mesh_arrays
+    pairs = RegionAveraging(mesh["topology"], mesh["region"], 12, [2]).size
+    model = SimpleNamespace(vertex_basis=rng.standard_normal((48, MODES)),
+                            derived_basis=rng.standard_normal((pairs * RAW_COLUMNS, MODES)) * 1e6,
+                            region_table=np.array(["1|horn|0", "2|piezo|1"]), mesh_geometry=mesh["geometry"],
+                            mesh_topology=mesh["topology"], mesh_region=mesh["region"],
+                            mesh_topology_type="Quadrilateral")
+    vertex = ReducedVertexFields(model, MPI.COMM_SELF, ("von_mises", "principal_stress", "electric_field", "stress"))
+    q = rng.standard_normal((MODES, 5))
+    batch = vertex.expand(q)
+    assert len(batch) == 5
+    for k, (u, phi, fields, peaks) in enumerate(batch):
+        u1, phi1 = vertex.sample(q[:, k])
+        fields1, peaks1 = vertex.derived_frame(q[:, k])
+        for a, b in ((u, u1), (phi, phi1), *((fields[name], fields1[name]) for name in fields1)):
+            assert a.shape == b.shape and np.abs(a - b).max() <= 1e-13 * np.abs(b).max()
+        assert sorted(fields) == sorted(fields1) == ["electric_field_V_per_m", "principal_stress_Pa", "stress_Pa",
+                                                     "von_mises_Pa"]
+        assert sorted(peaks) == sorted(peaks1) == ["horn", "piezo"]
+        assert sorted(peaks["piezo"]) == ["electric_field_V_per_m", "max_principal_stress_Pa", "von_mises_Pa"]
+        for region, values in peaks1.items():
+            assert peaks[region] == pytest.approx(values, rel=1e-13)
+
+
+def test_fast_hdf5_writer_reads_back_as_h5py_high_level(tmp_path):
+    """app/files.py write_h5_atomic (h5py's low-level API for numeric arrays and float/int/str attributes) against
+    the same file written with h5py's high-level API: the same datasets, values, dtypes and attributes (str read
+    back as str, lists through the high level)."""
+    import h5py
+
+    from app.files import write_h5_atomic
+
+    rng = np.random.default_rng(5)
+    datasets = {"step_000003/displacement": rng.standard_normal((7, 3)),
+                "step_000003/potential": rng.standard_normal(7),
+                "mesh/in_region_1": (rng.uniform(size=9) > 0.5).astype(np.int8),
+                "mesh/topology": np.arange(12).reshape(3, 4), "names": np.array(["a", "bc"], dtype=object)}
+    attrs = {"step_000003/displacement": {"units": "m", "time_s": 2.5e-4, "region_peaks_json": '{"horn": {"x": 1}}'},
+             "mesh/in_region_1": {"name": "region: horn", "tag": 3}, "mesh/topology": {"names": ["ab", "c"]}}
+    write_h5_atomic(tmp_path / "fast.h5", datasets, attrs)
+    with h5py.File(tmp_path / "slow.h5", "w") as f:
+        for name, values in datasets.items():
+            ds = f.create_dataset(name, data=values)
+            for key, value in attrs.get(name, {}).items():
+                ds.attrs[key] = value
+    assert not list(tmp_path.glob("*.tmp"))
+    with h5py.File(tmp_path / "fast.h5", "r") as a, h5py.File(tmp_path / "slow.h5", "r") as b:
+        names = []
+        a.visit(names.append)
+        other = []
+        b.visit(other.append)
+        assert names == other
+        for name in datasets:
+            assert a[name].dtype == b[name].dtype and a[name].shape == b[name].shape
+            assert np.array_equal(a[name][()], b[name][()])
+            assert sorted(a[name].attrs) == sorted(b[name].attrs)
+            for key in b[name].attrs:
+                x, y = a[name].attrs[key], b[name].attrs[key]
+                assert type(x) is type(y) and np.array_equal(x, y), (name, key)
