@@ -21,6 +21,9 @@ finished ones, so the table can be made again when the FE runs finish without re
 
     .venv/bin/python bench/bench_tier_statistics.py --seconds 1.0 --forces 0,3,6,9 --keep-dir DIR \
         [--fe-dir 0=DIR0 --fe-dir 9=DIR9 ...]
+    # against the FE intervals published in BENCHMARKS.md (the FE runs' directories not at hand):
+    .venv/bin/python bench/bench_tier_statistics.py --seconds 1.0 --forces 0,9 --tiers modal \
+        --fe-published BENCHMARKS.md
 """
 
 from __future__ import annotations
@@ -171,6 +174,31 @@ def _verdict(value: tuple, reference: tuple | None) -> str:
     return " OUT (overlap)" if difference <= reference[1] + value[1] else " OUT"
 
 
+PUBLISHED_SECTION = "## Drill-scene statistics with 95 % intervals: FE, modal and lumped tiers (issue 9)"
+
+
+def published_fe_rows(path: Path) -> dict[float, tuple[str, dict[str, tuple]]]:
+    """The FE tier's rows of the issue-9 table in BENCHMARKS.md (``| 9 N | FE (1 s, fe1s_9N) | 1.34e+03 ± 96 |
+    ...``): force -> (label, {statistic: (mean, half-width)}), the longest FE run per force. For a table against
+    the published FE intervals when the FE runs' directories are not at hand (a 1 s FE run costs hours)."""
+    out: dict[float, tuple[str, dict, float]] = {}
+    text = path.read_text()
+    section = text[text.index(PUBLISHED_SECTION):]
+    section = section[:section.find("\n## ", 1)]
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) != 2 + len(KEYS) + 1 or not cells[1].startswith("FE (") or not cells[0].endswith(" N"):
+            continue
+        force, seconds = float(cells[0][:-2]), float(cells[1][4:].split(" s")[0])
+        values = {}
+        for key, cell in zip([*KEYS, RISE], cells[2:]):
+            mean, half = cell.split("±")
+            values[key] = (float(mean), float(half))
+        if force not in out or seconds > out[force][2]:
+            out[force] = (f"{cells[1]}, published", values, seconds)
+    return {force: (label, values) for force, (label, values, _) in out.items()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=1.0, help="simulated time per run [s]")
@@ -180,6 +208,8 @@ def main() -> None:
     parser.add_argument("--skip-ms", type=float, default=5.0, help="start-up left out [ms]")
     parser.add_argument("--fe-dir", action="append", default=[], metavar="FORCE=DIR",
                         help="a finished FE-tier run (repeatable, several per force allowed)")
+    parser.add_argument("--fe-published", type=Path, default=None, metavar="BENCHMARKS.md",
+                        help="the FE rows of the issue-9 table there as the yardstick (where no --fe-dir is given)")
     parser.add_argument("--keep-dir", type=Path, default=None,
                         help="keep (and reuse) the run directories here: <tier><seconds>s_<force>N")
     args = parser.parse_args()
@@ -196,6 +226,11 @@ def main() -> None:
         base.mkdir(parents=True, exist_ok=True)
         for force in [float(f) for f in args.forces.split(",")]:
             reference, reference_s = None, 0.0
+            if args.fe_published is not None and not fe_dirs.get(force):
+                published = published_fe_rows(args.fe_published).get(force)
+                if published is not None:
+                    rows.append((force, published[0], published[1], None))
+                    reference = published[1]
             for directory in fe_dirs.get(force, []):
                 summary = json.loads((directory / "summary.json").read_text())["results"]["transient"]
                 values = batch_statistics(directory / summary["time_series"], force, args.batches, skip)
@@ -224,7 +259,8 @@ def main() -> None:
         cells = [f"{m:.3g} ± {h:.2g}" + _verdict((m, h), reference[key] if reference else None)
                  for key, (m, h) in values.items()]
         print(f"| {force:g} N | {tier} | " + " | ".join(cells) + " |")
-    without = sorted({f"{f:g} N" for f, *_ in rows} - {f"{f:g} N" for f in fe_dirs})
+    with_fe = {f"{f:g} N" for f, tier, *_ in rows if tier.startswith("FE")}
+    without = sorted({f"{f:g} N" for f, *_ in rows} - with_fe)
     if without:
         print(f"\nNo FE run given at {', '.join(without)}: no in/OUT flags there.")
     if outside:
