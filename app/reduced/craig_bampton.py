@@ -425,9 +425,10 @@ def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int |
         constraints.apply(M_held, 0.0)
         eps = shift_invert_solver(K.getComm(), clamped_ksp.getOperators()[0], M_held, want, 0.0, prefix)
         st = eps.getST()
-        # in place: with the shift 0 the ST's operator is the clamped K itself, the object the KSP factorised (a copy
-        # would be factorised anew); the KSP sees its operator unchanged and keeps its LU. One EPS for every pass of
-        # the cutoff's loop: destroying it resets the shared KSP (its LU gone)
+        # in place: the ST's operator is the clamped K itself (the shift is 0), the object the KSP factorised, so the
+        # KSP sees its operator unchanged and keeps its LU (SLEPc's default copy mode did the same at shift 0 with
+        # slepc 3.18: 2 factorisations either way, tests/test_reduced_build.py; in place states it). One EPS for
+        # every pass of the cutoff's loop: destroying it resets the shared KSP (its LU gone)
         st.setMatMode(SLEPc.ST.MatMode.INPLACE)
         st.setKSP(clamped_ksp)
     try:
