@@ -32,23 +32,34 @@ def solve_modes(ops: Operators, constraints: ConstraintSet, target_Hz: float, n_
     constraints.apply(M, 0.0)
     eps = shift_invert_solver(comm, K, M, n_modes, target_Hz, prefix)
     eps.solve()
+    modes = converged_modes(eps, ops.M, constraints, target_Hz, n_modes, rigid_cutoff_Hz, prefix)
+    for obj in (eps, K, M):
+        obj.destroy()
+    return modes
+
+
+def converged_modes(eps, M_full: PETSc.Mat, constraints: ConstraintSet, target_Hz: float, n_modes: int,
+                    rigid_cutoff_Hz: float, prefix: str) -> list[Mode]:
+    """The ``n_modes`` converged pairs of a solved ``eps`` nearest ``target_Hz`` (rigid-body modes below the cutoff
+    dropped), expanded to the full numbering and mass-normalised with ``M_full``, ascending in frequency."""
     n_conv = eps.getConverged()
     if n_conv == 0:
         raise NumericalFailure(f"eigensolver ({prefix}) found no eigenpair near {target_Hz} Hz "
                                f"(tried Krylov-Schur shift-invert with MUMPS LU)")
     modes = []
+    K, _ = eps.getOperators()
     y = K.createVecRight()
-    Mx = ops.M.createVecLeft()
+    Mx = M_full.createVecLeft()
     for i in range(n_conv):
         lam = eps.getEigenpair(i, y).real
         if lam <= (2 * math.pi * rigid_cutoff_Hz) ** 2:
             continue
-        x = ops.K.createVecRight()
+        x = M_full.createVecRight()
         constraints.expand(y, x)
-        ops.M.mult(x, Mx)
+        M_full.mult(x, Mx)
         x.scale(1.0 / math.sqrt(abs(x.dot(Mx))))
         modes.append(Mode(math.sqrt(lam) / (2 * math.pi), x))
-    for obj in (eps, K, M, y, Mx):
+    for obj in (y, Mx):
         obj.destroy()
     # SLEPc may converge more pairs than asked for, depending on the partition: keep the n nearest
     modes.sort(key=lambda m: abs(m.frequency_Hz - target_Hz))

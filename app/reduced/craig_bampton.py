@@ -42,17 +42,21 @@ replicated on every rank.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
+from slepc4py import SLEPc
 
 from app.errors import NumericalFailure
 from app.fe.constraints import ConstraintSet
 
 REDUCTION_PREFIX = "reduction_"
 MAX_MODES = 2000
+#: static modes solved per MUMPS call (a dense block of right-hand sides: 64 columns of 130 k DOFs, 67 MB)
+STATIC_BLOCK = 64
 
 
 @dataclass
@@ -72,6 +76,8 @@ class ReducedBasis:
     comm: MPI.Comm = field(repr=False, default=None)
     #: the full model's modes put in the basis (``n_enrich``), electrodes held [Hz]
     enrichment_frequencies_Hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (wall, CPU) time of each step of the reduction [s] (logged by app/reduced/model.py; BENCHMARKS.md, issue 27)
+    phases: dict = field(default_factory=dict)
 
     @property
     def n_interface(self) -> int:
@@ -122,7 +128,8 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
                  damping_vectors: bool = True, n_enrich: int = 0,
                  enrich_near_Hz: float | None = None,
                  patterns: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
-                 interface_patterns: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> ReducedBasis:
+                 interface_patterns: dict[int, tuple[np.ndarray, np.ndarray]] | None = None,
+                 shared_factorisation: bool = True) -> ReducedBasis:
     """Craig-Bampton basis and projected operators.
 
     ``K, M, C``: assembled without boundary conditions (full u-phi numbering). ``fixed_local``: local
@@ -136,7 +143,12 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
     electrodes, its static mode the response to that pattern with every other boundary held.
     ``interface_patterns``: interface DOF -> (global DOFs, values): that interface coordinate's static mode
     prescribes this pattern instead of the DOF's unit displacement (the band interface,
-    app/contact/sites.py ring_band_patterns); every DOF of a pattern is held in the fixed-interface modes."""
+    app/contact/sites.py ring_band_patterns); every DOF of a pattern is held in the fixed-interface modes.
+
+    ``shared_factorisation`` (the default): the static modes are solved all at once (MUMPS with a dense block of
+    right-hand sides) and the fixed-interface eigenproblem reuses the clamped K's LU; False: one solve per static mode
+    and an eigensolver with its own factorisation (the straightforward path, which tests/test_reduced_build.py holds
+    the default against)."""
     if n_modes is None and cutoff_Hz is None:
         raise ValueError("give n_modes or cutoff_Hz")
     comm = K.getComm().tompi4py()
@@ -165,6 +177,8 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
                                     + list(electrode_owned.values())
                                     + [g for g, _ in pattern_owned.values()])).astype(PETSc.IntType)
 
+    phases = {}
+    mark = (time.perf_counter(), time.process_time())
     # One LU of K with every boundary DOF clamped: static constraint and electrode modes.
     clamped = K.copy()
     clamped.zeroRowsColumns(held, 1.0)
@@ -175,9 +189,6 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
     ksp.getPC().setType("lu")
     ksp.getPC().setFactorSolverType("mumps")
     ksp.setFromOptions()
-    columns: list[PETSc.Vec] = []
-    boundary_values = K.createVecRight()
-    rhs = K.createVecLeft()
     unit_sets = []
     for g in interface:
         if int(g) in interface_patterns:
@@ -190,32 +201,26 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
             unit_sets.append((owned, np.ones(owned.size)))
     unit_sets += [(electrode_owned[name], np.ones(electrode_owned[name].size)) for name in electrodes]
     unit_sets += [pattern_owned[name] for name in patterns]
-    from app.progress import Progress
-
-    progress = Progress(len(unit_sets), "reduction: static modes", "solves", rank=comm.rank, value_format="{:.0f}")
-    for owned, values in unit_sets:
-        boundary_values.set(0.0)
-        boundary_values.setValues(owned, values)
-        boundary_values.assemble()
-        K.mult(boundary_values, rhs)
-        rhs.scale(-1.0)
-        rhs.setValues(held, boundary_values.getValues(held))   # clamped rows: the boundary values
-        rhs.assemble()
-        x = K.createVecRight()
-        ksp.solve(rhs, x)
-        if ksp.getConvergedReason() < 0:
-            raise NumericalFailure(f"Craig-Bampton static mode: LU solve failed "
-                                   f"(KSP reason {ksp.getConvergedReason()})")
-        columns.append(x)
-        progress.update(1)
-    progress.close()
+    try:
+        ksp.setUp()                                    # the LU of the clamped K
+    except PETSc.Error as exc:
+        raise NumericalFailure(f"Craig-Bampton static modes: LU factorisation of the clamped K failed ({exc})") \
+            from None
+    mark = _lap(phases, "clamped K: LU", mark)
+    static = _static_modes_block if shared_factorisation else _static_modes_one_by_one
+    columns = static(K, ksp, held, unit_sets, comm)
+    damping_solves = _damping_solves(C, ksp, held, columns[interface.size:interface.size + len(electrodes)]) \
+        if C is not None and damping_vectors else []
+    mark = _lap(phases, f"{len(unit_sets) + len(damping_solves)} static solves", mark)
     # the interior: what the boundary (interface, inputs, supports) leaves free; none (a strip whose every node
     # is interface or prescribed), no fixed-interface modes
     interior = comm.allreduce((hi - lo) - held.size, op=MPI.SUM)
     if interior > 0:
-        frequencies, modes = _fixed_interface_modes(K, M, W, held - lo, n_modes, cutoff_Hz, interior)
+        frequencies, modes = _fixed_interface_modes(K, M, W, held - lo, n_modes, cutoff_Hz, interior,
+                                                    clamped_ksp=ksp if shared_factorisation else None)
     else:
         frequencies, modes = np.zeros(0), []
+    mark = _lap(phases, f"{len(modes)} fixed-interface modes", mark)
     enrichment_Hz = np.zeros(0)
     if n_enrich > 0:
         if enrich_near_Hz is None:
@@ -227,13 +232,11 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
         enrichment_Hz, extra = _enrichment_vectors(K, M, W, support_and_electrodes - lo, n_enrich, enrich_near_Hz,
                                                    columns[:interface.size], interface, modes, comm, band_owned)
         modes += extra
-    if C is not None and damping_vectors:
-        modes += _damping_vectors(C, M, ksp, held, columns[interface.size:interface.size + len(electrodes)], modes,
-                                  comm)
+        mark = _lap(phases, f"{n_enrich} enrichment modes", mark)
+    if damping_solves:
+        modes += _damping_vectors(M, damping_solves, modes)
     ksp.destroy()
     clamped.destroy()
-    boundary_values.destroy()
-    rhs.destroy()
     columns += modes
 
     K_r, KT = _project(K, columns, comm, keep_products=True)
@@ -244,8 +247,16 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
         rows = electrode_owned[name] - lo
         charge_rows[name] = -comm.allreduce(KT[rows].sum(axis=0) if rows.size else np.zeros(len(columns)),
                                             op=MPI.SUM)
+    _lap(phases, "damping vectors and projections", mark)
     return ReducedBasis(K_r, M_r, C_r, interface.astype(np.int64), electrodes + list(patterns), frequencies,
-                        charge_rows, columns, comm, enrichment_Hz)
+                        charge_rows, columns, comm, enrichment_Hz, phases)
+
+
+def _lap(phases: dict, name: str, mark: tuple[float, float]) -> tuple[float, float]:
+    """phases[name] = (wall, CPU) seconds since ``mark``; returns now."""
+    now = (time.perf_counter(), time.process_time())
+    phases[name] = (now[0] - mark[0], now[1] - mark[1])
+    return now
 
 
 def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint_modes, interface, modes, comm,
@@ -269,6 +280,7 @@ def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint
     lo, hi = K.getOwnershipRange()
     owned = (interface >= lo) & (interface < hi)
     M_z = K.createVecLeft()
+    M_phi: dict = {}
     out, frequencies = [], []
     for mode in full:
         z = mode.vector
@@ -284,7 +296,9 @@ def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint
         norm0 = math.sqrt(abs(z.dot(_mult(M, z, M_z))))
         for _ in range(2):      # classical Gram-Schmidt, twice (Kahan's "twice is enough")
             for phi in modes + out:
-                z.axpy(-z.dot(_mult(M, phi, M_z)), phi)
+                if id(phi) not in M_phi:        # M phi once per vector, not once per pass and per mode
+                    M_phi[id(phi)] = _mult(M, phi, M.createVecLeft())
+                z.axpy(-z.dot(M_phi[id(phi)]), phi)
         norm = math.sqrt(abs(z.dot(_mult(M, z, M_z))))
         frequencies.append(mode.frequency_Hz)
         if norm > 1e-8 * norm0:     # else already in the span: nothing to add
@@ -293,25 +307,40 @@ def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint
         else:
             z.destroy()
     M_z.destroy()
+    for vec in M_phi.values():
+        vec.destroy()
     return np.array(frequencies), out
 
 
-def _damping_vectors(C, M, ksp, held, electrode_modes, modes, comm) -> list[PETSc.Vec]:
-    """One interior vector per electrode, K_II^-1 (C psi_e)_I, made M-orthogonal to the kept modes.
-
-    A voltage on a damped body also drives the damping force i omega C psi_e, whose quasi-static
-    response is not in span{psi, phi} unless C is proportional to the coupled K (here C acts on the
-    elastic part only: Rayleigh beta and material Q). Without this vector the real part of the
-    admittance off resonance (the loss the electrical power reads) converges only like 1/n."""
+def _damping_solves(C, ksp, held, electrode_modes) -> list[PETSc.Vec]:
+    """K_II^-1 (C psi_e)_I for each electrode mode psi_e (see ``_damping_vectors``), on the clamped K's LU: solved
+    before the fixed-interface eigensolver, which shares that KSP and resets it when it is destroyed."""
     out = []
     rhs = C.createVecLeft()
-    M_phi = C.createVecLeft()
     for psi in electrode_modes:
         C.mult(psi, rhs)
         rhs.setValues(held, np.zeros(held.size))
         rhs.assemble()
         z = C.createVecRight()
         ksp.solve(rhs, z)
+        if ksp.getConvergedReason() < 0:
+            raise NumericalFailure(f"Craig-Bampton damping vector: LU solve failed "
+                                   f"(KSP reason {ksp.getConvergedReason()})")
+        out.append(z)
+    rhs.destroy()
+    return out
+
+
+def _damping_vectors(M, solves, modes) -> list[PETSc.Vec]:
+    """One interior vector per electrode, K_II^-1 (C psi_e)_I (``solves``), made M-orthogonal to the kept modes.
+
+    A voltage on a damped body also drives the damping force i omega C psi_e, whose quasi-static
+    response is not in span{psi, phi} unless C is proportional to the coupled K (here C acts on the
+    elastic part only: Rayleigh beta and material Q). Without this vector the real part of the
+    admittance off resonance (the loss the electrical power reads) converges only like 1/n."""
+    out = []
+    M_phi = M.createVecLeft()
+    for z in solves:
         for phi in modes + out:
             M.mult(phi, M_phi)
             z.axpy(-z.dot(M_phi) / phi.dot(M_phi), phi)
@@ -321,7 +350,6 @@ def _damping_vectors(C, M, ksp, held, electrode_modes, modes, comm) -> list[PETS
             out.append(z)
         else:
             z.destroy()
-    rhs.destroy()
     M_phi.destroy()
     return out
 
@@ -331,32 +359,109 @@ def _mult(A, x, out):
     return out
 
 
+def _static_modes_one_by_one(K, ksp, held, unit_sets, comm) -> list[PETSc.Vec]:
+    """One static mode per boundary set: x = 1 (or the pattern's values) on the set, 0 on every other held DOF,
+    K_II x_I = -K_Ib x_b in the interior; one LU solve each (the reference path)."""
+    from app.progress import Progress
+
+    columns: list[PETSc.Vec] = []
+    boundary_values = K.createVecRight()
+    rhs = K.createVecLeft()
+    progress = Progress(len(unit_sets), "reduction: static modes", "solves", rank=comm.rank, value_format="{:.0f}")
+    for owned, values in unit_sets:
+        boundary_values.set(0.0)
+        boundary_values.setValues(owned, values)
+        boundary_values.assemble()
+        K.mult(boundary_values, rhs)
+        rhs.scale(-1.0)
+        rhs.setValues(held, boundary_values.getValues(held))   # clamped rows: the boundary values
+        rhs.assemble()
+        x = K.createVecRight()
+        ksp.solve(rhs, x)
+        if ksp.getConvergedReason() < 0:
+            raise NumericalFailure(f"Craig-Bampton static mode: LU solve failed "
+                                   f"(KSP reason {ksp.getConvergedReason()})")
+        columns.append(x)
+        progress.update(1)
+    progress.close()
+    boundary_values.destroy()
+    rhs.destroy()
+    return columns
+
+
+def _static_modes_block(K, ksp, held, unit_sets, comm, block: int = STATIC_BLOCK) -> list[PETSc.Vec]:
+    """The static modes of ``_static_modes_one_by_one``, ``block`` at a time: the right-hand sides as the columns of
+    one dense matrix, solved in one call on the clamped K's factor (MatMatSolve: MUMPS's multiple dense right-hand
+    sides, forward and backward substitution with matrix-matrix kernels, where one right-hand side at a time reads
+    the whole factor once per mode)."""
+    lo, hi = K.getOwnershipRange()
+    n_local, n_global = hi - lo, K.getSize()[0]
+    held_local = held - lo
+    factor = ksp.getPC().getFactorMatrix()            # set up: the LU of the clamped K
+    columns: list[PETSc.Vec] = []
+    for first in range(0, len(unit_sets), block):
+        chunk = unit_sets[first:first + block]
+        size = ((n_local, n_global), (PETSc.DECIDE, len(chunk)))
+        values = np.zeros((n_local, len(chunk)), order="F")
+        for j, (owned, unit) in enumerate(chunk):
+            values[owned - lo, j] = unit
+        boundary = PETSc.Mat().createDense(size, array=values, comm=comm)
+        boundary.assemble()
+        rhs = K.matMult(boundary)                      # K x_b: its negative is the interior's load
+        rhs_values = rhs.getDenseArray()
+        rhs_values *= -1.0
+        rhs_values[held_local, :] = values[held_local, :]      # clamped rows: the boundary values
+        rhs.assemble()
+        solution = rhs.duplicate()
+        try:
+            factor.matSolve(rhs, solution)
+        except PETSc.Error as exc:
+            raise NumericalFailure(f"Craig-Bampton static modes: LU solve failed ({exc})") from None
+        solved = solution.getDenseArray(readonly=True)
+        for j in range(len(chunk)):
+            x = K.createVecRight()
+            x.array[:] = solved[:, j]
+            columns.append(x)
+        for mat in (boundary, rhs, solution):
+            mat.destroy()
+    return columns
+
+
 def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int | None, cutoff_Hz: float | None,
-                           interior: int = MAX_MODES):
+                           interior: int = MAX_MODES, clamped_ksp: PETSc.KSP | None = None):
     """Lowest fixed-interface modes (mass normalised), by SLEPc shift-invert about 0. With a cutoff,
-    the number asked for grows until the highest mode found lies above it."""
+    the number asked for grows until the highest mode found lies above it. ``clamped_ksp``: a KSP whose operator
+    is K with the held DOFs' rows and columns zeroed (1 on the diagonal) and that holds its LU: the shift-invert
+    about 0 applies that operator's inverse, so it solves with that LU instead of factorising K again."""
+    from app.fe.eigen import shift_invert_solver
     from app.fe.operators import Operators
-    from app.modal import solve_modes
 
     constraints = ConstraintSet(W, held_owned_local.astype(np.int32), [])
     ops = Operators(K, M)
     want = min(n_modes or 16, interior)
     dim = W.mesh.geometry.dim
-    while True:
-        # target 0: the clamped K is non-singular, so the modes nearest 0 are the lowest ones
-        try:
-            modes = solve_modes(ops, constraints, 0.0, want, 0.0, prefix=REDUCTION_PREFIX + "eps_")
-        except PETSc.Error as exc:
-            raise NumericalFailure(f"fixed-interface modes: SLEPc failed for {want} modes ({exc}); "
-                                   f"lower reduction.cutoff_Hz / n_modes") from None
-        top = modes[-1].frequency_Hz if modes else 0.0
-        if cutoff_Hz is None or top > cutoff_Hz or want >= min(MAX_MODES, interior):
-            break
-        # Weyl: the count below f grows like f^dim; ask once more for what the cutoff needs (+20 %)
-        estimate = int(math.ceil(1.2 * len(modes) * (cutoff_Hz / max(top, 1e-30)) ** dim)) + 8
-        for m in modes:
-            m.vector.destroy()
-        want = min(max(estimate, 2 * want), MAX_MODES, interior)
+    prefix = REDUCTION_PREFIX + "eps_"
+    eps = M_held = None
+    if clamped_ksp is not None:
+        M_held = M.copy()
+        constraints.apply(M_held, 0.0)
+        eps = shift_invert_solver(K.getComm(), clamped_ksp.getOperators()[0], M_held, want, 0.0, prefix)
+        st = eps.getST()
+        # in place: the ST's operator is the clamped K itself (the shift is 0), the object the KSP factorised, so the
+        # KSP sees its operator unchanged and keeps its LU (SLEPc's default copy mode did the same at shift 0 with
+        # slepc 3.18: 2 factorisations either way, tests/test_reduced_build.py; in place states it). One EPS for
+        # every pass of the cutoff's loop: destroying it resets the shared KSP (its LU gone)
+        st.setMatMode(SLEPc.ST.MatMode.INPLACE)
+        st.setKSP(clamped_ksp)
+    try:
+        if eps is None:
+            modes = _lowest_modes_by_restart(ops, constraints, prefix, want, n_modes, cutoff_Hz, interior, dim)
+        else:
+            modes = _lowest_modes_by_deflation(eps, M, constraints, prefix, want, n_modes, cutoff_Hz, interior, dim)
+    finally:
+        for obj in (eps, M_held):
+            if obj is not None:
+                obj.destroy()
     keep = [m for m in modes if (n_modes is not None and modes.index(m) < n_modes)
             or (cutoff_Hz is not None and m.frequency_Hz <= cutoff_Hz)]
     for m in modes:
@@ -365,16 +470,76 @@ def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int |
     return np.array([m.frequency_Hz for m in keep]), [m.vector for m in keep]
 
 
+def _lowest_modes_by_restart(ops, constraints, prefix, want, n_modes, cutoff_Hz, interior, dim):
+    """The reference path: solve for ``want`` modes; while the highest lies below the cutoff, solve again from scratch
+    for more (a Weyl estimate)."""
+    from app.modal import solve_modes
+
+    while True:
+        # target 0: the clamped K is non-singular, so the modes nearest 0 are the lowest ones
+        try:
+            modes = solve_modes(ops, constraints, 0.0, want, 0.0, prefix=prefix)
+        except PETSc.Error as exc:
+            raise NumericalFailure(f"fixed-interface modes: SLEPc failed for {want} modes ({exc}); "
+                                   f"lower reduction.cutoff_Hz / n_modes") from None
+        top = modes[-1].frequency_Hz if modes else 0.0
+        if cutoff_Hz is None or top > cutoff_Hz or want >= min(MAX_MODES, interior):
+            return modes
+        # Weyl: the count below f grows like f^dim; ask once more for what the cutoff needs (+20 %)
+        estimate = int(math.ceil(1.2 * len(modes) * (cutoff_Hz / max(top, 1e-30)) ** dim)) + 8
+        for m in modes:
+            m.vector.destroy()
+        want = min(max(estimate, 2 * want), MAX_MODES, interior)
+
+
+def _lowest_modes_by_deflation(eps, M, constraints, prefix, want, n_modes, cutoff_Hz, interior, dim):
+    """The lowest modes by passes of ``eps`` (set up, shift-invert about 0): the first asks for ``want``; while the
+    highest found lies below the cutoff, the next pass deflates the modes found (SLEPc seeks the rest in their
+    M-orthogonal complement) and asks for at most as many again as were found (a Weyl estimate of what the cutoff
+    needs, +20 %, capped: the estimate's f^dim overshoots a thin-walled body's count). No mode is computed twice,
+    and the overshoot beyond the cutoff is bounded by the last pass."""
+    from app.modal import converged_modes
+
+    found: list = []
+    ask = want
+    while True:
+        try:
+            eps.setDimensions(nev=ask, ncv=SLEPc.DECIDE, mpd=SLEPc.DECIDE)
+            if found:
+                eps.setDeflationSpace([m.vector for m in found])
+            eps.solve()
+            new = converged_modes(eps, M, constraints, 0.0, ask, 0.0, prefix)
+        except PETSc.Error as exc:
+            raise NumericalFailure(f"fixed-interface modes: SLEPc failed for {len(found) + ask} modes ({exc}); "
+                                   f"lower reduction.cutoff_Hz / n_modes") from None
+        found = sorted(found + new, key=lambda m: m.frequency_Hz)
+        total, top = len(found), (found[-1].frequency_Hz if found else 0.0)
+        limit = min(MAX_MODES, interior)
+        if not new or total >= limit:
+            return found
+        if n_modes is not None and total < n_modes:
+            ask = min(n_modes, limit) - total
+            continue
+        if cutoff_Hz is None or top > cutoff_Hz:
+            return found
+        estimate = int(math.ceil(1.2 * total * (cutoff_Hz / max(top, 1e-30)) ** dim)) + 8
+        ask = max(1, min(estimate - total, total, limit - total))
+
+
 def _project(A: PETSc.Mat, columns: list[PETSc.Vec], comm, keep_products: bool = False):
-    """T^T A T (dense, replicated) with one allreduce; optionally also the local rows of A T."""
+    """T^T A T (dense, replicated) with one allreduce; optionally also the local rows of A T. A T is one sparse
+    times dense product (MatMatMult), which reads A once per few columns rather than once per column."""
     n = len(columns)
-    T = np.column_stack([c.array_r for c in columns]) if n else np.zeros((0, 0))
-    AT = np.empty_like(T)
-    y = A.createVecLeft()
-    for j, c in enumerate(columns):
-        A.mult(c, y)
-        AT[:, j] = y.array_r
-    y.destroy()
+    if n == 0:
+        reduced = np.zeros((0, 0))
+        return (reduced, np.zeros((A.getLocalSize()[0], 0))) if keep_products else reduced
+    T = np.asfortranarray(np.column_stack([c.array_r for c in columns]))
+    T_mat = PETSc.Mat().createDense(((T.shape[0], A.getSize()[1]), (PETSc.DECIDE, n)), array=T, comm=comm)
+    T_mat.assemble()
+    AT_mat = A.matMult(T_mat)
+    AT = np.array(AT_mat.getDenseArray(readonly=True))
+    AT_mat.destroy()
+    T_mat.destroy()
     reduced = comm.allreduce(T.T @ AT, op=MPI.SUM)
     reduced = 0.5 * (reduced + reduced.T)      # symmetric up to round-off; make it exactly so
     return (reduced, AT) if keep_products else reduced
