@@ -81,6 +81,23 @@ def compare(fe_dir: Path, modal_dir: Path, frequency_Hz: float) -> dict:
     return rows
 
 
+def windows(fe_dir: Path, modal_dir: Path, frequency_Hz: float, length: int) -> None:
+    """Both tiers' means over consecutive windows of ``length`` periods, as far as both have run: how the FE tier
+    follows the modal tier through the start, before either is steady."""
+    fe, modal = (cycle_means(d / "transient.h5", frequency_Hz) for d in (fe_dir, modal_dir))
+    common = min(fe["period"].size, modal["period"].size)
+    print(f"| periods | speed FE / modal [rpm] | torque FE / modal [mN m] | N FE / modal [N] "
+          f"| (of {common} both ran) |")
+    print("|---|---|---|---|---|")
+    for first in range(0, common, length):
+        last = min(first + length, common)
+        cells = []
+        for key, scale in (("speed_rad_per_s", 30 / np.pi), ("torque_N_m", 1e3), ("normal_force_N", 1.0)):
+            a, b = fe[key][first:last].mean() * scale, modal[key][first:last].mean() * scale
+            cells.append(f"{a:.3f} / {b:.3f} ({100 * (b / a - 1):+.2f} %)")
+        print(f"| {first}-{last} | " + " | ".join(cells) + " | |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -90,6 +107,11 @@ def main() -> None:
     cmp = sub.add_parser("compare", help="the FE and modal points' last-window cycle means")
     cmp.add_argument("--fe", type=Path, required=True)
     cmp.add_argument("--modal", type=Path, required=True)
+    win = sub.add_parser("windows", help="FE and modal means over windows of the periods both have run (an FE run "
+                                         "still going: HDF5_USE_FILE_LOCKING=FALSE)")
+    win.add_argument("--fe", type=Path, required=True)
+    win.add_argument("--modal", type=Path, required=True)
+    win.add_argument("--periods", type=int, default=50, help="window length [drive periods]")
     args = parser.parse_args()
     if args.command == "fe":
         results = run_fe(args.out, args.set)["results"]["transient"]
@@ -99,6 +121,9 @@ def main() -> None:
     from app.runner import load_for_run
 
     frequency = load_for_run(CASE, POINT).transient.drive.frequency_Hz
+    if args.command == "windows":
+        windows(args.fe, args.modal, frequency, args.periods)
+        return
     rows = compare(args.fe, args.modal, frequency)
     print(json.dumps(rows, indent=1))
     print(f"| tier | periods | steady | speed [rpm] | friction torque [mN m] | normal force [N] | "
