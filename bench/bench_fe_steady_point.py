@@ -55,11 +55,14 @@ def cycle_means(path: Path, frequency_Hz: float) -> dict[str, np.ndarray]:
         series = {"speed_rad_per_s": f["rotor_angular_velocity_rad_per_s"][()].reshape(len(t), -1)[:, 0],
                   "torque_N_m": f["stator_rotor_torque_N_m"][()].reshape(len(t), -1)[:, 0],
                   "normal_force_N": f["stator_rotor_normal_force_N"][()].reshape(-1)}
+        probe = f["stator_rotor_probe_displacement_m"][()].reshape(len(t), -1)[:, 0]
     period = np.floor((t - 0.5 * dt) * frequency_Hz + 1e-9).astype(int)
     closed = np.arange(period.max())            # the last period may be partial
     out = {"period": closed}
     for key, values in series.items():
         out[key] = np.array([np.average(values[period == k], weights=dt[period == k]) for k in closed])
+    # the stator's wave under load at the contact point: half the peak-to-peak of the probe's normal displacement
+    out["wave_m"] = np.array([0.5 * np.ptp(probe[period == k]) for k in closed])
     return out
 
 
@@ -67,18 +70,23 @@ def window_means(means: dict[str, np.ndarray], window: int) -> dict[str, float]:
     return {k: float(np.mean(v[-window:])) for k, v in means.items() if k != "period"}
 
 
-def compare(fe_dir: Path, modal_dir: Path, frequency_Hz: float) -> dict:
+def compare(fe_dir: Path, modal_dirs: list[Path], frequency_Hz: float) -> dict:
+    """The last-window means of the FE point and of each modal run (a modal setting per directory)."""
     rows = {}
-    for label, directory in (("fe", fe_dir), ("modal", modal_dir)):
+    for label, directory in [("fe", fe_dir)] + [(d.name, d) for d in modal_dirs]:
         means = cycle_means(directory / "transient.h5", frequency_Hz)
         summary = json.loads((directory / "summary.json").read_text())["results"]["transient"]
         steady = summary.get("steady_state") or {}
         rows[label] = {"periods": int(means["period"].size), "steady": summary.get("steady", steady.get("steady")),
                        "wall_time_s": summary.get("wall_time_s"), "steps": summary.get("steps"),
                        **window_means(means, WINDOW)}
-    fe, modal = rows["fe"], rows["modal"]
-    rows["modal_vs_fe"] = {k: modal[k] / fe[k] - 1 for k in ("speed_rad_per_s", "torque_N_m", "normal_force_N")}
+    fe = rows["fe"]
+    for d in modal_dirs:
+        rows[d.name]["vs_fe"] = {k: rows[d.name][k] / fe[k] - 1 for k in QUANTITIES}
     return rows
+
+
+QUANTITIES = ("speed_rad_per_s", "torque_N_m", "normal_force_N", "wave_m")
 
 
 def windows(fe_dir: Path, modal_dir: Path, frequency_Hz: float, length: int) -> None:
@@ -86,13 +94,14 @@ def windows(fe_dir: Path, modal_dir: Path, frequency_Hz: float, length: int) -> 
     follows the modal tier through the start, before either is steady."""
     fe, modal = (cycle_means(d / "transient.h5", frequency_Hz) for d in (fe_dir, modal_dir))
     common = min(fe["period"].size, modal["period"].size)
-    print(f"| periods | speed FE / modal [rpm] | torque FE / modal [mN m] | N FE / modal [N] "
+    print(f"| periods | speed FE / modal [rpm] | torque FE / modal [mN m] | N FE / modal [N] | wave FE / modal [um] "
           f"| (of {common} both ran) |")
-    print("|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|")
     for first in range(0, common, length):
         last = min(first + length, common)
         cells = []
-        for key, scale in (("speed_rad_per_s", 30 / np.pi), ("torque_N_m", 1e3), ("normal_force_N", 1.0)):
+        for key, scale in (("speed_rad_per_s", 30 / np.pi), ("torque_N_m", 1e3), ("normal_force_N", 1.0),
+                       ("wave_m", 1e6)):
             a, b = fe[key][first:last].mean() * scale, modal[key][first:last].mean() * scale
             cells.append(f"{a:.3f} / {b:.3f} ({100 * (b / a - 1):+.2f} %)")
         print(f"| {first}-{last} | " + " | ".join(cells) + " | |")
@@ -106,7 +115,7 @@ def main() -> None:
     fe.add_argument("--set", nargs="*", default=[], help="further --set overrides (the same on every resume)")
     cmp = sub.add_parser("compare", help="the FE and modal points' last-window cycle means")
     cmp.add_argument("--fe", type=Path, required=True)
-    cmp.add_argument("--modal", type=Path, required=True)
+    cmp.add_argument("--modal", type=Path, nargs="+", required=True, help="modal runs (one setting each)")
     win = sub.add_parser("windows", help="FE and modal means over windows of the periods both have run (an FE run "
                                          "still going: HDF5_USE_FILE_LOCKING=FALSE)")
     win.add_argument("--fe", type=Path, required=True)
@@ -126,16 +135,16 @@ def main() -> None:
         return
     rows = compare(args.fe, args.modal, frequency)
     print(json.dumps(rows, indent=1))
-    print(f"| tier | periods | steady | speed [rpm] | friction torque [mN m] | normal force [N] | "
-          f"(means over the last {WINDOW} periods) |")
-    print("|---|---|---|---|---|---|---|")
-    for label in ("fe", "modal"):
-        r = rows[label]
-        print(f"| {label} | {r['periods']} | {r['steady']} | {r['speed_rad_per_s'] * 30 / np.pi:.3f} | "
-              f"{r['torque_N_m'] * 1e3:.4f} | {r['normal_force_N']:.4f} | |")
-    d = rows["modal_vs_fe"]
-    print(f"| modal / FE - 1 | | | {100 * d['speed_rad_per_s']:+.2f} % | {100 * d['torque_N_m']:+.2f} % | "
-          f"{100 * d['normal_force_N']:+.2f} % | |")
+    print(f"| run | periods | steady | speed [rpm] | friction torque [mN m] | normal force [N] | wave [um] | "
+          f"(means over the last {WINDOW} periods; against FE) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for label, r in rows.items():
+        d = r.get("vs_fe")
+        cells = []
+        for key, scale, fmt in (("speed_rad_per_s", 30 / np.pi, ".3f"), ("torque_N_m", 1e3, ".4f"),
+                                ("normal_force_N", 1.0, ".4f"), ("wave_m", 1e6, ".3f")):
+            cells.append(f"{r[key] * scale:{fmt}}" + (f" ({100 * d[key]:+.1f} %)" if d else ""))
+        print(f"| {label} | {r['periods']} | {r['steady']} | " + " | ".join(cells) + " | |")
 
 
 if __name__ == "__main__":

@@ -166,6 +166,10 @@ SET_INPUTS = [
     (MOTOR, ['reduction.interface="band"', 'reduction.site_displacement="field"'], "reduction.interface"),
     (FE, ['tier="modal"', 'reduction.interface="band"'], "reduction.interface"),
     (MOTOR, ['reduction.interface="ring"'], "reduction.interface"),
+    # rings across the band: a cone's ring sampling, and a modal interface that sees the band's tilt
+    (MOTOR, [f"{_CONE}.sample_rings=3"], f"{_CONE}.sample_rings"),
+    (MOTOR, [f'{_CONE}.sampling="nodes"', f"{_CONE}.sample_rings=2"], f"{_CONE}.sample_rings"),
+    (MOTOR, [f"{_CONE}.sample_rings=0"], f"{_CONE}.sample_rings"),
     (MOTOR, ["reduction.ring_points=64"], "reduction.ring_points"),                   # a key of the old motor path
     # cone obstacle, brake, steady-state stop (the motor case: caught before its mesh is built)
     (MOTOR, [f"{_CONE}.axis=[0.0, 0.0, 2.0]"], f"{_CONE}.axis"),

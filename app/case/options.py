@@ -86,6 +86,13 @@ def check_tier(case, file: str, written=None) -> None:
             raise foreign_section(tier.name, section, file)
     if case.output.contact_pressure:
         _check_contact_pressure(case, file)
+    if case.tier == "modal" and case.transient is not None and case.reduction.interface == "nodes" \
+            and case.reduction.site_displacement == "interface":
+        for i, contact in enumerate(case.transient.contacts):
+            if getattr(contact, "sample_rings", 1) > 1:
+                raise CaseError(file, f"transient.contacts[{i}].sample_rings",
+                                "rings across the band see one displacement with the nodes interface: set "
+                                'reduction.interface = "band" or reduction.site_displacement = "field"')
     if case.transient is not None and case.transient.start_from is not None and case.tier != "modal":
         raise CaseError(file, "transient.start_from", f"warm starts are offered by the modal tier only (this case "
                                                       f"runs tier {case.tier!r})")

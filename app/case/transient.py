@@ -197,6 +197,12 @@ class SurfaceContactSection:
     sample_points: int = param(
         512, ge=8, le=16384, doc="sampling 'ring': points round the contact circle, each carrying the facet group's "
                                  "area over their number")
+    sample_rings: int = param(
+        1, ge=1, le=16, doc="sampling 'ring' on a cone: rings of sample_points points across the facet group's height "
+                            "(Gauss-Legendre in height, each point carrying its ring's share of the area), as the FE "
+                            "tier's facet quadrature samples the band across it; 1: one ring on the contact circle. "
+                            "The modal tier needs the band's tilt to see it: reduction.interface = 'band' or "
+                            "reduction.site_displacement = 'field' (docs/motor-rotor.md, 'Sampling across the band')")
     exclude_initial_gap: bool = param(
         False, doc="measure each point's gap from its gap at the start, the undeformed surface against the body at "
                    "its position_m (ANSYS KEYOPT(9) = 1, every shape): g_eff = g(x + u, p) - g(x, p_ref). Both initial "
@@ -204,6 +210,10 @@ class SurfaceContactSection:
                    "faceted surface that is in contact by design (docs/contact.md)")
 
     def check(self, file, prefix):
+        if self.sample_rings > 1 and (self.sampling != "ring" or self.shape != "cone"):
+            raise CaseError(file, f"{prefix}.sample_rings", 'rings across the band need sampling = "ring" on a cone '
+                                                            f'(this contact: sampling {self.sampling!r}, shape '
+                                                            f'{self.shape!r})')
         if self.shape == "plane" and self.normal is None:
             raise CaseError(file, f"{prefix}.normal", "a plane obstacle needs a normal")
         if self.shape == "sphere" and self.radius_m is None:

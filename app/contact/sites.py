@@ -101,12 +101,25 @@ def interpolation_stencil(node_angles: np.ndarray, point_angles: np.ndarray, ord
     return idx, weights
 
 
+def ring_heights(n_rings: int, h_lo: float, h_hi: float) -> tuple[np.ndarray, np.ndarray]:
+    """Heights [m] along the axis of ``n_rings`` rings of sites across a band from ``h_lo`` to ``h_hi``, and their
+    weights (summing to 1): Gauss-Legendre points of the band's height, as the FE tier's facet quadrature samples
+    the band across it (docs/motor-rotor.md, "Sampling across the band")."""
+    x, w = np.polynomial.legendre.leggauss(n_rings)
+    # the ring nearest the band's middle first: its first site is the contact's probe (the contact point's path)
+    order = np.argsort(np.abs(x), kind="stable")
+    return 0.5 * (h_lo + h_hi) + 0.5 * (h_hi - h_lo) * x[order], 0.5 * w[order]
+
+
 def ring_sites(contact_index: int, section, case, body, nodes, area_m2: float, n_points: int, n_interface: int,
-               rule: str, prefix: str, band: bool = False) -> SiteSet:
+               rule: str, prefix: str, band: bool = False, n_rings: int = 1) -> SiteSet:
     """Ring sampling of a surface contact (module docstring): ``nodes`` are the facet group's nodes
     (app/reduced/surface.py SurfaceNodes), ``area_m2`` its area. ``band``: the band interface
     (:func:`ring_band_patterns`): ``n_interface`` stations on each edge of the band (its lowest and highest
-    nodes along the axis), the band and the sites interpolated cubically in angle and linearly in height."""
+    nodes along the axis), the band and the sites interpolated cubically in angle and linearly in height.
+    ``n_rings`` > 1 (a cone): that many rings of ``n_points`` sites across the band's height
+    (:func:`ring_heights`), each on the cone at its height, each site carrying its ring's share of the area
+    (weight x radius), ring-major order, the ring nearest the band's middle first."""
     file = case.source
     axis, centre, radius = contact_circle(section, case, body)
     e1, e2 = in_plane_basis(axis)
@@ -124,7 +137,7 @@ def ring_sites(contact_index: int, section, case, body, nodes, area_m2: float, n
     if k > nodes.size:
         raise CaseError(file, "reduction.interface_nodes", f"the facet group of {prefix} has only {nodes.size} nodes")
     targets = (2 * math.pi * np.arange(k) / k)
-    site_angles = 2 * math.pi * (np.arange(n_points) + 0.5) / n_points
+    ring_angles = 2 * math.pi * (np.arange(n_points) + 0.5) / n_points
     h_lo, h_hi = float(height.min()), float(height.max())
     if band and h_hi - h_lo > 1e-9 * max(radius, 1e-30):
         # stations on both edges of the band: the band can tilt across its height, as the wave's bending tilts it
@@ -150,87 +163,96 @@ def ring_sites(contact_index: int, section, case, body, nodes, area_m2: float, n
                                                            "round its contact circle: use fewer")
     if (nodes.global_dofs[chosen] < 0).any():
         raise CaseError(file, f"{prefix}.facets", "the contact surface touches a support")
-    points = centre + h_c * axis + radius * (np.outer(np.cos(site_angles), e1) + np.outer(np.sin(site_angles), e2))
+    if n_rings == 1:
+        ring_h, ring_r, ring_share = np.array([h_c]), np.array([radius]), np.ones(1)
+    else:
+        ring_h, ring_w = ring_heights(n_rings, h_lo, h_hi)
+        # the cone's radius at each height (its radius grows along the axis); the area of a ring's slice of the
+        # band grows with its radius
+        ring_r = radius + ring_h * math.tan(math.radians(section.half_angle_deg))
+        ring_share = ring_w * ring_r / float(ring_w @ ring_r)
+    site_angles = np.tile(ring_angles, n_rings)
+    site_h = np.repeat(ring_h, n_points)
+    site_r = np.repeat(ring_r, n_points)
+    points = centre + np.outer(site_h, axis) + site_r[:, None] * (np.outer(np.cos(site_angles), e1)
+                                                                  + np.outer(np.sin(site_angles), e2))
+    weight = np.repeat(ring_share, n_points) * area_m2 / n_points
     ring = {"axis": axis, "centre": centre, "e1": e1, "e2": e2, "node_angles": angles_nodes[chosen],
-            "site_angles": site_angles, "rule": rule,
+            "site_angles": site_angles, "rule": rule, "rings": n_rings,
             # stations: ``levels`` rings of k interface nodes (level-major), each point's weight per level
-            "levels": heights.size, "site_level_weights": level_weights(np.full(n_points, h_c)),
+            "levels": heights.size, "site_level_weights": level_weights(site_h),
             # every node of the band, for the band interface (ring_band_patterns)
             "band_angles": angles_nodes, "band_dofs": nodes.global_dofs, "band_xyz": xyz,
             "band_level_weights": level_weights(height)}
-    return SiteSet(contact_index, section.name, points, np.full(n_points, area_m2 / n_points),
-                   nodes.global_dofs[chosen], None, ring)
+    return SiteSet(contact_index, section.name, points, weight, nodes.global_dofs[chosen], None, ring)
+
+
+def ring_interpolation(ring: dict, angles: np.ndarray, level_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ring's interpolation from its stations (interface nodes) at points given by their angles [rad] and
+    weights per level of stations (n, levels): periodic cubic Lagrange in angle of the cylindrical components within
+    each level, the level weights across levels (one level; two for the band interface, linear in height).
+    Returns the stations each point uses (n, m; indices into ``ring["node_angles"]``) and the 3 x 3 blocks B
+    (n, m, 3, 3) with u_point = sum_s B_s u_station, both in global components."""
+    levels = ring.get("levels", 1)
+    per_level = ring["node_angles"].size // levels
+    point_frames = cylindrical_frames(angles, ring["e1"], ring["e2"], ring["axis"])
+    stations, blocks = [], []
+    for level in range(levels):
+        node_angles = ring["node_angles"][level * per_level:(level + 1) * per_level]
+        idx, weights = interpolation_stencil(node_angles, angles)
+        weights = weights * level_weights[:, level:level + 1]
+        node_frames = cylindrical_frames(node_angles, ring["e1"], ring["e2"], ring["axis"])
+        # global at the point = F_p^T (cylindrical at the point) = F_p^T w F_s (global at station s)
+        blocks.append(weights[:, :, None, None] * np.einsum("pji,psjk->psik", point_frames, node_frames[idx]))
+        stations.append(idx + level * per_level)
+    return np.concatenate(stations, axis=1), np.concatenate(blocks, axis=1)
 
 
 def ring_interface_rows(ring: dict, n_interface_before: int, gdim: int, n_columns: int) -> np.ndarray:
     """Rows (n_sites * 3, n_columns) of the ring's sites interpolated from its interface nodes (whose
-    coordinates start at ``n_interface_before``, gdim per node in component order): cubic Lagrange in angle of
-    the cylindrical components, within each level of stations (one; two for the band interface, then linear in
-    height between them)."""
-    site_angles, axis = ring["site_angles"], ring["axis"]
-    levels = ring.get("levels", 1)
-    per_level = ring["node_angles"].size // levels
-    site_frames = cylindrical_frames(site_angles, ring["e1"], ring["e2"], axis)
-    rows = np.zeros((site_angles.size * 3, n_columns))
-    for level in range(levels):
-        node_angles = ring["node_angles"][level * per_level:(level + 1) * per_level]
-        idx, weights = interpolation_stencil(node_angles, site_angles)
-        if levels > 1:
-            weights = weights * ring["site_level_weights"][:, level:level + 1]
-        node_frames = cylindrical_frames(node_angles, ring["e1"], ring["e2"], axis)
-        first = n_interface_before + gdim * level * per_level
-        for c in range(site_angles.size):
-            for s in range(idx.shape[1]):
-                j = idx[c, s]
-                # global at the site = F_c^T (local at the site) = F_c^T w F_j (global at node j)
-                block = weights[c, s] * site_frames[c].T @ node_frames[j]
-                for r in range(3):
-                    for kk in range(gdim):
-                        rows[3 * c + r, first + gdim * j + kk] += block[r, kk]
+    coordinates start at ``n_interface_before``, gdim per node in component order): :func:`ring_interpolation`
+    at the sites."""
+    site_angles = ring["site_angles"]
+    weights = ring.get("site_level_weights", np.ones((site_angles.size, 1)))
+    stations, blocks = ring_interpolation(ring, site_angles, weights)
+    n_sites, width = stations.shape
+    rows = np.zeros((n_sites * 3, n_columns))
+    site = np.arange(n_sites)[:, None, None, None]
+    r = np.arange(3)[None, None, :, None]
+    kk = np.arange(gdim)[None, None, None, :]
+    columns = n_interface_before + gdim * stations[:, :, None, None] + kk
+    np.add.at(rows, (3 * site + r, np.broadcast_to(columns, (n_sites, width, 3, gdim))), blocks[:, :, :, :gdim])
     return rows
 
 
 def ring_band_patterns(ring: dict, interface_dofs: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """The band interface (``reduction.interface = "band"``): each interface coordinate of a ring, interface node k's
     global component c (its DOF ``interface_dofs[k, c]``), as a displacement pattern of every node of the contact
-    band: node j moves by w_jk F_j^T F_k e_c, the same periodic cubic Lagrange interpolation in angle of the
-    cylindrical components as the sites' rows (:func:`ring_interface_rows`). Returns {interface DOF: (global DOFs,
-    values)}; held DOFs (-1) are left out. At an interface node the pattern is the unit displacement of that DOF
-    (Lagrange weights), so the coordinate is still the node's displacement; between them the band follows the
-    interpolation instead of being free, so the sites' forces act on the band as loads spread over it rather than
-    as point loads on a few nodes, whose local compliance does not converge (3D: it grows like 1/h)."""
-    band_angles, band_dofs = ring["band_angles"], ring["band_dofs"]
-    levels = ring.get("levels", 1)
-    per_level = ring["node_angles"].size // levels
-    band_frames = cylindrical_frames(band_angles, ring["e1"], ring["e2"], ring["axis"])
+    band: node j moves by B_jk e_c, :func:`ring_interpolation` at the band's nodes, the sites' own interpolation.
+    Returns {interface DOF: (global DOFs, values)}; held DOFs (-1) are left out. At an interface node the pattern is
+    the unit displacement of that DOF (Lagrange weights), so the coordinate is still the node's displacement;
+    between them the band follows the interpolation instead of being free, so the sites' forces act on the band as
+    loads spread over it rather than as point loads on a few nodes, whose local compliance does not converge (3D:
+    it grows like 1/h)."""
+    band_dofs = ring["band_dofs"]
     gdim = band_dofs.shape[1]
-    collected: dict[int, tuple[list, list]] = {}
-    for level in range(levels):
-        station_angles = ring["node_angles"][level * per_level:(level + 1) * per_level]
-        idx, weights = interpolation_stencil(station_angles, band_angles)
-        weights = weights * ring["band_level_weights"][:, level:level + 1]
-        station_frames = cylindrical_frames(station_angles, ring["e1"], ring["e2"], ring["axis"])
-        for j in range(band_angles.size):
-            for s in range(idx.shape[1]):
-                if weights[j, s] == 0.0:
-                    continue
-                k = level * per_level + idx[j, s]
-                # global at band node j = F_j^T w F_k (global at station k)
-                block = weights[j, s] * band_frames[j].T @ station_frames[idx[j, s]]
-                for c in range(gdim):
-                    key = int(interface_dofs[k, c])
-                    if key < 0:
-                        continue
-                    dofs, values = collected.setdefault(key, ([], []))
-                    for r in range(gdim):
-                        if band_dofs[j, r] >= 0 and block[r, c] != 0.0:
-                            dofs.append(int(band_dofs[j, r]))
-                            values.append(float(block[r, c]))
+    stations, blocks = ring_interpolation(ring, ring["band_angles"], ring["band_level_weights"])
+    n_band, width = stations.shape
+    # one entry per (band node j, stencil slot s, band component r, station component c)
+    key = np.broadcast_to(interface_dofs[stations][:, :, None, :], (n_band, width, gdim, gdim))
+    dof = np.broadcast_to(band_dofs[:, None, :, None], (n_band, width, gdim, gdim))
+    value = blocks[:, :, :gdim, :gdim]
+    keep = (key >= 0) & (dof >= 0) & (value != 0.0)
+    key, dof, value = key[keep], dof[keep], value[keep]
+    order = np.lexsort((dof, key))
+    key, dof, value = key[order], dof[order], value[order]
     out = {}
-    for key, (dofs, values) in collected.items():
-        dofs_arr, values_arr = np.asarray(dofs, dtype=np.int64), np.asarray(values)
-        unique, inverse = np.unique(dofs_arr, return_inverse=True)
-        out[key] = (unique, np.bincount(inverse, weights=values_arr, minlength=unique.size))
+    bounds = np.flatnonzero(np.diff(key)) + 1
+    for k_slice in np.split(np.arange(key.size), bounds):
+        if k_slice.size == 0:
+            continue
+        unique, inverse = np.unique(dof[k_slice], return_inverse=True)
+        out[int(key[k_slice[0]])] = (unique, np.bincount(inverse, weights=value[k_slice], minlength=unique.size))
     return out
 
 
@@ -337,7 +359,8 @@ def contact_site_sets(case, model):
                                                              "(the sites interpolated from the band's stations)")
             k = case.reduction.interface_nodes or min(64, nodes.size)
             sets.append(ring_sites(i, c, case, bodies[c.body], nodes, areas[i], c.sample_points, k,
-                                   case.reduction.site_displacement, key, band=case.reduction.interface == "band"))
+                                   case.reduction.site_displacement, key, band=case.reduction.interface == "band",
+                                   n_rings=c.sample_rings))
             continue
         points = np.zeros((nodes.size, 3))
         points[:, :gdim] = nodes.coordinates_m

@@ -142,6 +142,8 @@ def cache_key(case) -> str:
             continue
         keep = {k: c.get(k) for k in ("kind", "facets", "node_point", "sampling", "sample_points", "shape", "axis",
                                       "radius_m", "half_angle_deg", "body", "friction")}
+        if c.get("sample_rings", 1) != 1:           # the default: the keys of models built before the key existed
+            keep["sample_rings"] = c["sample_rings"]
         keep["friction"] = c.get("friction") is not None        # node DOFs kept: all components with friction
         contacts.append(keep)
     bodies = {b["name"]: {"position_m": b["position_m"], "rotations": [r["axis"] for r in b["rotations"]]}

@@ -48,12 +48,21 @@ def write_outputs(results: dict, out_dir: Path, title: str, plots: bool) -> list
         if not rows.any():
             rows[-1] = True
         angle = np.degrees(np.arctan2(geometry[:, 1], geometry[:, 0])) % 360.0
-        order = np.argsort(angle)
-        ring = {"angle_deg": angle[order],
-                "mean_pressure_Pa": data[S.sites_table(contact, "pressure")][rows].mean(axis=0)[order],
-                "last_period_pressure_Pa": data[S.sites_table(contact, "pressure")][-1][order],
-                "contact_fraction": data[S.sites_table(contact, "closed")][rows].mean(axis=0)[order],
-                "stick_fraction": data[S.sites_table(contact, "stick")][rows].mean(axis=0)[order]}
+        # rings across the band (sample_rings > 1) share their angles: one row per angle, the area-weighted mean
+        # across the band's height
+        angles, column = np.unique(np.round(angle, 9), return_inverse=True)
+        area = geometry[:, 3]
+        per_angle = np.bincount(column, weights=area, minlength=angles.size)
+
+        def across(values):
+            return np.bincount(column, weights=values * area, minlength=angles.size) / per_angle
+
+        pressure = data[S.sites_table(contact, "pressure")]
+        ring = {"angle_deg": angles,
+                "mean_pressure_Pa": across(pressure[rows].mean(axis=0)),
+                "last_period_pressure_Pa": across(pressure[-1]),
+                "contact_fraction": across(data[S.sites_table(contact, "closed")][rows].mean(axis=0)),
+                "stick_fraction": across(data[S.sites_table(contact, "stick")][rows].mean(axis=0))}
         write_csv(out_dir / RING_CSV, ring)
         written.append(RING_CSV)
         probe = S.contact_probe(contact)
