@@ -13,8 +13,10 @@ rotor's torque ripples by more than 0.5 %, so its run would end at ``end_time_s`
     # the modal tier at the same point (any piezodyn; the comparison reads its transient.h5)
     piezodyn run bench/cases/wwusm-motor-pinned.toml --out MODAL \
         --set 'transient.bodies[0].rotations[0].torque_N_m=-0.012929'
-    # the comparison: cycle means over each run's last window (20 periods)
-    .venv/bin/python bench/bench_fe_steady_point.py compare --fe /work/runs/fe_steady --modal MODAL
+    # the comparison: cycle means over each run's last window (20 periods), speed, torque, N and the stator's
+    # loaded wave at the contact point; several modal runs (one setting each: BENCHMARKS.md, "What the gap is made
+    # of") against the one FE point
+    .venv/bin/python bench/bench_fe_steady_point.py compare --fe /work/runs/fe_steady --modal MODAL [MODAL2 ...]
 
 ``fe`` passes ``--set`` keys after ``--set`` to both the run and its resume (the case digest must match).
 """
