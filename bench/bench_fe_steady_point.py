@@ -68,6 +68,28 @@ def cycle_means(path: Path, frequency_Hz: float) -> dict[str, np.ndarray]:
     return out
 
 
+def window_powers(path: Path, frequency_Hz: float, window: int, load_N_m: float = LOAD_N_M) -> dict[str, float]:
+    """Mean powers [W] over the last ``window`` periods: the electrical input (sum over the electrodes of the
+    integral of V dQ), the stator's damping and the contact's friction (rates of their dissipated energies) and the
+    output (load torque x speed)."""
+    with h5py.File(path, "r") as f:
+        t = f["time_s"][()]
+        first = int(np.searchsorted(t, t[-1] - window / frequency_Hz * (1 - 1e-9)))
+        span = t[-1] - t[first]
+        electrodes = [k[: -len("_voltage_V")] for k in f if k.endswith("_voltage_V") and k != "drive_voltage_V"]
+        electrical = 0.0
+        for name in electrodes:
+            voltage, charge = f[f"{name}_voltage_V"][first:], f[f"{name}_charge_C"][first:]
+            electrical += float(np.sum(0.5 * (voltage[1:] + voltage[:-1]) * np.diff(charge)))
+
+        def rate(key):
+            return float(f[key][-1] - f[key][first]) / span
+
+        speed = f["rotor_angular_velocity_rad_per_s"][first:].reshape(-1)
+        return {"electrical_W": electrical / span, "damping_W": rate("damping_dissipated_J"),
+                "friction_W": rate("stator_rotor_dissipated_J"), "output_W": float(np.mean(speed)) * load_N_m}
+
+
 def window_means(means: dict[str, np.ndarray], window: int) -> dict[str, float]:
     return {k: float(np.mean(v[-window:])) for k, v in means.items() if k != "period"}
 
@@ -81,7 +103,7 @@ def compare(fe_dir: Path, modal_dirs: list[Path], frequency_Hz: float) -> dict:
         steady = summary.get("steady_state") or {}
         rows[label] = {"periods": int(means["period"].size), "steady": summary.get("steady", steady.get("steady")),
                        "wall_time_s": summary.get("wall_time_s"), "steps": summary.get("steps"),
-                       **window_means(means, WINDOW)}
+                       **window_means(means, WINDOW), **window_powers(directory / "transient.h5", frequency_Hz, WINDOW)}
     fe = rows["fe"]
     for d in modal_dirs:
         rows[d.name]["vs_fe"] = {k: rows[d.name][k] / fe[k] - 1 for k in QUANTITIES}
@@ -147,6 +169,12 @@ def main() -> None:
                                 ("normal_force_N", 1.0, ".4f"), ("wave_m", 1e6, ".3f")):
             cells.append(f"{r[key] * scale:{fmt}}" + (f" ({100 * d[key]:+.1f} %)" if d else ""))
         print(f"| {label} | {r['periods']} | {r['steady']} | " + " | ".join(cells) + " | |")
+    print(f"\n| run | electrical input [mW] | stator damping [mW] | friction [mW] | output [mW] | "
+          f"(means over the last {WINDOW} periods) |")
+    print("|---|---|---|---|---|---|")
+    for label, r in rows.items():
+        print(f"| {label} | {1e3 * r['electrical_W']:.2f} | {1e3 * r['damping_W']:.2f} | {1e3 * r['friction_W']:.2f} "
+              f"| {1e3 * r['output_W']:.2f} | |")
 
 
 if __name__ == "__main__":
