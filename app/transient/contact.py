@@ -695,6 +695,8 @@ class PointContact(ForceColumns):
             rigid.body(self.lower).rotation_axes or rigid.body(self.upper).rotation_axes)
         self._pair = np.r_[np.arange(rigid.size)[rigid.all_dofs(self.lower)],
                            np.arange(rigid.size)[rigid.all_dofs(self.upper)]]
+        self._lower_dofs, self._upper_dofs = rigid.dofs(self.lower), rigid.dofs(self.upper)
+        self._normal_outer = np.outer(self.normal, self.normal)
         n_lo = rigid.body(self.lower).n_dofs
         self._D = np.zeros(self._pair.size)        # d delta / d (lower, upper) coordinates
         self._D[:rigid.gdim] = self.normal
@@ -706,6 +708,16 @@ class PointContact(ForceColumns):
     def _state(self, rigid, z, zd):
         lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
         return self.penetration(z[lo], z[up], zd[lo], zd[up])
+
+    def _at_iterate(self, system) -> tuple[float, float, tuple[float, float, float]]:
+        """(delta, rate, force(delta, rate)) at the system's mid-point state, kept while its
+        ``iterate_version`` stays (the residual, the tangent and the dissipation of one iterate)."""
+        key = (system, getattr(system, "iterate_version", None))
+        if key[1] is None or self.__dict__.get("_iterate_key") != key:
+            delta, rate = self._state(system.rigid, system.z_mid, system.zd_mid)
+            self._iterate_values = (delta, rate, self.force(delta, rate))
+            self._iterate_key = key
+        return self._iterate_values
 
     def _slip_map(self, rigid, z) -> np.ndarray:
         """P: (lower, upper) coordinate rates -> velocity of the upper body's contact point relative
@@ -738,25 +750,25 @@ class PointContact(ForceColumns):
         return generalised, F[: rigid.gdim], -one_minus_af * P.T @ dF_dq
 
     def add_residual(self, system, rc_S, r_z, r):
-        rigid = system.rigid
         if self._general:
             generalised, force, _ = self._general_terms(system, tangent=False)
             r_z[self._pair] -= generalised
             return force
-        f, _, _ = self.force(*self._state(rigid, system.z_mid, system.zd_mid))
-        r_z[rigid.dofs(self.upper)] -= f * self.normal
-        r_z[rigid.dofs(self.lower)] += f * self.normal
-        return f * self.normal
+        force = self._at_iterate(system)[2][0] * self.normal
+        r_z[self._upper_dofs] -= force
+        r_z[self._lower_dofs] += force
+        return force
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:
-        rigid = system.rigid
         if self._general:
             _, _, block = self._general_terms(system, tangent=True)
             Kzz[np.ix_(self._pair, self._pair)] += block
             return
-        _, k_f, c_f = self.force(*self._state(rigid, system.z_mid, system.zd_mid))
-        stiffness = (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * np.outer(self.normal, self.normal)
-        lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
+        _, k_f, c_f = self._at_iterate(system)[2]
+        if k_f == 0.0 and c_f == 0.0:
+            return      # open: no block
+        stiffness = (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * self._normal_outer
+        lo, up = self._lower_dofs, self._upper_dofs
         Kzz[up, up] += stiffness
         Kzz[lo, lo] += stiffness
         Kzz[up, lo] -= stiffness
@@ -772,10 +784,9 @@ class PointContact(ForceColumns):
     def dissipation_power_W(self, system) -> float:
         """Power dissipated by the damper and friction [W] at the evaluated iterate."""
         rigid, z, zd = system.rigid, system.z_mid, system.zd_mid
-        delta, rate = self._state(rigid, z, zd)
+        delta, rate, (f, _, _) = self._at_iterate(system)
         if delta <= 0.0:
             return 0.0
-        f, _, _ = self.force(delta, rate)
         power = (f - self.stiffness_N_per_m * delta) * rate
         if self.friction is not None and f > 0.0:
             n3 = pad3(self.normal)
@@ -883,6 +894,7 @@ class NodeContact(ForceColumns):
     # ------------------------------------------------------------ interaction protocol
     kind = "node"
     fe_coupled = True
+    reads_fields = False          # reads system.u_mid, v_mid and states directly, never the shared fields
 
     def bind(self, system) -> None:
         rigid = system.rigid
@@ -898,9 +910,19 @@ class NodeContact(ForceColumns):
     def move_to_iterate(self, system) -> None:
         pass
 
+    def _at_iterate(self, system) -> tuple[float, float, tuple[float, float, float]]:
+        """(delta, rate, force(delta, rate)) at the system's mid-point fields, kept while its
+        ``iterate_version`` stays (the residual, the tangent and the dissipation of one iterate)."""
+        key = (system, getattr(system, "iterate_version", None))
+        if key[1] is None or self.__dict__.get("_iterate_key") != key:
+            sl = system.rigid.dofs(self.body)
+            delta, rate = self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl])
+            self._iterate_values = (delta, rate, self.force(delta, rate))
+            self._iterate_key = key
+        return self._iterate_values
+
     def _force_at_iterate(self, system):
-        sl = system.rigid.dofs(self.body)
-        return self.force(*self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl]))
+        return self._at_iterate(system)[2]
 
     def _slip_map(self, system) -> tuple[np.ndarray, np.ndarray]:
         """(P, rates): P maps the rates xi' = (node velocity (gdim), body coordinate rates) at the
@@ -982,11 +1004,9 @@ class NodeContact(ForceColumns):
 
     def dissipation_power_W(self, system) -> float:
         """Power dissipated by the damper and friction [W] at the evaluated iterate."""
-        sl = system.rigid.dofs(self.body)
-        delta, rate = self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl])
+        delta, rate, (f, _, _) = self._at_iterate(system)
         if delta <= 0.0:
             return 0.0
-        f, _, _ = self.force(delta, rate)
         power = (f - self.stiffness * delta * math.sqrt(delta)) * rate
         if self.friction is not None and f > 0.0:
             n3 = pad3(self.normal)

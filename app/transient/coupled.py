@@ -43,6 +43,7 @@ from app.blas import limit_blas_threads
 from app.compat import petsc_vector
 from app.transient.active_set import CondensedJacobian, ContactTangent, RigidJacobian, subtract_rows
 from app.transient.fe import EffectiveOperatorCache, InterfaceRows, LinearFE
+from app.transient.kinematics import increment_kinematics, scheme_factors, step_kinematics, step_kinematics_at
 from app.transient.rigid import RigidSet
 from app.transient.state import TransientState
 from forms.newmark import (
@@ -50,7 +51,6 @@ from forms.newmark import (
     acceleration,
     acceleration_per_displacement,
     midpoint,
-    velocity,
     velocity_per_displacement,
 )
 
@@ -93,6 +93,14 @@ class CoupledSystem:
         self.m = rigid.size
         self.m_local = self.m if comm.rank == 0 else 0
         self.active_set = active_set
+        # per-iterate bookkeeping, formed once: the mass factor of the new acceleration, the prescribed axes, brakes
+        self._mass_new = rigid.mass_diagonal * (1 - scheme.alpha_m)
+        self._fixed_axes = np.flatnonzero(~rigid.free_mask)
+        self._braked = bool(np.any(rigid.damping_diagonal))
+        self._fe_contacts = [c for c in self.interactions if c.fe_coupled]
+        self._rigid_links = [c for c in self.interactions if not c.fe_coupled]
+        self._rigid_jacobians = {}      # RigidJacobian by its Kzz (the same while dt and the links' states stay)
+        self._rigid_diagonal_now = None
         self._setup_contact_dofs()
         for c in self.interactions:
             c.bind(self)
@@ -101,11 +109,21 @@ class CoupledSystem:
         self._rows_layout = InterfaceRows(fe, evaluation, self.contact_global) if evaluation is not None else None
         self.cache = (EffectiveOperatorCache(fe, scheme, self.contact_global, rows=self._rows_layout)
                       if fe is not None else None)
-        self.fields = list({id(c.fields): c.fields for c in self.interactions if hasattr(c, "fields")}.values())
+        # the shared mid-point fields, kept up to date only if an interaction's forms read them
+        self.fields = list({id(c.fields): c.fields for c in self.interactions
+                            if getattr(c, "reads_fields", hasattr(c, "fields"))}.values())
+        self._field_constants = None
+        # bumped whenever the mid-point quantities (u_mid, v_mid, z_mid, zd_mid) change: an interaction may keep
+        # what it derived from them while the version stays (see PointContact.forces_at_iterate)
+        self.iterate_version = 0
         if fe is not None:
             from dolfinx import fem
 
             self._u1 = fem.Function(fe.space)
+            size = self._u1.x.array.size
+            # a_{n+1}, v_{n+1}, u_mid, v_mid on every local DOF (owned and ghost), written in place
+            self.a1, self.v1, self.u_mid, self.v_mid = np.zeros((4, size))
+            self._fields_formed = False     # formed at every DOF once (the first step's predictor)
             self.translations = fe.translation_vectors()
             self._r = fe.new_vector()
             self._tmp = fe.new_vector()
@@ -289,9 +307,11 @@ class CoupledSystem:
     def _rigid_diagonal(self) -> np.ndarray:
         """d r_z / d z_{n+1} of the bodies alone: inertia (1 - alpha_m) c_acc m and brake
         (1 - alpha_f) c_vel c (the brake acts on the mid-point rate)."""
-        s = self.scheme
-        return ((1 - s.alpha_m) * self.c_acc * self.rigid.mass_diagonal
-                + (1 - s.alpha_f) * self.c_vel * self.rigid.damping_diagonal)
+        if self._rigid_diagonal_now is None:      # once a step (c_acc, c_vel)
+            s = self.scheme
+            self._rigid_diagonal_now = ((1 - s.alpha_m) * self.c_acc * self.rigid.mass_diagonal
+                                        + (1 - s.alpha_f) * self.c_vel * self.rigid.damping_diagonal)
+        return self._rigid_diagonal_now
 
     def _begin_step(self, state: TransientState, dt: float) -> None:
         s, fe, rigid = self.scheme, self.fe, self.rigid
@@ -302,9 +322,12 @@ class CoupledSystem:
         self.t_mid = midpoint(self.t1, state.t, s.alpha_f)
         self.c_acc = acceleration_per_displacement(dt, s)
         self.c_vel = velocity_per_displacement(dt, s)
-        for f in self.fields:
-            f.velocity_per_displacement.value = self.c_vel
-            f.one_minus_alpha_f.value = 1 - s.alpha_f
+        self._factors = scheme_factors(dt, s)
+        if self._field_constants != (self.c_vel, s.alpha_f):     # set the forms' constants when dt changes
+            for f in self.fields:
+                f.velocity_per_displacement.value = self.c_vel
+                f.one_minus_alpha_f.value = 1 - s.alpha_f
+            self._field_constants = (self.c_vel, s.alpha_f)
         scale_sq = 0.0
         if fe is not None:
             self.op = self.cache.get(dt)
@@ -313,6 +336,8 @@ class CoupledSystem:
         z0, zd0, zdd0 = state.z, state.zd, state.zdd
         self.zdd_hat = acceleration(0.0, 0.0, zd0, zdd0, dt, s)
         self.rigid_force_ext = rigid.external_force_N(self.t_mid)
+        self._inertia_old = rigid.mass_diagonal * s.alpha_m * zdd0
+        self._rigid_diagonal_now = None
         self.rigid_inertia_const = rigid.mass_diagonal * ((1 - s.alpha_m) * self.zdd_hat + s.alpha_m * zdd0)
         rigid_scale_sq = float(np.sum(self.rigid_force_ext**2 + (rigid.mass_diagonal * zdd0) ** 2
                                       + rigid.brake_force_N(zd0) ** 2))
@@ -386,7 +411,7 @@ class CoupledSystem:
         self._u1_free = self._u1.x.array.copy()
         # the fields at g = 0 where the contact forms read them; the accepted iterate is formed on every
         # DOF (_evaluate_everywhere), so nothing reads the others before
-        if self._rows_layout is None or getattr(self, "a1", None) is None:
+        if self._rows_layout is None or not self._fields_formed:
             self._fe_fields(None)
         else:
             self._fe_fields(self._rows_layout.local)
@@ -434,7 +459,7 @@ class CoupledSystem:
             return
         self._evaluated = np.array(x)
         du, dz, fe_key = self._split(x)
-        s, st, dt = self.scheme, self.state0, self.dt
+        st = self.state0
         # Iterates that differ only in the rigid increments (the contact-free path) share the FE
         # fields: keep them (the key is replicated, so every rank decides alike).
         same_fe = fe_key is not None and fe_key == self._fe_key and (self._fe_full or not everywhere)
@@ -446,12 +471,11 @@ class CoupledSystem:
                 petsc_vector(self._u1).array_w[:] = self._u_pred.array_r + du
                 self._u1.x.scatter_forward()
                 self._fe_fields(None)
-        z1 = st.z + dz
-        self.z1 = z1
-        self.zdd1 = acceleration(dz, 0.0, st.zd, st.zdd, dt, s)
-        self.zd1 = velocity(self.zdd1, st.zd, st.zdd, dt, s)
-        self.z_mid = midpoint(z1, st.z, s.alpha_f)
-        self.zd_mid = midpoint(self.zd1, st.zd, s.alpha_f)
+        self.z1 = z1 = st.z + dz
+        rigid = np.empty((4, z1.size))
+        increment_kinematics(dz, z1, st.z, st.zd, st.zdd, self._factors, rigid[0], rigid[1], rigid[2], rigid[3])
+        self.zdd1, self.zd1, self.z_mid, self.zd_mid = rigid
+        self.iterate_version += 1
         for c in self.interactions:
             c.move_to_iterate(self)
 
@@ -494,26 +518,20 @@ class CoupledSystem:
     def _fe_fields(self, at: np.ndarray | None) -> None:
         """a_{n+1}, v_{n+1} and the mid-point fields from u_{n+1} (in ``_u1``), at the local DOFs
         ``at`` or (None) at every DOF."""
-        s, st, dt = self.scheme, self.state0, self.dt
+        st = self.state0
         u1 = self._u1.x.array
+        self.iterate_version += 1
         if at is None:
-            self.a1 = acceleration(u1, st.u, st.v, st.a, dt, s)
-            self.v1 = velocity(self.a1, st.v, st.a, dt, s)
-            self.u_mid = midpoint(u1, st.u, s.alpha_f)
-            self.v_mid = midpoint(self.v1, st.v, s.alpha_f)
+            step_kinematics(u1, st.u, st.v, st.a, self._factors, self.a1, self.v1, self.u_mid, self.v_mid)
             for f in self.fields:
                 f.u_mid.x.array[:] = self.u_mid
                 f.v_mid.x.array[:] = self.v_mid
-            self._fe_full = True
+            self._fe_full = self._fields_formed = True
             return
-        u0, v0, a0 = st.u[at], st.v[at], st.a[at]
-        a1 = acceleration(u1[at], u0, v0, a0, dt, s)
-        v1 = velocity(a1, v0, a0, dt, s)
-        u_mid, v_mid = midpoint(u1[at], u0, s.alpha_f), midpoint(v1, v0, s.alpha_f)
-        self.a1[at], self.v1[at], self.u_mid[at], self.v_mid[at] = a1, v1, u_mid, v_mid
+        step_kinematics_at(at, u1, st.u, st.v, st.a, self._factors, self.a1, self.v1, self.u_mid, self.v_mid)
         for f in self.fields:
-            f.u_mid.x.array[at] = u_mid
-            f.v_mid.x.array[at] = v_mid
+            f.u_mid.x.array[at] = self.u_mid[at]
+            f.v_mid.x.array[at] = self.v_mid[at]
         self._fe_full = False
 
     def _new_state(self) -> TransientState:
@@ -529,10 +547,13 @@ class CoupledSystem:
         contact DOFs rc_S (all ranks' entries), the rigid residual r_z). With ``r`` (an FE vector
         holding the rest of the FE residual) the contact residual is also added to it."""
         forces = {}
-        r_z = self.rigid.mass_diagonal * (1 - self.scheme.alpha_m) * self.zdd1
-        r_z = r_z + self.rigid.mass_diagonal * self.scheme.alpha_m * self.state0.zdd - self.rigid_force_ext
-        # brakes: a load -c omega at the generalised mid-point, like every other force of the step
-        r_z = r_z - self.rigid.brake_force_N(self.zd_mid)
+        # m (1 - alpha_m) zdd_{n+1} + m alpha_m zdd_n - F_ext
+        r_z = self._mass_new * self.zdd1
+        r_z += self._inertia_old
+        r_z -= self.rigid_force_ext
+        if self._braked:
+            # brakes: a load -c omega at the generalised mid-point, like every other force of the step
+            r_z -= self.rigid.brake_force_N(self.zd_mid)
         rc_S = np.zeros(self.contact_global.size)
         for c in self.interactions:
             forces[c.name] = c.add_residual(self, rc_S, r_z, r)
@@ -540,8 +561,8 @@ class CoupledSystem:
         # surface contact's rc.dot is collective, so "any force" is the same on every rank.
         self._forces = forces
         self._forces_at = self._evaluated
-        self._fe_contact_active = any(np.any(forces[c.name] != 0.0) for c in self.interactions if c.fe_coupled)
-        r_z[~self.rigid.free_mask] = 0.0
+        self._fe_contact_active = any(np.any(forces[c.name] != 0.0) for c in self._fe_contacts)
+        r_z[self._fixed_axes] = 0.0
         return forces, rc_S, r_z
 
     def _residual_callback(self, snes, X, R) -> None:
@@ -557,10 +578,9 @@ class CoupledSystem:
         """Add the rigid-rigid interactions to the rigid block ``Kzz`` and put identity
         rows/columns on the prescribed axes."""
         empty = np.zeros((0, 0))
-        for c in self.interactions:
-            if not c.fe_coupled:
-                c.add_tangent(self, empty, empty, empty, Kzz)
-        fixed = ~self.rigid.free_mask
+        for c in self._rigid_links:
+            c.add_tangent(self, empty, empty, empty, Kzz)
+        fixed = self._fixed_axes
         Kzz[fixed, :] = 0.0
         Kzz[:, fixed] = 0.0
         Kzz[fixed, fixed] = 1.0
@@ -597,7 +617,7 @@ class CoupledSystem:
             if c.fe_coupled:
                 c.add_tangent(self, Kss, B, L, Kzz)
         Kzz = self._rigid_block(Kzz)
-        fixed = ~self.rigid.free_mask
+        fixed = self._fixed_axes
         L[fixed, :] = 0.0
         B[:, fixed] = 0.0
         return Kss, B, L, Kzz
@@ -633,7 +653,14 @@ class CoupledSystem:
         if self.comm.rank != 0:
             return
         if isinstance(Kss, ContactTangent) and Kss.empty and not B.any() and not L.any():
-            self._jacobian = RigidJacobian(self.contact_global.size, Kzz)     # no FE contact carries force
+            # no FE contact carries force: the factorised Kzz, kept while it recurs (same dt and rigid links)
+            key = Kzz.tobytes()
+            jacobian = self._rigid_jacobians.get(key)
+            if jacobian is None:
+                if len(self._rigid_jacobians) >= 16:
+                    self._rigid_jacobians.clear()
+                jacobian = self._rigid_jacobians[key] = RigidJacobian(self.contact_global.size, Kzz)
+            self._jacobian = jacobian
             return
         previous = self._jacobian
         self._jacobian = CondensedJacobian(self._contact_block(), Kss, B, L, Kzz, active_only=self.active_set)
@@ -663,6 +690,7 @@ class CoupledSystem:
         dt |a_0 error| / 2 in the trapezoidal rule)."""
         rigid = self.rigid
         self.z_mid, self.zd_mid = state.z, state.zd
+        self.iterate_version += 1
         r_z = -rigid.external_force_N(state.t) - rigid.brake_force_N(state.zd)
         for c in self.interactions:
             if not c.fe_coupled:

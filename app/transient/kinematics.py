@@ -1,0 +1,68 @@
+"""The generalized-alpha end-of-step and mid-point kinematics of many DOFs in one pass (numba).
+
+:func:`forms.newmark.acceleration`, :func:`~forms.newmark.velocity` and :func:`~forms.newmark.midpoint` applied
+to arrays make ~15 passes with temporaries; the condensed step (app/transient/coupled.py) applies them to every
+FE DOF once a step, to its evaluation DOFs and to the rigid coordinates at every Newton iterate, where numpy's
+call overhead on a few entries dominates. These kernels evaluate the same expressions entry by entry, in the same
+order and with the same scalar factors, so the values are those of forms/newmark.py bit for bit (numba does not
+contract to fused multiply-adds unless asked: no ``fastmath``); tests/test_transient_newmark.py checks it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from forms.newmark import TimeScheme
+
+
+def scheme_factors(dt: float, scheme: TimeScheme) -> tuple[float, float, float, float, float, float]:
+    """The scalars of forms/newmark.py's expressions at step ``dt``: (dt, beta dt^2, 1 / (2 beta) - 1,
+    1 - gamma, gamma, alpha_f) (each formed as there)."""
+    return (float(dt), scheme.beta * dt * dt, 1 / (2 * scheme.beta) - 1, 1 - scheme.gamma, scheme.gamma,
+            scheme.alpha_f)
+
+
+@njit(cache=True)
+def _one(u_new, u_old, v_old, a_old, dt, beta_dt2, a_factor, one_minus_gamma, gamma, alpha_f):
+    a_new = (u_new - u_old - dt * v_old) / beta_dt2 - a_factor * a_old
+    v_new = v_old + dt * (one_minus_gamma * a_old + gamma * a_new)
+    return a_new, v_new, (1 - alpha_f) * u_new + alpha_f * u_old, (1 - alpha_f) * v_new + alpha_f * v_old
+
+
+@njit(cache=True)
+def step_kinematics(u_new, u_old, v_old, a_old, factors, a_new, v_new, u_mid, v_mid):
+    """a_{n+1}, v_{n+1} and the mid-point u, v of every entry, into the four output arrays."""
+    dt, beta_dt2, a_factor, one_minus_gamma, gamma, alpha_f = factors
+    for i in range(u_new.size):
+        a_new[i], v_new[i], u_mid[i], v_mid[i] = _one(u_new[i], u_old[i], v_old[i], a_old[i], dt, beta_dt2,
+                                                      a_factor, one_minus_gamma, gamma, alpha_f)
+
+
+@njit(cache=True)
+def step_kinematics_at(at, u_new, u_old, v_old, a_old, factors, a_new, v_new, u_mid, v_mid):
+    """:func:`step_kinematics` at the entries ``at`` only (the other entries of the outputs untouched)."""
+    dt, beta_dt2, a_factor, one_minus_gamma, gamma, alpha_f = factors
+    for k in range(at.size):
+        i = at[k]
+        a_new[i], v_new[i], u_mid[i], v_mid[i] = _one(u_new[i], u_old[i], v_old[i], a_old[i], dt, beta_dt2,
+                                                      a_factor, one_minus_gamma, gamma, alpha_f)
+
+
+@njit(cache=True)
+def increment_kinematics(du, u_new, u_old, v_old, a_old, factors, a_new, v_new, u_mid, v_mid):
+    """:func:`step_kinematics` with the acceleration formed from the increment ``du`` = u_new - u_old
+    (``acceleration(du, 0.0, ...)``: the rigid coordinates, whose increments are the unknowns)."""
+    dt, beta_dt2, a_factor, one_minus_gamma, gamma, alpha_f = factors
+    for i in range(du.size):
+        a_new[i], v_new[i], _, v_mid[i] = _one(du[i], 0.0, v_old[i], a_old[i], dt, beta_dt2, a_factor,
+                                               one_minus_gamma, gamma, alpha_f)
+        u_mid[i] = (1 - alpha_f) * u_new[i] + alpha_f * u_old[i]
+
+
+def kinematics(u_new: np.ndarray, u_old: np.ndarray, v_old: np.ndarray, a_old: np.ndarray,
+               factors: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(a_{n+1}, v_{n+1}, u_mid, v_mid) as new arrays."""
+    out = np.empty((4, u_new.size))
+    step_kinematics(u_new, u_old, v_old, a_old, factors, out[0], out[1], out[2], out[3])
+    return out[0], out[1], out[2], out[3]
