@@ -91,7 +91,11 @@ class CondensedJacobian:
                 Kss = Kss.toarray()
             self.active = np.arange(s_count)
             self.inactive = np.zeros(0, dtype=int)
-            self.Z = np.block([[-(np.eye(s_count) + Kss @ G), B], [-L @ G, Kzz]])
+            Z = self.Z = np.empty((s_count + m, s_count + m))      # [[-(I + Kss G), B], [-L G, Kzz]]
+            Z[:s_count, :s_count] = -(np.eye(s_count) + Kss @ G)
+            Z[:s_count, s_count:] = B
+            Z[s_count:, :s_count] = -L @ G
+            Z[s_count:, s_count:] = Kzz
             self._lu = scipy.linalg.lu_factor(self.Z, check_finite=True) if self.Z.size else None
             return
         K = Kss.tocsr() if scipy.sparse.issparse(Kss) else scipy.sparse.csr_matrix(Kss)

@@ -695,6 +695,7 @@ class PointContact(ForceColumns):
             rigid.body(self.lower).rotation_axes or rigid.body(self.upper).rotation_axes)
         self._pair = np.r_[np.arange(rigid.size)[rigid.all_dofs(self.lower)],
                            np.arange(rigid.size)[rigid.all_dofs(self.upper)]]
+        self._bound_rigid = rigid
         self._lower_dofs, self._upper_dofs = rigid.dofs(self.lower), rigid.dofs(self.upper)
         self._normal_outer = np.outer(self.normal, self.normal)
         n_lo = rigid.body(self.lower).n_dofs
@@ -706,7 +707,9 @@ class PointContact(ForceColumns):
         pass
 
     def _state(self, rigid, z, zd):
-        lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
+        lo, up = self.__dict__.get("_lower_dofs"), self.__dict__.get("_upper_dofs")
+        if lo is None or rigid is not self._bound_rigid:
+            lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
         return self.penetration(z[lo], z[up], zd[lo], zd[up])
 
     def _at_iterate(self, system) -> tuple[float, float, tuple[float, float, float]]:
@@ -857,24 +860,26 @@ class NodeContact(ForceColumns):
             raise ValueError(f"contact {name!r}: the node at {point.tolist()} has no free displacement DOF")
         x_node = coords[self.local_dofs[0]] if self.comm.rank == self.owner else None
         self.x_node = self.comm.bcast(x_node, root=self.owner)
-        self.body_reference = np.zeros(fe.gdim)
+        self._mine, self._serial = self.comm.rank == self.owner, self.comm.size == 1
+        self.set_body_reference(np.zeros(fe.gdim))
 
     def set_body_reference(self, position_m) -> None:
         self.body_reference = np.asarray(position_m, dtype=float).copy()
+        self._reference_gap = self.normal @ (self.x_node - self.body_reference)    # normal.(x - p_ref)
 
     def _node_values(self, arr: np.ndarray) -> np.ndarray:
         """The node's displacement-like vector from a local DOF array (owner), broadcast (gdim)."""
         out = np.zeros(self.fe.gdim)
-        if self.comm.rank == self.owner:
+        if self._mine:
             out[self.dof_axes] = arr[self.local_dofs]
-        return self.comm.bcast(out, root=self.owner) if self.comm.size > 1 else out
+        return out if self._serial else self.comm.bcast(out, root=self.owner)
 
     def penetration(self, u: np.ndarray, v: np.ndarray, body_position, body_velocity) -> tuple[float, float]:
         """(delta [m], d delta/dt [m/s]) for local arrays u, v and the body state. The gap is formed
         as normal.(x - p_ref) + normal.(u - dz) - R (small differences, no round-off of |x|)."""
         n = self.normal
         du = self._node_values(u) - (np.asarray(body_position) - self.body_reference)
-        gap = n @ (self.x_node - self.body_reference) + n @ du - self.radius_m
+        gap = self._reference_gap + n @ du - self.radius_m
         rate = n @ (self._node_values(v) - np.asarray(body_velocity))
         return -float(gap), -float(rate)
 

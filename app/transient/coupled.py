@@ -34,6 +34,8 @@ is three mat-vecs of physical-size vectors, free of cancellation.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse
 from mpi4py import MPI
@@ -43,7 +45,14 @@ from app.blas import limit_blas_threads
 from app.compat import petsc_vector
 from app.transient.active_set import CondensedJacobian, ContactTangent, RigidJacobian, subtract_rows
 from app.transient.fe import EffectiveOperatorCache, InterfaceRows, LinearFE
-from app.transient.kinematics import increment_kinematics, scheme_factors, step_kinematics, step_kinematics_at
+from app.transient.kinematics import (
+    increment_kinematics,
+    predictor_arguments,
+    scheme_factors,
+    step_kinematics,
+    step_kinematics_at,
+    taylor_predictor,
+)
 from app.transient.rigid import RigidSet
 from app.transient.state import TransientState
 from forms.newmark import (
@@ -54,6 +63,7 @@ from forms.newmark import (
     velocity_per_displacement,
 )
 
+_EPS = float(np.finfo(float).eps)
 SNES_PREFIX = "transient_"
 SNES_DEFAULTS = {
     "snes_type": "newtonls",
@@ -128,6 +138,7 @@ class CoupledSystem:
             self._r = fe.new_vector()
             self._tmp = fe.new_vector()
             self._tmp2 = fe.new_vector()
+            self._matvec_arguments = [fe.new_vector() for _ in range(3)]    # of M, K, C in the predictor residual
             self._u_pred = fe.new_vector()
             self._r0 = fe.new_vector()
             self._du = fe.new_vector()
@@ -339,13 +350,15 @@ class CoupledSystem:
         self._inertia_old = rigid.mass_diagonal * s.alpha_m * zdd0
         self._rigid_diagonal_now = None
         self.rigid_inertia_const = rigid.mass_diagonal * ((1 - s.alpha_m) * self.zdd_hat + s.alpha_m * zdd0)
-        rigid_scale_sq = float(np.sum(self.rigid_force_ext**2 + (rigid.mass_diagonal * zdd0) ** 2
-                                      + rigid.brake_force_N(zd0) ** 2))
-        self._force_scale = float(np.sqrt(scale_sq + rigid_scale_sq))
+        rigid_squares = self.rigid_force_ext**2 + (rigid.mass_diagonal * zdd0) ** 2
+        if self._braked:
+            rigid_squares += rigid.brake_force_N(zd0) ** 2
+        rigid_scale_sq = float(np.sum(rigid_squares))
+        self._force_scale = math.sqrt(scale_sq + rigid_scale_sq)
         # Below ~eps |terms| the residual is round-off: never ask for less. The rigid inertia is
         # formed from z / (beta dt^2)-sized terms; the FE terms are physical forces (see above).
         roundoff_sq = scale_sq + float(np.sum(self.rigid_inertia_const**2))
-        self._roundoff_force = 10 * np.finfo(float).eps * float(np.sqrt(roundoff_sq))
+        self._roundoff_force = 10 * _EPS * math.sqrt(roundoff_sq)
         z1 = z0 + dt * zd0 + 0.5 * dt * dt * zdd0
         rigid.apply_prescribed(self.t1, z1)
         self._initial_guess(z1 - z0)
@@ -359,40 +372,21 @@ class CoupledSystem:
         u0, v0, a0 = state.u[:n], state.v[:n], state.a[:n]
         bc = fe.bc_local_owned
         predictor = self._u_pred
-        taylor = predictor.array_w
-        np.multiply(v0, dt, out=taylor)
-        taylor += u0
-        taylor += (0.5 * dt * dt) * a0
-        taylor_bc = taylor[bc].copy()
-        fe.apply_dirichlet(self.t1, predictor)
-        pred = predictor.array_r
+        pred = predictor.array_w
+        taylor_predictor(u0, v0, a0, dt, pred)
+        taylor_bc = pred[bc]
+        fe.apply_dirichlet(self.t1, predictor)     # in place: ``pred`` views the same values
         delta_bc = pred[bc] - taylor_bc
-        r0, x, y = self._r0, self._tmp, self._tmp2
+        r0, y = self._r0, self._tmp2
         fe.load_N(self.t_mid, r0)
         scale_sq = r0.norm() ** 2
         r0.scale(-1.0)
-        one_minus_af = 1 - s.alpha_f
-
-        def mass_term(out):
-            out[:] = a0
-            out[bc] += (1 - s.alpha_m) * self.c_acc * delta_bc
-
-        def stiffness_term(out):
-            np.subtract(pred, u0, out=out)
-            out *= one_minus_af
-            out += u0
-
-        def damping_term(out):
-            np.multiply(a0, dt, out=out)
-            out[bc] += self.c_vel * delta_bc
-            out *= one_minus_af
-            out += v0
-
-        terms = [(fe.M, mass_term), (fe.K, stiffness_term)]
-        if fe.C is not None:
-            terms.append((fe.C, damping_term))
-        for matrix, fill in terms:
-            fill(x.array_w)
+        x_M, x_K, x_C = self._matvec_arguments
+        predictor_arguments(pred, u0, v0, a0, dt, bc, (1 - s.alpha_m) * self.c_acc * delta_bc, self.c_vel * delta_bc,
+                            1 - s.alpha_f, x_M.array_w, x_K.array_w, x_C.array_w)
+        for matrix, x in ((fe.M, x_M), (fe.K, x_K), (fe.C, x_C)):
+            if matrix is None:
+                continue
             matrix.mult(x, y)
             scale_sq += y.norm() ** 2
             r0.axpy(1.0, y)
@@ -450,7 +444,8 @@ class CoupledSystem:
         updated at the DOFs the contact forms read only (``_evaluation_dofs``); ``everywhere`` (the
         accepted iterate, diagnostics) updates every DOF."""
         x = X.array_r
-        same = self._evaluated is not None and self._evaluated.shape == x.shape and np.array_equal(self._evaluated, x)
+        # the same iterate, bit for bit (a cheaper test than array_equal on these few entries)
+        same = self._evaluated is not None and self._evaluated_bytes == x.tobytes()
         if self.comm.size > 1:
             same = self.comm.allreduce(same, op=MPI.LAND)
         if same:
@@ -458,6 +453,7 @@ class CoupledSystem:
                 self._evaluate_everywhere()
             return
         self._evaluated = np.array(x)
+        self._evaluated_bytes = self._evaluated.tobytes()
         du, dz, fe_key = self._split(x)
         st = self.state0
         # Iterates that differ only in the rigid increments (the contact-free path) share the FE
@@ -561,7 +557,12 @@ class CoupledSystem:
         # surface contact's rc.dot is collective, so "any force" is the same on every rank.
         self._forces = forces
         self._forces_at = self._evaluated
-        self._fe_contact_active = any(np.any(forces[c.name] != 0.0) for c in self._fe_contacts)
+        active = False
+        for c in self._fe_contacts:
+            if (forces[c.name] != 0.0).any():
+                active = True
+                break
+        self._fe_contact_active = active
         r_z[self._fixed_axes] = 0.0
         return forces, rc_S, r_z
 

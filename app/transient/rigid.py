@@ -192,6 +192,13 @@ class RigidSet:
         # brakes act on free coordinates only (a prescribed one is not loaded by anything)
         damping = [b.damping_diagonal() for b in bodies]
         self.damping_diagonal = np.concatenate(damping) * self.free_mask if bodies else np.zeros(0)
+        # each body's packed coordinates and prescribed axes (fixed at construction), for apply_prescribed
+        self._prescribed_layout = [(b, self.all_dofs(b.name), ~b.free_axes_mask) for b in self.bodies]
+        self._constant_load = None
+
+    def _loads_constant(self) -> bool:
+        """No body has a time-dependent applied force or torque (gravity only)."""
+        return all(b.applied_force_N is None and b.applied_torque_N_m is None for b in self.bodies)
 
     def body(self, name: str) -> RigidBody:
         return self.bodies[self.index[name]]
@@ -238,16 +245,18 @@ class RigidSet:
     def external_force_N(self, t: float) -> np.ndarray:
         if not self.bodies:
             return np.zeros(0)
+        if self._loads_constant():     # gravity only: the same array at every t (a copy: callers may write it)
+            if self._constant_load is None:
+                self._constant_load = np.concatenate([b.external_force_N(t) for b in self.bodies])
+            return self._constant_load.copy()
         return np.concatenate([b.external_force_N(t) for b in self.bodies])
 
     def apply_prescribed(self, t: float, z, v=None, a=None) -> None:
         """Overwrite prescribed components of (z, v, a) with their values at time t."""
-        for b in self.bodies:
+        for b, sl, fixed in self._prescribed_layout:
             if b.prescribed is None:
                 continue
             pos, vel, acc = b.prescribed(t)
-            sl = self.all_dofs(b.name)
-            fixed = ~b.free_axes_mask
             z[sl][fixed] = np.asarray(pos)[fixed]
             if v is not None:
                 v[sl][fixed] = np.asarray(vel)[fixed]
