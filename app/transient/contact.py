@@ -665,12 +665,17 @@ class PointContact(ForceColumns):
         self.damping_N_s_per_m = float(damping_N_s_per_m)
         self.friction = friction
         self.contact_offset_m = float(contact_offset_m)
+        self._normal_values = self.normal.tolist()
 
     def penetration(self, z_lower, z_upper, v_lower, v_upper):
         """(delta [m], d(delta)/dt [m/s])."""
-        delta = self.touch_distance_m - self.normal @ (np.asarray(z_upper) - np.asarray(z_lower))
-        rate = -self.normal @ (np.asarray(v_upper) - np.asarray(v_lower))
-        return float(delta), float(rate)
+        # in Python floats: the bodies' few coordinates cost more as numpy calls than as arithmetic
+        separation = rate = 0.0
+        for n_k, zl, zu, vl, vu in zip(self._normal_values, np.asarray(z_lower).tolist(), np.asarray(z_upper).tolist(),
+                                       np.asarray(v_lower).tolist(), np.asarray(v_upper).tolist()):
+            separation += n_k * (zu - zl)
+            rate -= n_k * (vu - vl)
+        return self.touch_distance_m - separation, rate
 
     def force(self, delta: float, rate: float) -> tuple[float, float, float]:
         """(f [N], df/d delta [N/m], df/d rate [N s/m])."""
@@ -833,6 +838,7 @@ class NodeContact(ForceColumns):
         self.name, self.body, self.fe = name, body, fe
         self.fields = fields if fields is not None else MidpointFields(fe)
         self.normal = n
+        self._normal_values = n.tolist()
         self.friction = friction
         self.radius_m = float(radius_m)
         self.stiffness = float(stiffness_N_per_m1_5)
@@ -865,7 +871,8 @@ class NodeContact(ForceColumns):
 
     def set_body_reference(self, position_m) -> None:
         self.body_reference = np.asarray(position_m, dtype=float).copy()
-        self._reference_gap = self.normal @ (self.x_node - self.body_reference)    # normal.(x - p_ref)
+        self._reference_values = self.body_reference.tolist()
+        self._reference_gap = float(self.normal @ (self.x_node - self.body_reference))    # normal.(x - p_ref)
 
     def _node_values(self, arr: np.ndarray) -> np.ndarray:
         """The node's displacement-like vector from a local DOF array (owner), broadcast (gdim)."""
@@ -877,17 +884,20 @@ class NodeContact(ForceColumns):
     def penetration(self, u: np.ndarray, v: np.ndarray, body_position, body_velocity) -> tuple[float, float]:
         """(delta [m], d delta/dt [m/s]) for local arrays u, v and the body state. The gap is formed
         as normal.(x - p_ref) + normal.(u - dz) - R (small differences, no round-off of |x|)."""
-        n = self.normal
-        du = self._node_values(u) - (np.asarray(body_position) - self.body_reference)
-        gap = self._reference_gap + n @ du - self.radius_m
-        rate = n @ (self._node_values(v) - np.asarray(body_velocity))
-        return -float(gap), -float(rate)
+        # in Python floats: a node's few components cost more as numpy calls than as arithmetic
+        n_du = n_dv = 0.0
+        for n_k, u_k, v_k, p_k, r_k, w_k in zip(self._normal_values, self._node_values(u).tolist(),
+                                                self._node_values(v).tolist(), np.asarray(body_position).tolist(),
+                                                self._reference_values, np.asarray(body_velocity).tolist()):
+            n_du += n_k * (u_k - (p_k - r_k))
+            n_dv += n_k * (v_k - w_k)
+        return -(self._reference_gap + n_du - self.radius_m), -n_dv
 
     def force(self, delta: float, rate: float) -> tuple[float, float, float]:
         """(F [N], dF/d delta [N/m], dF/d rate [N s/m]) of the Hertz spring + damper, F >= 0."""
         if delta <= 0.0:
             return 0.0, 0.0, 0.0
-        root = np.sqrt(delta)
+        root = math.sqrt(delta)
         f = self.stiffness * delta * root + self.damping * rate
         if f <= 0.0:
             return 0.0, 0.0, 0.0
@@ -911,6 +921,8 @@ class NodeContact(ForceColumns):
         pairs = self.comm.bcast(mine, root=self.owner)
         self._S = np.array([system.contact_position[g] for g, _ in pairs], dtype=int)
         self._S_axes = np.array([k for _, k in pairs], dtype=int)
+        self._normal_S = self.normal[self._S_axes]
+        self._body_dofs = rigid.dofs(self.body)
 
     def move_to_iterate(self, system) -> None:
         pass
@@ -969,11 +981,11 @@ class NodeContact(ForceColumns):
             rc_S[self._S] -= F[self._S_axes]
             r_z[system.rigid.all_dofs(self.body)] -= generalised[gdim:]
             return -F[:gdim]
-        f, _, _ = self._force_at_iterate(system)
+        f = self._at_iterate(system)[2][0]
         if r is not None and self.local_dofs.size:
             r.array_w[self.local_dofs] -= f * self.normal[self.dof_axes]
-        rc_S[self._S] -= f * self.normal[self._S_axes]
-        r_z[system.rigid.dofs(self.body)] += f * self.normal
+        rc_S[self._S] -= f * self._normal_S
+        r_z[self._body_dofs] += f * self.normal
         return -f * self.normal
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:
