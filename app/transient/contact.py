@@ -757,6 +757,11 @@ class PointContact(ForceColumns):
         dF_dq = np.outer(n3 + dF_dN, (k_f + c_f * system.c_vel) * self._D) + system.c_vel * dF_ds @ P
         return generalised, F[: rigid.gdim], -one_minus_af * P.T @ dF_dq
 
+    def tangent_key(self, system):
+        """What :meth:`add_tangent` depends on besides dt: (df/d delta, df/d rate) at the iterate; None on the
+        generalised path (friction, rotations), whose tangent depends on the positions."""
+        return None if self._general else self._at_iterate(system)[2][1:]
+
     def add_residual(self, system, rc_S, r_z, r):
         if self._general:
             generalised, force, _ = self._general_terms(system, tangent=False)

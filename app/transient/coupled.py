@@ -110,6 +110,7 @@ class CoupledSystem:
         self._fe_contacts = [c for c in self.interactions if c.fe_coupled]
         self._rigid_links = [c for c in self.interactions if not c.fe_coupled]
         self._rigid_jacobians = {}      # RigidJacobian by its Kzz (the same while dt and the links' states stay)
+        self._rigid_jacobians_by_state = {}     # the same by (c_acc, c_vel, the links' tangent keys)
         self._rigid_diagonal_now = None
         self._setup_contact_dofs()
         for c in self.interactions:
@@ -312,8 +313,20 @@ class CoupledSystem:
         """The Jacobian data with every FE contact block zero, as ``_jacobian_callback`` builds it
         when no FE contact is active."""
         s_count, m = self.contact_global.size, self.m
+        # Kzz is a function of dt and of the rigid links' tangent state: reuse its factorisation when the links
+        # say what that state is (``tangent_key``; the same on every rank: the rigid state is replicated)
+        keys = [getattr(c, "tangent_key", None) for c in self._rigid_links]
+        key = None if any(k is None for k in keys) else (self.c_acc, self.c_vel, *(k(self) for k in keys))
+        if key is not None and None not in key and key in self._rigid_jacobians_by_state:
+            if self.comm.rank == 0:
+                self._jacobian = self._rigid_jacobians_by_state[key]
+            return
         Kzz = self._rigid_block(np.diag(self._rigid_diagonal()))
         self._set_jacobian(ContactTangent(s_count), np.zeros((s_count, m)), np.zeros((m, s_count)), Kzz)
+        if key is not None and None not in key and self.comm.rank == 0:
+            if len(self._rigid_jacobians_by_state) >= 16:
+                self._rigid_jacobians_by_state.clear()
+            self._rigid_jacobians_by_state[key] = self._jacobian
 
     def _rigid_diagonal(self) -> np.ndarray:
         """d r_z / d z_{n+1} of the bodies alone: inertia (1 - alpha_m) c_acc m and brake
@@ -676,7 +689,7 @@ class CoupledSystem:
         """y = J^-1 x for local arrays of the unknown (rank 0 holds it all)."""
         if x.size:
             y[:] = self._jacobian.solve(x)
-            if self._jacobian.inactive.size and np.any(x[self._jacobian.inactive]):
+            if self._jacobian.inactive.size and x[self._jacobian.inactive].any():
                 self.opened_updates += 1
 
     def apply_jacobian(self, x: np.ndarray, y: np.ndarray) -> None:
