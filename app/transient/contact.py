@@ -872,6 +872,7 @@ class NodeContact(ForceColumns):
         x_node = coords[self.local_dofs[0]] if self.comm.rank == self.owner else None
         self.x_node = self.comm.bcast(x_node, root=self.owner)
         self._mine, self._serial = self.comm.rank == self.owner, self.comm.size == 1
+        self._axes_values = self.dof_axes.tolist()
         self.set_body_reference(np.zeros(fe.gdim))
 
     def set_body_reference(self, position_m) -> None:
@@ -891,8 +892,13 @@ class NodeContact(ForceColumns):
         as normal.(x - p_ref) + normal.(u - dz) - R (small differences, no round-off of |x|)."""
         # in Python floats: a node's few components cost more as numpy calls than as arithmetic
         n_du = n_dv = 0.0
-        for n_k, u_k, v_k, p_k, r_k, w_k in zip(self._normal_values, self._node_values(u).tolist(),
-                                                self._node_values(v).tolist(), np.asarray(body_position).tolist(),
+        if self._serial:        # the node's components as lists (zero on the axes it has no DOF of)
+            node_u, node_v = [0.0] * len(self._normal_values), [0.0] * len(self._normal_values)
+            for k, u_k, v_k in zip(self._axes_values, u[self.local_dofs].tolist(), v[self.local_dofs].tolist()):
+                node_u[k], node_v[k] = u_k, v_k
+        else:
+            node_u, node_v = self._node_values(u).tolist(), self._node_values(v).tolist()
+        for n_k, u_k, v_k, p_k, r_k, w_k in zip(self._normal_values, node_u, node_v, np.asarray(body_position).tolist(),
                                                 self._reference_values, np.asarray(body_velocity).tolist()):
             n_du += n_k * (u_k - (p_k - r_k))
             n_dv += n_k * (v_k - w_k)
@@ -927,6 +933,7 @@ class NodeContact(ForceColumns):
         self._S = np.array([system.contact_position[g] for g, _ in pairs], dtype=int)
         self._S_axes = np.array([k for _, k in pairs], dtype=int)
         self._normal_S = self.normal[self._S_axes]
+        self._normal_S_outer = np.outer(self._normal_S, self._normal_S)
         self._body_dofs = rigid.dofs(self.body)
 
     def move_to_iterate(self, system) -> None:
@@ -1005,12 +1012,13 @@ class NodeContact(ForceColumns):
             Kzz[np.ix_(body, body)] += J[gdim:, gdim:]
             return
         _, k_f, c_f = self._force_at_iterate(system)
-        n_S = self.normal[self._S_axes]
-        block = _sparse_block(self._S, (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * np.outer(n_S, n_S),
+        if k_f == 0.0 and c_f == 0.0:
+            return      # open: no block
+        block = _sparse_block(self._S, (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * self._normal_S_outer,
                               system.contact_global.size)
         T = system.translation_S
         Kss += block
-        sl = system.rigid.dofs(self.body)
+        sl = self._body_dofs
         B[:, sl] -= block @ T
         L[sl, :] -= T.T @ block
         Kzz[sl, sl] += T.T @ block @ T

@@ -134,6 +134,7 @@ class CoupledSystem:
             size = self._u1.x.array.size
             # a_{n+1}, v_{n+1}, u_mid, v_mid on every local DOF (owned and ghost), written in place
             self.a1, self.v1, self.u_mid, self.v_mid = np.zeros((4, size))
+            self._u1_is_free = False        # _u1 holds u_pred + w of the step (set by _condense)
             self._fields_formed = False     # formed at every DOF once (the first step's predictor)
             self.translations = fe.translation_vectors()
             self._r = fe.new_vector()
@@ -410,12 +411,12 @@ class CoupledSystem:
         """w = -K_eff^-1 r0: the FE solution without contact forces, and u_pred + w on every local DOF
         (owned and ghost): the end-of-step displacement at g = 0, from which the contact iterates
         differ by -G g."""
-        self.op.solve(self._r0, self._w)
-        self._w.scale(-1.0)
+        self.op.solve(self._r0, self._w)      # -w
         u1 = petsc_vector(self._u1)
-        u1.array_w[:] = self._u_pred.array_r + self._w.array_r
+        np.subtract(self._u_pred.array_r, self._w.array_r, out=u1.array_w)     # u_pred + w
         self._u1.x.scatter_forward()
         self._u1_free = self._u1.x.array.copy()
+        self._u1_is_free = True
         # the fields at g = 0 where the contact forms read them; the accepted iterate is formed on every
         # DOF (_evaluate_everywhere), so nothing reads the others before
         if self._rows_layout is None or not self._fields_formed:
@@ -478,6 +479,7 @@ class CoupledSystem:
                 self._condensed_fields(self._g, everywhere)
             else:
                 petsc_vector(self._u1).array_w[:] = self._u_pred.array_r + du
+                self._u1_is_free = False
                 self._u1.x.scatter_forward()
                 self._fe_fields(None)
         self.z1 = z1 = st.z + dz
@@ -502,8 +504,11 @@ class CoupledSystem:
         if everywhere or rows is None:
             u1 = petsc_vector(self._u1)
             if not nonzero.size:
-                self._u1.x.array[:] = self._u1_free
+                if not self._u1_is_free:        # else it holds u_pred + w already
+                    self._u1.x.array[:] = self._u1_free
+                    self._u1_is_free = True
             else:
+                self._u1_is_free = False
                 values = u1.array_w
                 values[:] = self._u1_free[:self.n_fe]
                 if self.op.columns_t is not None:
@@ -522,6 +527,7 @@ class CoupledSystem:
         u1[at] = self._u1_free[at]
         if nonzero.size:
             u1[at] -= rows[:, nonzero] @ g[nonzero]
+            self._u1_is_free = False
         self._fe_fields(at)
 
     def _fe_fields(self, at: np.ndarray | None) -> None:
@@ -627,9 +633,8 @@ class CoupledSystem:
         B = np.zeros((s_count, m))
         L = np.zeros((m, s_count))
         Kzz = np.diag(self._rigid_diagonal())
-        for c in self.interactions:
-            if c.fe_coupled:
-                c.add_tangent(self, Kss, B, L, Kzz)
+        for c in self._fe_contacts:
+            c.add_tangent(self, Kss, B, L, Kzz)
         Kzz = self._rigid_block(Kzz)
         fixed = self._fixed_axes
         L[fixed, :] = 0.0
@@ -680,8 +685,9 @@ class CoupledSystem:
         self._jacobian = CondensedJacobian(self._contact_block(), Kss, B, L, Kzz, active_only=self.active_set)
         self.jacobians += 1
         self.active_dofs += self._jacobian.active_count
-        if previous is not None and self._jacobian_step == self._step_count and not np.array_equal(
-                previous.active, self._jacobian.active):
+        active = self._jacobian.active
+        if previous is not None and self._jacobian_step == self._step_count and (
+                previous.active.shape != active.shape or (previous.active != active).any()):
             self.active_set_changes += 1
         self._jacobian_step = self._step_count
 
@@ -734,6 +740,7 @@ class CoupledSystem:
         """Make ``solution_vector`` show the displacement of ``state`` (e.g. the initial state)."""
         if self.fe is not None:
             self._u1.x.array[:] = state.u
+            self._u1_is_free = False
 
     @property
     def solution_vector(self) -> PETSc.Vec:
