@@ -718,9 +718,9 @@ class PointContact(ForceColumns):
         return self.penetration(z[lo], z[up], zd[lo], zd[up])
 
     def _at_iterate(self, system) -> tuple[float, float, tuple[float, float, float]]:
-        """(delta, rate, force(delta, rate)) at the system's mid-point state, kept while its
-        ``iterate_version`` stays (the residual, the tangent and the dissipation of one iterate)."""
-        key = (system, getattr(system, "iterate_version", None))
+        """(delta, rate, force(delta, rate)) at the system's rigid mid-point state, kept while its
+        ``rigid_version`` stays (the residual, the tangent and the dissipation of one iterate)."""
+        key = (system, getattr(system, "rigid_version", None))
         if key[1] is None or self.__dict__.get("_iterate_key") != key:
             delta, rate = self._state(system.rigid, system.z_mid, system.zd_mid)
             self._iterate_values = (delta, rate, self.force(delta, rate))
@@ -944,7 +944,7 @@ class NodeContact(ForceColumns):
         ``iterate_version`` stays (the residual, the tangent and the dissipation of one iterate)."""
         key = (system, getattr(system, "iterate_version", None))
         if key[1] is None or self.__dict__.get("_iterate_key") != key:
-            sl = system.rigid.dofs(self.body)
+            sl = self._body_dofs
             delta, rate = self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl])
             self._iterate_values = (delta, rate, self.force(delta, rate))
             self._iterate_key = key

@@ -125,8 +125,9 @@ class CoupledSystem:
                             if getattr(c, "reads_fields", hasattr(c, "fields"))}.values())
         self._field_constants = None
         # bumped whenever the mid-point quantities (u_mid, v_mid, z_mid, zd_mid) change: an interaction may keep
-        # what it derived from them while the version stays (see PointContact.forces_at_iterate)
+        # what it derived from them while the version stays (NodeContact._at_iterate)
         self.iterate_version = 0
+        self.rigid_version = 0          # the same for the rigid mid-point quantities (z_mid, zd_mid) alone
         if fe is not None:
             from dolfinx import fem
 
@@ -487,6 +488,7 @@ class CoupledSystem:
         increment_kinematics(dz, z1, st.z, st.zd, st.zdd, self._factors, rigid[0], rigid[1], rigid[2], rigid[3])
         self.zdd1, self.zd1, self.z_mid, self.zd_mid = rigid
         self.iterate_version += 1
+        self.rigid_version += 1
         for c in self.interactions:
             c.move_to_iterate(self)
 
@@ -711,6 +713,7 @@ class CoupledSystem:
         rigid = self.rigid
         self.z_mid, self.zd_mid = state.z, state.zd
         self.iterate_version += 1
+        self.rigid_version += 1
         r_z = -rigid.external_force_N(state.t) - rigid.brake_force_N(state.zd)
         for c in self.interactions:
             if not c.fe_coupled:
