@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg
+import scipy.linalg.lapack
 import scipy.sparse
 from numba import njit
 
@@ -137,7 +138,7 @@ class CondensedJacobian:
     def solve(self, x: np.ndarray) -> np.ndarray:
         """y = J^-1 x (x = (x_g, x_z))."""
         if self.reference:
-            return scipy.linalg.lu_solve(self._lu, x, check_finite=False) if self._lu is not None else np.array(x)
+            return lu_solve(self._lu, x) if self._lu is not None else np.array(x)
         A, I, s_count = self.active, self.inactive, self.s_count
         y = np.empty_like(x)
         x_g, x_z = x[:s_count], x[s_count:]
@@ -147,7 +148,7 @@ class CondensedJacobian:
         if coupling is not None:
             rhs[:A.size] -= self.K_AA @ coupling
             rhs[A.size:] -= self.L_A @ coupling
-        sol = scipy.linalg.lu_solve(self._lu, rhs, check_finite=False) if self._lu is not None else rhs
+        sol = lu_solve(self._lu, rhs) if self._lu is not None else rhs
         y[A] = sol[:A.size]
         y[s_count:] = sol[A.size:]
         return y
@@ -183,11 +184,26 @@ class RigidJacobian:
         y = np.empty_like(x)
         y[:self.s_count] = -x[:self.s_count]
         if self._lu is not None:
-            y[self.s_count:] = scipy.linalg.lu_solve(self._lu, x[self.s_count:], check_finite=False)
+            y[self.s_count:] = lu_solve(self._lu, x[self.s_count:])
         return y
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         return np.concatenate([-x[:self.s_count], self.Kzz @ x[self.s_count:]])
+
+
+def lu_solve(lu_and_piv, b: np.ndarray) -> np.ndarray:
+    """``scipy.linalg.lu_solve(lu_and_piv, b, check_finite=False)`` for float64 (the same LAPACK getrs) without its
+    per-call dispatch, which costs more than a solve of the few unknowns here."""
+    lu, piv = lu_and_piv
+    if lu.dtype != np.float64 or b.dtype != np.float64:
+        return scipy.linalg.lu_solve(lu_and_piv, b, check_finite=False)
+    x, info = _GETRS(lu, piv, b)
+    if info != 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal getrs (lu_solve)")
+    return x
+
+
+_GETRS = scipy.linalg.lapack.dgetrs
 
 
 @njit(cache=True)

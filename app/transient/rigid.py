@@ -193,7 +193,8 @@ class RigidSet:
         damping = [b.damping_diagonal() for b in bodies]
         self.damping_diagonal = np.concatenate(damping) * self.free_mask if bodies else np.zeros(0)
         # each body's packed coordinates and prescribed axes (fixed at construction), for apply_prescribed
-        self._prescribed_layout = [(b, self.all_dofs(b.name), ~b.free_axes_mask) for b in self.bodies]
+        self._prescribed_layout = [(b, np.arange(self.size)[self.all_dofs(b.name)][~b.free_axes_mask],
+                                    ~b.free_axes_mask) for b in self.bodies]
         self._constant_load = None
 
     def _loads_constant(self) -> bool:
@@ -253,12 +254,12 @@ class RigidSet:
 
     def apply_prescribed(self, t: float, z, v=None, a=None) -> None:
         """Overwrite prescribed components of (z, v, a) with their values at time t."""
-        for b, sl, fixed in self._prescribed_layout:
-            if b.prescribed is None:
+        for b, index, fixed in self._prescribed_layout:
+            if b.prescribed is None or not index.size:
                 continue
             pos, vel, acc = b.prescribed(t)
-            z[sl][fixed] = np.asarray(pos)[fixed]
+            z[index] = np.asarray(pos)[fixed]
             if v is not None:
-                v[sl][fixed] = np.asarray(vel)[fixed]
+                v[index] = np.asarray(vel)[fixed]
             if a is not None:
-                a[sl][fixed] = np.asarray(acc)[fixed]
+                a[index] = np.asarray(acc)[fixed]
