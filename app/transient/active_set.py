@@ -26,6 +26,8 @@ more than it saves.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.linalg
 import scipy.linalg.lapack
@@ -97,7 +99,7 @@ class CondensedJacobian:
             Z[:s_count, s_count:] = B
             Z[s_count:, :s_count] = -L @ G
             Z[s_count:, s_count:] = Kzz
-            self._lu = scipy.linalg.lu_factor(self.Z, check_finite=True) if self.Z.size else None
+            self._lu = lu_factor(self.Z) if self.Z.size else None
             return
         K = Kss.tocsr() if scipy.sparse.issparse(Kss) else scipy.sparse.csr_matrix(Kss)
         K.eliminate_zeros()
@@ -176,7 +178,7 @@ class RigidJacobian:
         self.active = np.zeros(0, dtype=int)
         self.inactive = np.arange(s_count)
         self.Kzz = Kzz
-        self._lu = scipy.linalg.lu_factor(Kzz, check_finite=True) if Kzz.size else None
+        self._lu = lu_factor(Kzz) if Kzz.size else None
 
     active_count = 0
 
@@ -189,6 +191,22 @@ class RigidJacobian:
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         return np.concatenate([-x[:self.s_count], self.Kzz @ x[self.s_count:]])
+
+
+def lu_factor(a: np.ndarray):
+    """``scipy.linalg.lu_factor(a, check_finite=True)`` for float64 (the same LAPACK getrf, the same errors and
+    warning) without its per-call dispatch."""
+    if a.dtype != np.float64:
+        return scipy.linalg.lu_factor(a, check_finite=True)
+    if not np.isfinite(a).all():
+        raise ValueError("array must not contain infs or NaNs")
+    lu, piv, info = _GETRF(a)
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal getrf (lu_factor)")
+    if info > 0:
+        warnings.warn(f"Diagonal number {info} is exactly zero. Singular matrix.", scipy.linalg.LinAlgWarning,
+                      stacklevel=2)
+    return lu, piv
 
 
 def lu_solve(lu_and_piv, b: np.ndarray) -> np.ndarray:
@@ -204,6 +222,7 @@ def lu_solve(lu_and_piv, b: np.ndarray) -> np.ndarray:
 
 
 _GETRS = scipy.linalg.lapack.dgetrs
+_GETRF = scipy.linalg.lapack.dgetrf
 
 
 @njit(cache=True)

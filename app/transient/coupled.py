@@ -48,6 +48,7 @@ from app.transient.fe import EffectiveOperatorCache, InterfaceRows, LinearFE
 from app.transient.kinematics import (
     increment_kinematics,
     predictor_arguments,
+    rigid_step_start,
     scheme_factors,
     step_kinematics,
     step_kinematics_at,
@@ -57,7 +58,6 @@ from app.transient.rigid import RigidSet
 from app.transient.state import TransientState
 from forms.newmark import (
     TimeScheme,
-    acceleration,
     acceleration_per_displacement,
     midpoint,
     velocity_per_displacement,
@@ -105,6 +105,7 @@ class CoupledSystem:
         self.active_set = active_set
         # per-iterate bookkeeping, formed once: the mass factor of the new acceleration, the prescribed axes, brakes
         self._mass_new = rigid.mass_diagonal * (1 - scheme.alpha_m)
+        self._mass_old = rigid.mass_diagonal * scheme.alpha_m
         self._fixed_axes = np.flatnonzero(~rigid.free_mask)
         self._braked = bool(np.any(rigid.damping_diagonal))
         self._fe_contacts = [c for c in self.interactions if c.fe_coupled]
@@ -360,21 +361,22 @@ class CoupledSystem:
             scale_sq = self._predictor_residual(state, dt)
             self._condense()
         z0, zd0, zdd0 = state.z, state.zd, state.zdd
-        self.zdd_hat = acceleration(0.0, 0.0, zd0, zdd0, dt, s)
         self.rigid_force_ext = rigid.external_force_N(self.t_mid)
-        self._inertia_old = rigid.mass_diagonal * s.alpha_m * zdd0
+        self._inertia_old = self._mass_old * zdd0
         self._rigid_diagonal_now = None
-        self.rigid_inertia_const = rigid.mass_diagonal * ((1 - s.alpha_m) * self.zdd_hat + s.alpha_m * zdd0)
-        rigid_squares = self.rigid_force_ext**2 + (rigid.mass_diagonal * zdd0) ** 2
+        # the predictor, the force scale |F|^2 + |m a_n|^2 (+ brakes) and the round-off bound's rigid inertia
+        # m ((1 - alpha_m) a_hat + alpha_m a_n), a_hat = acceleration(0, 0, v_n, a_n), in one pass
+        z1, inertia_sq, rigid_squares = np.empty((3, z0.size))
+        rigid_step_start(z0, zd0, zdd0, rigid.mass_diagonal, self.rigid_force_ext, self._factors, s.alpha_m, z1,
+                         inertia_sq, rigid_squares)
         if self._braked:
             rigid_squares += rigid.brake_force_N(zd0) ** 2
         rigid_scale_sq = float(np.sum(rigid_squares))
         self._force_scale = math.sqrt(scale_sq + rigid_scale_sq)
         # Below ~eps |terms| the residual is round-off: never ask for less. The rigid inertia is
         # formed from z / (beta dt^2)-sized terms; the FE terms are physical forces (see above).
-        roundoff_sq = scale_sq + float(np.sum(self.rigid_inertia_const**2))
+        roundoff_sq = scale_sq + float(np.sum(inertia_sq))
         self._roundoff_force = 10 * _EPS * math.sqrt(roundoff_sq)
-        z1 = z0 + dt * zd0 + 0.5 * dt * dt * zdd0
         rigid.apply_prescribed(self.t1, z1)
         self._initial_guess(z1 - z0)
 
