@@ -160,13 +160,20 @@ def constant_rate_motion(start, rate) -> PrescribedMotion:
     """q(t) = q0 + rate t for every coordinate (a belt at constant speed, a rotor at constant spin)."""
     q0 = np.asarray(start, dtype=float)
     qd = np.asarray(rate, dtype=float)
+    if not qd.any():
+        return _hold(q0)
     zeros = np.zeros_like(q0)
     return lambda t: (q0 + qd * t, qd, zeros)
 
 
 def _hold(position: np.ndarray) -> PrescribedMotion:
     zeros = np.zeros_like(position)
-    return lambda t: (position, zeros, zeros)
+
+    def hold(t: float):
+        return position, zeros, zeros
+
+    hold.constant = True        # the same values at every t (RigidSet.apply_prescribed keeps them)
+    return hold
 
 
 class RigidSet:
@@ -196,6 +203,7 @@ class RigidSet:
         self._prescribed_layout = [(b, np.arange(self.size)[self.all_dofs(b.name)][~b.free_axes_mask],
                                     ~b.free_axes_mask) for b in self.bodies]
         self._constant_load = None
+        self._held = {}     # body -> (its constant motion, the prescribed values)
 
     def _loads_constant(self) -> bool:
         """No body has a time-dependent applied force or torque (gravity only)."""
@@ -254,12 +262,18 @@ class RigidSet:
 
     def apply_prescribed(self, t: float, z, v=None, a=None) -> None:
         """Overwrite prescribed components of (z, v, a) with their values at time t."""
-        for b, index, fixed in self._prescribed_layout:
-            if b.prescribed is None or not index.size:
+        for i, (b, index, fixed) in enumerate(self._prescribed_layout):
+            motion = b.prescribed
+            if motion is None or not index.size:
                 continue
-            pos, vel, acc = b.prescribed(t)
-            z[index] = np.asarray(pos)[fixed]
+            held = self._held.get(i)
+            if held is None or held[0] is not motion:
+                held = (motion, *(np.asarray(x)[fixed] for x in motion(t)))
+                if getattr(motion, "constant", False):
+                    self._held[i] = held
+            _, pos, vel, acc = held
+            z[index] = pos
             if v is not None:
-                v[index] = np.asarray(vel)[fixed]
+                v[index] = vel
             if a is not None:
-                a[index] = np.asarray(acc)[fixed]
+                a[index] = acc
