@@ -156,6 +156,7 @@ class CoupledSystem:
         self.active_set_changes = 0     # Jacobians whose active set differs from the step's previous one
         self.opened_updates = 0         # Newton updates that took DOFs carrying force off the active set
         self._evaluated = self._fe_key = None
+        self._residual_in_R = False
         self._fe_full = False           # the FE fields hold every DOF of the evaluated iterate
         self._jacobian = None
         self._step_count = self._jacobian_step = 0
@@ -345,6 +346,7 @@ class CoupledSystem:
         self.state0, self.dt = state, dt
         self._step_count += 1
         self._evaluated = self._fe_key = None
+        self._residual_in_R = False
         self.t1 = state.t + dt
         self.t_mid = midpoint(self.t1, state.t, s.alpha_f)
         self.c_acc = acceleration_per_displacement(dt, s)
@@ -454,14 +456,15 @@ class CoupledSystem:
         self._g = g = unknown[:s_count]
         return None, unknown[s_count:], g.tobytes()
 
-    def _evaluate(self, X: PETSc.Vec, everywhere: bool = False) -> None:
+    def _evaluate(self, X: PETSc.Vec, everywhere: bool = False) -> bool:
         """Set u_{n+1}, z_{n+1} and every derived (mid-point) quantity from the iterate X.
 
         SNES asks for the Jacobian at the point whose residual it has just evaluated, and the
         accepted state is the last evaluated point: skip the re-evaluation then (the decision is
         global, since the evaluation is collective). While Newton iterates, the FE fields are
         updated at the DOFs the contact forms read only (``_evaluation_dofs``); ``everywhere`` (the
-        accepted iterate, diagnostics) updates every DOF."""
+        accepted iterate, diagnostics) updates every DOF. Returns whether it evaluated (False: X is the last
+        iterate evaluated)."""
         x = X.array_r
         # the same iterate, bit for bit (a cheaper test than array_equal on these few entries)
         same = self._evaluated is not None and self._evaluated_bytes == x.tobytes()
@@ -470,7 +473,7 @@ class CoupledSystem:
         if same:
             if everywhere:
                 self._evaluate_everywhere()
-            return
+            return False
         self._evaluated = np.array(x)
         self._evaluated_bytes = self._evaluated.tobytes()
         du, dz, fe_key = self._split(x)
@@ -495,6 +498,7 @@ class CoupledSystem:
         self.rigid_version += 1
         for c in self.interactions:
             c.move_to_iterate(self)
+        return True
 
     def _evaluate_everywhere(self) -> None:
         """The last evaluated iterate (the accepted one) on every FE DOF: the new state, the probes and
@@ -592,13 +596,18 @@ class CoupledSystem:
         return forces, rc_S, r_z
 
     def _residual_callback(self, snes, X, R) -> None:
-        self._evaluate(X)
+        evaluated = self._evaluate(X)
+        if snes is not None and not evaluated and self._residual_in_R and R.handle == self.R.handle:
+            # SNES' first residual, at the iterate the contact-free step left in X and whose residual it left in R
+            self._residual_in_R = False
+            return
         _, rc_S, r_z = self._contact_terms(None)
         out = R.array   # on every rank: write access bumps the Vec state, so no rank reuses a cached norm
         if self.comm.rank == 0:
             s_count = self.contact_global.size
             out[:s_count] = rc_S - self._unknown[:s_count]
             out[s_count:] = r_z
+        self._residual_in_R = snes is None and R.handle == self.R.handle
 
     def _rigid_block(self, Kzz: np.ndarray) -> np.ndarray:
         """Add the rigid-rigid interactions to the rigid block ``Kzz`` and put identity
