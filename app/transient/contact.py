@@ -671,8 +671,8 @@ class PointContact(ForceColumns):
         """(delta [m], d(delta)/dt [m/s])."""
         # in Python floats: the bodies' few coordinates cost more as numpy calls than as arithmetic
         separation = rate = 0.0
-        for n_k, zl, zu, vl, vu in zip(self._normal_values, np.asarray(z_lower).tolist(), np.asarray(z_upper).tolist(),
-                                       np.asarray(v_lower).tolist(), np.asarray(v_upper).tolist()):
+        for n_k, zl, zu, vl, vu in zip(self._normal_values, _values(z_lower), _values(z_upper), _values(v_lower),
+                                       _values(v_upper)):
             separation += n_k * (zu - zl)
             rate -= n_k * (vu - vl)
         return self.touch_distance_m - separation, rate
@@ -721,8 +721,13 @@ class PointContact(ForceColumns):
         """(delta, rate, force(delta, rate)) at the system's rigid mid-point state, kept while its
         ``rigid_version`` stays (the residual, the tangent and the dissipation of one iterate)."""
         key = (system, getattr(system, "rigid_version", None))
-        if key[1] is None or self.__dict__.get("_iterate_key") != key:
+        if key[1] is None:
             delta, rate = self._state(system.rigid, system.z_mid, system.zd_mid)
+            self._iterate_values = (delta, rate, self.force(delta, rate))
+        elif self.__dict__.get("_iterate_key") != key:
+            z, zd = system.rigid_mid_values()
+            lo, up = self._lower_dofs, self._upper_dofs
+            delta, rate = self.penetration(z[lo], z[up], zd[lo], zd[up])
             self._iterate_values = (delta, rate, self.force(delta, rate))
             self._iterate_key = key
         return self._iterate_values
@@ -898,8 +903,8 @@ class NodeContact(ForceColumns):
                 node_u[k], node_v[k] = u_k, v_k
         else:
             node_u, node_v = self._node_values(u).tolist(), self._node_values(v).tolist()
-        for n_k, u_k, v_k, p_k, r_k, w_k in zip(self._normal_values, node_u, node_v, np.asarray(body_position).tolist(),
-                                                self._reference_values, np.asarray(body_velocity).tolist()):
+        for n_k, u_k, v_k, p_k, r_k, w_k in zip(self._normal_values, node_u, node_v, _values(body_position),
+                                                self._reference_values, _values(body_velocity)):
             n_du += n_k * (u_k - (p_k - r_k))
             n_dv += n_k * (v_k - w_k)
         return -(self._reference_gap + n_du - self.radius_m), -n_dv
@@ -945,7 +950,8 @@ class NodeContact(ForceColumns):
         key = (system, getattr(system, "iterate_version", None))
         if key[1] is None or self.__dict__.get("_iterate_key") != key:
             sl = self._body_dofs
-            delta, rate = self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl])
+            z, zd = system.rigid_mid_values() if key[1] is not None else (system.z_mid, system.zd_mid)
+            delta, rate = self.penetration(system.u_mid, system.v_mid, z[sl], zd[sl])
             self._iterate_values = (delta, rate, self.force(delta, rate))
             self._iterate_key = key
         return self._iterate_values
@@ -1044,6 +1050,11 @@ class NodeContact(ForceColumns):
             slip = (np.eye(3) - np.outer(n3, n3)) @ (P @ rates)
             power -= float(friction_force(slip, f, self.friction)[0] @ slip)
         return float(power)
+
+
+def _values(x) -> list:
+    """A few coordinates as a list of floats (a list as it is)."""
+    return x if isinstance(x, list) else np.asarray(x, dtype=float).tolist()
 
 
 def _sparse_block(positions: np.ndarray, values: np.ndarray, s_count: int):

@@ -500,6 +500,14 @@ class CoupledSystem:
             c.move_to_iterate(self)
         return True
 
+    def rigid_mid_values(self) -> tuple[list, list]:
+        """(z_mid, zd_mid) as lists of floats, formed once per rigid iterate (``rigid_version``): the rigid
+        links and node contacts read a few of them, cheaper as floats than as numpy calls."""
+        if self.__dict__.get("_rigid_values_version") != self.rigid_version:
+            self._rigid_values = (self.z_mid.tolist(), self.zd_mid.tolist())
+            self._rigid_values_version = self.rigid_version
+        return self._rigid_values
+
     def _evaluate_everywhere(self) -> None:
         """The last evaluated iterate (the accepted one) on every FE DOF: the new state, the probes and
         the field output read it."""
