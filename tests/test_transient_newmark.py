@@ -172,21 +172,24 @@ def test_fused_kinematics_are_the_newmark_expressions_bit_for_bit(scheme):
         np.testing.assert_array_equal(got, want)
     # the predictor u_n + dt v_n + dt^2/2 a_n and the M, K, C arguments with a Dirichlet change on a few DOFs
     pred = np.empty(n)
-    taylor_predictor(u0, v0, a0, dt, pred)
+    bc = np.array([0, 5, 9], dtype=np.int32)
+    taylor_bc = np.empty(bc.size)
+    taylor_predictor(u0, v0, a0, dt, pred, bc, taylor_bc)
     want = v0 * dt
     want += u0
     want += (0.5 * dt * dt) * a0
     np.testing.assert_array_equal(pred, want)
-    bc = np.array([0, 5, 9], dtype=np.int32)
-    pred[bc] += 1e-9
-    mass_bc, damping_bc = rng.standard_normal(3), rng.standard_normal(3)
+    np.testing.assert_array_equal(taylor_bc, want[bc])
+    pred[bc] += 1e-9 * rng.standard_normal(bc.size)        # the Dirichlet change
+    delta_bc = pred[bc] - taylor_bc
+    mass_factor, damping_factor = 3.7e12, 2.1e6
     one_minus_af = 1 - scheme.alpha_f
     args = np.empty((3, n))
-    predictor_arguments(pred, u0, v0, a0, dt, bc, mass_bc, damping_bc, one_minus_af, *args)
+    predictor_arguments(pred, u0, v0, a0, dt, bc, taylor_bc, mass_factor, damping_factor, one_minus_af, *args)
     mass_arg = a0.copy()
-    mass_arg[bc] += mass_bc
+    mass_arg[bc] += mass_factor * delta_bc
     damping_arg = a0 * dt
-    damping_arg[bc] += damping_bc
+    damping_arg[bc] += damping_factor * delta_bc
     np.testing.assert_array_equal(args[0], mass_arg)
     np.testing.assert_array_equal(args[1], (pred - u0) * one_minus_af + u0)
     np.testing.assert_array_equal(args[2], damping_arg * one_minus_af + v0)

@@ -392,16 +392,15 @@ class CoupledSystem:
         bc = fe.bc_local_owned
         predictor = self._u_pred
         pred = predictor.array_w
-        taylor_predictor(u0, v0, a0, dt, pred)
-        taylor_bc = pred[bc]
+        taylor_bc = np.empty(bc.size)
+        taylor_predictor(u0, v0, a0, dt, pred, bc, taylor_bc)
         fe.apply_dirichlet(self.t1, predictor)     # in place: ``pred`` views the same values
-        delta_bc = pred[bc] - taylor_bc
         r0, y = self._r0, self._tmp2
         fe.load_N(self.t_mid, r0)
         scale_sq = r0.norm() ** 2
         r0.scale(-1.0)
         x_M, x_K, x_C = self._matvec_arguments
-        predictor_arguments(pred, u0, v0, a0, dt, bc, (1 - s.alpha_m) * self.c_acc * delta_bc, self.c_vel * delta_bc,
+        predictor_arguments(pred, u0, v0, a0, dt, bc, taylor_bc, (1 - s.alpha_m) * self.c_acc, self.c_vel,
                             1 - s.alpha_f, x_M.array_w, x_K.array_w, x_C.array_w)
         residual = r0.array_w
         for matrix, x in ((fe.M, x_M), (fe.K, x_K), (fe.C, x_C)):

@@ -76,19 +76,22 @@ def kinematics(u_new: np.ndarray, u_old: np.ndarray, v_old: np.ndarray, a_old: n
 
 
 @njit(cache=True)
-def taylor_predictor(u_old, v_old, a_old, dt, out):
-    """out = u_n + dt v_n + dt^2/2 a_n, formed as (v_n dt + u_n) + (dt^2/2) a_n."""
+def taylor_predictor(u_old, v_old, a_old, dt, out, bc, out_bc):
+    """out = u_n + dt v_n + dt^2/2 a_n, formed as (v_n dt + u_n) + (dt^2/2) a_n; ``out_bc`` its values at ``bc``."""
     half_dt2 = 0.5 * dt * dt
     for i in range(out.size):
         out[i] = v_old[i] * dt + u_old[i] + half_dt2 * a_old[i]
+    for k in range(bc.size):
+        out_bc[k] = out[bc[k]]
 
 
 @njit(cache=True)
-def predictor_arguments(u_pred, u_old, v_old, a_old, dt, bc, mass_bc, damping_bc, one_minus_alpha_f,
-                        mass_arg, stiffness_arg, damping_arg):
-    """The arguments of the predictor residual's M, K and C mat-vecs (app/transient/coupled.py):
-    a_n (+ ``mass_bc`` on the constrained DOFs ``bc``), (1 - alpha_f) u_pred + alpha_f u_n formed as
-    (u_pred - u_n) (1 - alpha_f) + u_n, and (a_n dt (+ ``damping_bc``)) (1 - alpha_f) + v_n."""
+def predictor_arguments(u_pred, u_old, v_old, a_old, dt, bc, taylor_bc, mass_factor, damping_factor,
+                        one_minus_alpha_f, mass_arg, stiffness_arg, damping_arg):
+    """The arguments of the predictor residual's M, K and C mat-vecs (app/transient/coupled.py): with the
+    Dirichlet change delta = u_pred - ``taylor_bc`` on the constrained DOFs ``bc``, a_n (+ ``mass_factor`` delta),
+    (1 - alpha_f) u_pred + alpha_f u_n formed as (u_pred - u_n) (1 - alpha_f) + u_n, and
+    (a_n dt (+ ``damping_factor`` delta)) (1 - alpha_f) + v_n."""
     n = u_pred.size
     for i in range(n):
         mass_arg[i] = a_old[i]
@@ -97,8 +100,9 @@ def predictor_arguments(u_pred, u_old, v_old, a_old, dt, bc, mass_bc, damping_bc
     for i in range(n):
         damping_arg[i] = a_old[i] * dt
     for k in range(bc.size):
-        mass_arg[bc[k]] += mass_bc[k]
-        damping_arg[bc[k]] += damping_bc[k]
+        delta = u_pred[bc[k]] - taylor_bc[k]
+        mass_arg[bc[k]] += mass_factor * delta
+        damping_arg[bc[k]] += damping_factor * delta
     for i in range(n):
         damping_arg[i] = damping_arg[i] * one_minus_alpha_f + v_old[i]
 
