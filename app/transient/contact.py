@@ -772,9 +772,11 @@ class PointContact(ForceColumns):
             generalised, force, _ = self._general_terms(system, tangent=False)
             r_z[self._pair] -= generalised
             return force
-        force = self._at_iterate(system)[2][0] * self.normal
-        r_z[self._upper_dofs] -= force
-        r_z[self._lower_dofs] += force
+        f = self._at_iterate(system)[2][0]
+        force = f * self.normal
+        if f != 0.0:        # open: nothing to add
+            r_z[self._upper_dofs] -= force
+            r_z[self._lower_dofs] += force
         return force
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:
@@ -1000,10 +1002,11 @@ class NodeContact(ForceColumns):
             r_z[system.rigid.all_dofs(self.body)] -= generalised[gdim:]
             return -F[:gdim]
         f = self._at_iterate(system)[2][0]
-        if r is not None and self.local_dofs.size:
-            r.array_w[self.local_dofs] -= f * self.normal[self.dof_axes]
-        rc_S[self._S] -= f * self._normal_S
-        r_z[self._body_dofs] += f * self.normal
+        if f != 0.0:        # open: nothing to add
+            if r is not None and self.local_dofs.size:
+                r.array_w[self.local_dofs] -= f * self.normal[self.dof_axes]
+            rc_S[self._S] -= f * self._normal_S
+            r_z[self._body_dofs] += f * self.normal
         return -f * self.normal
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:
