@@ -142,6 +142,7 @@ def test_fused_kinematics_are_the_newmark_expressions_bit_for_bit(scheme):
         predictor_arguments,
         scheme_factors,
         step_kinematics_at,
+        step_rates,
         taylor_predictor,
     )
     from forms.newmark import acceleration, midpoint, velocity
@@ -156,6 +157,10 @@ def test_fused_kinematics_are_the_newmark_expressions_bit_for_bit(scheme):
     expected = (a1, v1, midpoint(u1, u0, scheme.alpha_f), midpoint(v1, v0, scheme.alpha_f))
     for got, want in zip(kinematics(u1, u0, v0, a0, factors), expected):
         np.testing.assert_array_equal(got, want)
+    rates = np.empty((2, n))
+    step_rates(u1, u0, v0, a0, factors, *rates)
+    np.testing.assert_array_equal(rates[0], expected[0])
+    np.testing.assert_array_equal(rates[1], expected[1])
     at = np.array([3, 17, 500, 1000])
     out = np.zeros((4, n))
     step_kinematics_at(at, u1, u0, v0, a0, factors, *out)

@@ -52,6 +52,7 @@ from app.transient.kinematics import (
     scheme_factors,
     step_kinematics,
     step_kinematics_at,
+    step_rates,
     taylor_predictor,
 )
 from app.transient.rigid import RigidSet
@@ -134,7 +135,8 @@ class CoupledSystem:
 
             self._u1 = fem.Function(fe.space)
             size = self._u1.x.array.size
-            # a_{n+1}, v_{n+1}, u_mid, v_mid on every local DOF (owned and ghost), written in place
+            # a_{n+1}, v_{n+1}, u_mid, v_mid on the local DOFs (owned and ghost), written in place (u_mid, v_mid at
+            # every DOF only for shared fields; else at the evaluation DOFs, see _fe_fields)
             self.a1, self.v1, self.u_mid, self.v_mid = np.zeros((4, size))
             self._u1_is_free = False        # _u1 holds u_pred + w of the step (set by _condense)
             self._fields_formed = False     # formed at every DOF once (the first step's predictor)
@@ -554,7 +556,14 @@ class CoupledSystem:
         u1 = self._u1.x.array
         self.iterate_version += 1
         if at is None:
-            step_kinematics(u1, st.u, st.v, st.a, self._factors, self.a1, self.v1, self.u_mid, self.v_mid)
+            if self.fields or self._rows_layout is None:
+                step_kinematics(u1, st.u, st.v, st.a, self._factors, self.a1, self.v1, self.u_mid, self.v_mid)
+            else:
+                # no shared fields: the mid-points are read at the evaluation DOFs only (a node contact's), so form
+                # them there; a_{n+1}, v_{n+1} (the new state) everywhere
+                step_rates(u1, st.u, st.v, st.a, self._factors, self.a1, self.v1)
+                step_kinematics_at(self._rows_layout.local, u1, st.u, st.v, st.a, self._factors, self.a1, self.v1,
+                                   self.u_mid, self.v_mid)
             for f in self.fields:
                 f.u_mid.x.array[:] = self.u_mid
                 f.v_mid.x.array[:] = self.v_mid

@@ -47,6 +47,17 @@ def step_kinematics(u_new, u_old, v_old, a_old, factors, a_new, v_new, u_mid, v_
 
 
 @njit(cache=True)
+def step_rates(u_new, u_old, v_old, a_old, factors, a_new, v_new):
+    """a_{n+1} and v_{n+1} of every entry (:func:`step_kinematics` without the mid-points)."""
+    dt, beta_dt2, a_factor, one_minus_gamma, gamma, _ = factors
+    n = u_new.size
+    for i in range(n):
+        a_new[i] = (u_new[i] - u_old[i] - dt * v_old[i]) / beta_dt2 - a_factor * a_old[i]
+    for i in range(n):
+        v_new[i] = v_old[i] + dt * (one_minus_gamma * a_old[i] + gamma * a_new[i])
+
+
+@njit(cache=True)
 def step_kinematics_at(at, u_new, u_old, v_old, a_old, factors, a_new, v_new, u_mid, v_mid):
     """:func:`step_kinematics` at the entries ``at`` only (the other entries of the outputs untouched)."""
     dt, beta_dt2, a_factor, one_minus_gamma, gamma, alpha_f = factors
