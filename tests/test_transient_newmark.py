@@ -127,3 +127,74 @@ def test_generalized_alpha_damps_only_the_high_mode():
     dissipative = run(TimeScheme.generalized_alpha(0.5))
     assert dissipative[0] == pytest.approx(1.0, rel=5e-3)       # resolved mode kept
     assert dissipative[1] < 1e-6                                # unresolved mode removed
+
+
+@pytest.mark.parametrize("scheme", [TimeScheme.newmark(), TimeScheme.generalized_alpha(0.5), TimeScheme.hht(-0.1)])
+def test_fused_kinematics_are_the_newmark_expressions_bit_for_bit(scheme):
+    """The condensed step's one-pass kernels (app/transient/kinematics.py) against forms/newmark.py's
+    acceleration, velocity and midpoint applied to arrays, and the predictor residual's mat-vec arguments against
+    their numpy formulas (app/transient/coupled.py before the kernels). Reference: those expressions; tolerance 0
+    (bit for bit): the kernels evaluate the same operations in the same order without fused multiply-adds, so any
+    difference is a changed formula (a sign, a factor, an alpha_f for a gamma)."""
+    from app.transient.kinematics import (
+        increment_kinematics,
+        kinematics,
+        predictor_arguments,
+        scheme_factors,
+        step_kinematics_at,
+        step_rates,
+        taylor_predictor,
+    )
+    from forms.newmark import acceleration, midpoint, velocity
+
+    rng = np.random.default_rng(7)
+    dt = 2.5e-7
+    n = 1001
+    u1, u0, v0, a0 = (rng.standard_normal(n) * scale for scale in (1e-6, 1e-6, 1e-1, 1e5))
+    factors = scheme_factors(dt, scheme)
+    a1 = acceleration(u1, u0, v0, a0, dt, scheme)
+    v1 = velocity(a1, v0, a0, dt, scheme)
+    expected = (a1, v1, midpoint(u1, u0, scheme.alpha_f), midpoint(v1, v0, scheme.alpha_f))
+    for got, want in zip(kinematics(u1, u0, v0, a0, factors), expected):
+        np.testing.assert_array_equal(got, want)
+    rates = np.empty((2, n))
+    step_rates(u1, u0, v0, a0, factors, *rates)
+    np.testing.assert_array_equal(rates[0], expected[0])
+    np.testing.assert_array_equal(rates[1], expected[1])
+    at = np.array([3, 17, 500, 1000])
+    out = np.zeros((4, n))
+    step_kinematics_at(at, u1, u0, v0, a0, factors, *out)
+    for got, want in zip(out, expected):
+        np.testing.assert_array_equal(got[at], want[at])
+        assert not got[np.setdiff1d(np.arange(n), at)].any()
+    # rigid coordinates: the acceleration from the increment, the mid-point position from the positions
+    dz = u1 - u0
+    out = np.empty((4, n))
+    increment_kinematics(dz, u1, u0, v0, a0, factors, *out)
+    a1 = acceleration(dz, 0.0, v0, a0, dt, scheme)
+    v1 = velocity(a1, v0, a0, dt, scheme)
+    for got, want in zip(out, (a1, v1, midpoint(u1, u0, scheme.alpha_f), midpoint(v1, v0, scheme.alpha_f))):
+        np.testing.assert_array_equal(got, want)
+    # the predictor u_n + dt v_n + dt^2/2 a_n and the M, K, C arguments with a Dirichlet change on a few DOFs
+    pred = np.empty(n)
+    bc = np.array([0, 5, 9], dtype=np.int32)
+    taylor_bc = np.empty(bc.size)
+    taylor_predictor(u0, v0, a0, dt, pred, bc, taylor_bc)
+    want = v0 * dt
+    want += u0
+    want += (0.5 * dt * dt) * a0
+    np.testing.assert_array_equal(pred, want)
+    np.testing.assert_array_equal(taylor_bc, want[bc])
+    pred[bc] += 1e-9 * rng.standard_normal(bc.size)        # the Dirichlet change
+    delta_bc = pred[bc] - taylor_bc
+    mass_factor, damping_factor = 3.7e12, 2.1e6
+    one_minus_af = 1 - scheme.alpha_f
+    args = np.empty((3, n))
+    predictor_arguments(pred, u0, v0, a0, dt, bc, taylor_bc, mass_factor, damping_factor, one_minus_af, *args)
+    mass_arg = a0.copy()
+    mass_arg[bc] += mass_factor * delta_bc
+    damping_arg = a0 * dt
+    damping_arg[bc] += damping_factor * delta_bc
+    np.testing.assert_array_equal(args[0], mass_arg)
+    np.testing.assert_array_equal(args[1], (pred - u0) * one_minus_af + u0)
+    np.testing.assert_array_equal(args[2], damping_arg * one_minus_af + v0)

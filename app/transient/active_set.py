@@ -26,8 +26,11 @@ more than it saves.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.linalg
+import scipy.linalg.lapack
 import scipy.sparse
 from numba import njit
 
@@ -91,8 +94,12 @@ class CondensedJacobian:
                 Kss = Kss.toarray()
             self.active = np.arange(s_count)
             self.inactive = np.zeros(0, dtype=int)
-            self.Z = np.block([[-(np.eye(s_count) + Kss @ G), B], [-L @ G, Kzz]])
-            self._lu = scipy.linalg.lu_factor(self.Z, check_finite=True) if self.Z.size else None
+            Z = self.Z = np.empty((s_count + m, s_count + m))      # [[-(I + Kss G), B], [-L G, Kzz]]
+            Z[:s_count, :s_count] = -(np.eye(s_count) + Kss @ G)
+            Z[:s_count, s_count:] = B
+            Z[s_count:, :s_count] = -L @ G
+            Z[s_count:, s_count:] = Kzz
+            self._lu = lu_factor(self.Z) if self.Z.size else None
             return
         K = Kss.tocsr() if scipy.sparse.issparse(Kss) else scipy.sparse.csr_matrix(Kss)
         K.eliminate_zeros()
@@ -133,7 +140,7 @@ class CondensedJacobian:
     def solve(self, x: np.ndarray) -> np.ndarray:
         """y = J^-1 x (x = (x_g, x_z))."""
         if self.reference:
-            return scipy.linalg.lu_solve(self._lu, x, check_finite=False) if self._lu is not None else np.array(x)
+            return lu_solve(self._lu, x) if self._lu is not None else np.array(x)
         A, I, s_count = self.active, self.inactive, self.s_count
         y = np.empty_like(x)
         x_g, x_z = x[:s_count], x[s_count:]
@@ -143,7 +150,7 @@ class CondensedJacobian:
         if coupling is not None:
             rhs[:A.size] -= self.K_AA @ coupling
             rhs[A.size:] -= self.L_A @ coupling
-        sol = scipy.linalg.lu_solve(self._lu, rhs, check_finite=False) if self._lu is not None else rhs
+        sol = lu_solve(self._lu, rhs) if self._lu is not None else rhs
         y[A] = sol[:A.size]
         y[s_count:] = sol[A.size:]
         return y
@@ -171,7 +178,7 @@ class RigidJacobian:
         self.active = np.zeros(0, dtype=int)
         self.inactive = np.arange(s_count)
         self.Kzz = Kzz
-        self._lu = scipy.linalg.lu_factor(Kzz, check_finite=True) if Kzz.size else None
+        self._lu = lu_factor(Kzz) if Kzz.size else None
 
     active_count = 0
 
@@ -179,11 +186,43 @@ class RigidJacobian:
         y = np.empty_like(x)
         y[:self.s_count] = -x[:self.s_count]
         if self._lu is not None:
-            y[self.s_count:] = scipy.linalg.lu_solve(self._lu, x[self.s_count:], check_finite=False)
+            y[self.s_count:] = lu_solve(self._lu, x[self.s_count:])
         return y
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         return np.concatenate([-x[:self.s_count], self.Kzz @ x[self.s_count:]])
+
+
+def lu_factor(a: np.ndarray):
+    """``scipy.linalg.lu_factor(a, check_finite=True)`` for float64 (the same LAPACK getrf, the same errors and
+    warning) without its per-call dispatch."""
+    if a.dtype != np.float64:
+        return scipy.linalg.lu_factor(a, check_finite=True)
+    if not np.isfinite(a).all():
+        raise ValueError("array must not contain infs or NaNs")
+    lu, piv, info = _GETRF(a)
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal getrf (lu_factor)")
+    if info > 0:
+        warnings.warn(f"Diagonal number {info} is exactly zero. Singular matrix.", scipy.linalg.LinAlgWarning,
+                      stacklevel=2)
+    return lu, piv
+
+
+def lu_solve(lu_and_piv, b: np.ndarray) -> np.ndarray:
+    """``scipy.linalg.lu_solve(lu_and_piv, b, check_finite=False)`` for float64 (the same LAPACK getrs) without its
+    per-call dispatch, which costs more than a solve of the few unknowns here."""
+    lu, piv = lu_and_piv
+    if lu.dtype != np.float64 or b.dtype != np.float64:
+        return scipy.linalg.lu_solve(lu_and_piv, b, check_finite=False)
+    x, info = _GETRS(lu, piv, b)
+    if info != 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal getrs (lu_solve)")
+    return x
+
+
+_GETRS = scipy.linalg.lapack.dgetrs
+_GETRF = scipy.linalg.lapack.dgetrf
 
 
 @njit(cache=True)

@@ -665,12 +665,17 @@ class PointContact(ForceColumns):
         self.damping_N_s_per_m = float(damping_N_s_per_m)
         self.friction = friction
         self.contact_offset_m = float(contact_offset_m)
+        self._normal_values = self.normal.tolist()
 
     def penetration(self, z_lower, z_upper, v_lower, v_upper):
         """(delta [m], d(delta)/dt [m/s])."""
-        delta = self.touch_distance_m - self.normal @ (np.asarray(z_upper) - np.asarray(z_lower))
-        rate = -self.normal @ (np.asarray(v_upper) - np.asarray(v_lower))
-        return float(delta), float(rate)
+        # in Python floats: the bodies' few coordinates cost more as numpy calls than as arithmetic
+        separation = rate = 0.0
+        for n_k, zl, zu, vl, vu in zip(self._normal_values, _values(z_lower), _values(z_upper), _values(v_lower),
+                                       _values(v_upper)):
+            separation += n_k * (zu - zl)
+            rate -= n_k * (vu - vl)
+        return self.touch_distance_m - separation, rate
 
     def force(self, delta: float, rate: float) -> tuple[float, float, float]:
         """(f [N], df/d delta [N/m], df/d rate [N s/m])."""
@@ -695,6 +700,9 @@ class PointContact(ForceColumns):
             rigid.body(self.lower).rotation_axes or rigid.body(self.upper).rotation_axes)
         self._pair = np.r_[np.arange(rigid.size)[rigid.all_dofs(self.lower)],
                            np.arange(rigid.size)[rigid.all_dofs(self.upper)]]
+        self._bound_rigid = rigid
+        self._lower_dofs, self._upper_dofs = rigid.dofs(self.lower), rigid.dofs(self.upper)
+        self._normal_outer = np.outer(self.normal, self.normal)
         n_lo = rigid.body(self.lower).n_dofs
         self._D = np.zeros(self._pair.size)        # d delta / d (lower, upper) coordinates
         self._D[:rigid.gdim] = self.normal
@@ -704,8 +712,25 @@ class PointContact(ForceColumns):
         pass
 
     def _state(self, rigid, z, zd):
-        lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
+        lo, up = self.__dict__.get("_lower_dofs"), self.__dict__.get("_upper_dofs")
+        if lo is None or rigid is not self._bound_rigid:
+            lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
         return self.penetration(z[lo], z[up], zd[lo], zd[up])
+
+    def _at_iterate(self, system) -> tuple[float, float, tuple[float, float, float]]:
+        """(delta, rate, force(delta, rate)) at the system's rigid mid-point state, kept while its
+        ``rigid_version`` stays (the residual, the tangent and the dissipation of one iterate)."""
+        key = (system, getattr(system, "rigid_version", None))
+        if key[1] is None:
+            delta, rate = self._state(system.rigid, system.z_mid, system.zd_mid)
+            self._iterate_values = (delta, rate, self.force(delta, rate))
+        elif self.__dict__.get("_iterate_key") != key:
+            z, zd = system.rigid_mid_values()
+            lo, up = self._lower_dofs, self._upper_dofs
+            delta, rate = self.penetration(z[lo], z[up], zd[lo], zd[up])
+            self._iterate_values = (delta, rate, self.force(delta, rate))
+            self._iterate_key = key
+        return self._iterate_values
 
     def _slip_map(self, rigid, z) -> np.ndarray:
         """P: (lower, upper) coordinate rates -> velocity of the upper body's contact point relative
@@ -737,26 +762,33 @@ class PointContact(ForceColumns):
         dF_dq = np.outer(n3 + dF_dN, (k_f + c_f * system.c_vel) * self._D) + system.c_vel * dF_ds @ P
         return generalised, F[: rigid.gdim], -one_minus_af * P.T @ dF_dq
 
+    def tangent_key(self, system):
+        """What :meth:`add_tangent` depends on besides dt: (df/d delta, df/d rate) at the iterate; None on the
+        generalised path (friction, rotations), whose tangent depends on the positions."""
+        return None if self._general else self._at_iterate(system)[2][1:]
+
     def add_residual(self, system, rc_S, r_z, r):
-        rigid = system.rigid
         if self._general:
             generalised, force, _ = self._general_terms(system, tangent=False)
             r_z[self._pair] -= generalised
             return force
-        f, _, _ = self.force(*self._state(rigid, system.z_mid, system.zd_mid))
-        r_z[rigid.dofs(self.upper)] -= f * self.normal
-        r_z[rigid.dofs(self.lower)] += f * self.normal
-        return f * self.normal
+        f = self._at_iterate(system)[2][0]
+        force = f * self.normal
+        if f != 0.0:        # open: nothing to add
+            r_z[self._upper_dofs] -= force
+            r_z[self._lower_dofs] += force
+        return force
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:
-        rigid = system.rigid
         if self._general:
             _, _, block = self._general_terms(system, tangent=True)
             Kzz[np.ix_(self._pair, self._pair)] += block
             return
-        _, k_f, c_f = self.force(*self._state(rigid, system.z_mid, system.zd_mid))
-        stiffness = (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * np.outer(self.normal, self.normal)
-        lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
+        _, k_f, c_f = self._at_iterate(system)[2]
+        if k_f == 0.0 and c_f == 0.0:
+            return      # open: no block
+        stiffness = (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * self._normal_outer
+        lo, up = self._lower_dofs, self._upper_dofs
         Kzz[up, up] += stiffness
         Kzz[lo, lo] += stiffness
         Kzz[up, lo] -= stiffness
@@ -772,10 +804,9 @@ class PointContact(ForceColumns):
     def dissipation_power_W(self, system) -> float:
         """Power dissipated by the damper and friction [W] at the evaluated iterate."""
         rigid, z, zd = system.rigid, system.z_mid, system.zd_mid
-        delta, rate = self._state(rigid, z, zd)
+        delta, rate, (f, _, _) = self._at_iterate(system)
         if delta <= 0.0:
             return 0.0
-        f, _, _ = self.force(delta, rate)
         power = (f - self.stiffness_N_per_m * delta) * rate
         if self.friction is not None and f > 0.0:
             n3 = pad3(self.normal)
@@ -819,6 +850,7 @@ class NodeContact(ForceColumns):
         self.name, self.body, self.fe = name, body, fe
         self.fields = fields if fields is not None else MidpointFields(fe)
         self.normal = n
+        self._normal_values = n.tolist()
         self.friction = friction
         self.radius_m = float(radius_m)
         self.stiffness = float(stiffness_N_per_m1_5)
@@ -846,32 +878,44 @@ class NodeContact(ForceColumns):
             raise ValueError(f"contact {name!r}: the node at {point.tolist()} has no free displacement DOF")
         x_node = coords[self.local_dofs[0]] if self.comm.rank == self.owner else None
         self.x_node = self.comm.bcast(x_node, root=self.owner)
-        self.body_reference = np.zeros(fe.gdim)
+        self._mine, self._serial = self.comm.rank == self.owner, self.comm.size == 1
+        self._axes_values = self.dof_axes.tolist()
+        self.set_body_reference(np.zeros(fe.gdim))
 
     def set_body_reference(self, position_m) -> None:
         self.body_reference = np.asarray(position_m, dtype=float).copy()
+        self._reference_values = self.body_reference.tolist()
+        self._reference_gap = float(self.normal @ (self.x_node - self.body_reference))    # normal.(x - p_ref)
 
     def _node_values(self, arr: np.ndarray) -> np.ndarray:
         """The node's displacement-like vector from a local DOF array (owner), broadcast (gdim)."""
         out = np.zeros(self.fe.gdim)
-        if self.comm.rank == self.owner:
+        if self._mine:
             out[self.dof_axes] = arr[self.local_dofs]
-        return self.comm.bcast(out, root=self.owner) if self.comm.size > 1 else out
+        return out if self._serial else self.comm.bcast(out, root=self.owner)
 
     def penetration(self, u: np.ndarray, v: np.ndarray, body_position, body_velocity) -> tuple[float, float]:
         """(delta [m], d delta/dt [m/s]) for local arrays u, v and the body state. The gap is formed
         as normal.(x - p_ref) + normal.(u - dz) - R (small differences, no round-off of |x|)."""
-        n = self.normal
-        du = self._node_values(u) - (np.asarray(body_position) - self.body_reference)
-        gap = n @ (self.x_node - self.body_reference) + n @ du - self.radius_m
-        rate = n @ (self._node_values(v) - np.asarray(body_velocity))
-        return -float(gap), -float(rate)
+        # in Python floats: a node's few components cost more as numpy calls than as arithmetic
+        n_du = n_dv = 0.0
+        if self._serial:        # the node's components as lists (zero on the axes it has no DOF of)
+            node_u, node_v = [0.0] * len(self._normal_values), [0.0] * len(self._normal_values)
+            for k, u_k, v_k in zip(self._axes_values, u[self.local_dofs].tolist(), v[self.local_dofs].tolist()):
+                node_u[k], node_v[k] = u_k, v_k
+        else:
+            node_u, node_v = self._node_values(u).tolist(), self._node_values(v).tolist()
+        for n_k, u_k, v_k, p_k, r_k, w_k in zip(self._normal_values, node_u, node_v, _values(body_position),
+                                                self._reference_values, _values(body_velocity)):
+            n_du += n_k * (u_k - (p_k - r_k))
+            n_dv += n_k * (v_k - w_k)
+        return -(self._reference_gap + n_du - self.radius_m), -n_dv
 
     def force(self, delta: float, rate: float) -> tuple[float, float, float]:
         """(F [N], dF/d delta [N/m], dF/d rate [N s/m]) of the Hertz spring + damper, F >= 0."""
         if delta <= 0.0:
             return 0.0, 0.0, 0.0
-        root = np.sqrt(delta)
+        root = math.sqrt(delta)
         f = self.stiffness * delta * root + self.damping * rate
         if f <= 0.0:
             return 0.0, 0.0, 0.0
@@ -883,6 +927,7 @@ class NodeContact(ForceColumns):
     # ------------------------------------------------------------ interaction protocol
     kind = "node"
     fe_coupled = True
+    reads_fields = False          # reads system.u_mid, v_mid and states directly, never the shared fields
 
     def bind(self, system) -> None:
         rigid = system.rigid
@@ -894,13 +939,27 @@ class NodeContact(ForceColumns):
         pairs = self.comm.bcast(mine, root=self.owner)
         self._S = np.array([system.contact_position[g] for g, _ in pairs], dtype=int)
         self._S_axes = np.array([k for _, k in pairs], dtype=int)
+        self._normal_S = self.normal[self._S_axes]
+        self._normal_S_outer = np.outer(self._normal_S, self._normal_S)
+        self._body_dofs = rigid.dofs(self.body)
 
     def move_to_iterate(self, system) -> None:
         pass
 
+    def _at_iterate(self, system) -> tuple[float, float, tuple[float, float, float]]:
+        """(delta, rate, force(delta, rate)) at the system's mid-point fields, kept while its
+        ``iterate_version`` stays (the residual, the tangent and the dissipation of one iterate)."""
+        key = (system, getattr(system, "iterate_version", None))
+        if key[1] is None or self.__dict__.get("_iterate_key") != key:
+            sl = self._body_dofs
+            z, zd = system.rigid_mid_values() if key[1] is not None else (system.z_mid, system.zd_mid)
+            delta, rate = self.penetration(system.u_mid, system.v_mid, z[sl], zd[sl])
+            self._iterate_values = (delta, rate, self.force(delta, rate))
+            self._iterate_key = key
+        return self._iterate_values
+
     def _force_at_iterate(self, system):
-        sl = system.rigid.dofs(self.body)
-        return self.force(*self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl]))
+        return self._at_iterate(system)[2]
 
     def _slip_map(self, system) -> tuple[np.ndarray, np.ndarray]:
         """(P, rates): P maps the rates xi' = (node velocity (gdim), body coordinate rates) at the
@@ -942,11 +1001,12 @@ class NodeContact(ForceColumns):
             rc_S[self._S] -= F[self._S_axes]
             r_z[system.rigid.all_dofs(self.body)] -= generalised[gdim:]
             return -F[:gdim]
-        f, _, _ = self._force_at_iterate(system)
-        if r is not None and self.local_dofs.size:
-            r.array_w[self.local_dofs] -= f * self.normal[self.dof_axes]
-        rc_S[self._S] -= f * self.normal[self._S_axes]
-        r_z[system.rigid.dofs(self.body)] += f * self.normal
+        f = self._at_iterate(system)[2][0]
+        if f != 0.0:        # open: nothing to add
+            if r is not None and self.local_dofs.size:
+                r.array_w[self.local_dofs] -= f * self.normal[self.dof_axes]
+            rc_S[self._S] -= f * self._normal_S
+            r_z[self._body_dofs] += f * self.normal
         return -f * self.normal
 
     def add_tangent(self, system, Kss, B, L, Kzz) -> None:
@@ -961,12 +1021,13 @@ class NodeContact(ForceColumns):
             Kzz[np.ix_(body, body)] += J[gdim:, gdim:]
             return
         _, k_f, c_f = self._force_at_iterate(system)
-        n_S = self.normal[self._S_axes]
-        block = _sparse_block(self._S, (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * np.outer(n_S, n_S),
+        if k_f == 0.0 and c_f == 0.0:
+            return      # open: no block
+        block = _sparse_block(self._S, (1 - system.scheme.alpha_f) * (k_f + c_f * system.c_vel) * self._normal_S_outer,
                               system.contact_global.size)
         T = system.translation_S
         Kss += block
-        sl = system.rigid.dofs(self.body)
+        sl = self._body_dofs
         B[:, sl] -= block @ T
         L[sl, :] -= T.T @ block
         Kzz[sl, sl] += T.T @ block @ T
@@ -982,11 +1043,9 @@ class NodeContact(ForceColumns):
 
     def dissipation_power_W(self, system) -> float:
         """Power dissipated by the damper and friction [W] at the evaluated iterate."""
-        sl = system.rigid.dofs(self.body)
-        delta, rate = self.penetration(system.u_mid, system.v_mid, system.z_mid[sl], system.zd_mid[sl])
+        delta, rate, (f, _, _) = self._at_iterate(system)
         if delta <= 0.0:
             return 0.0
-        f, _, _ = self.force(delta, rate)
         power = (f - self.stiffness * delta * math.sqrt(delta)) * rate
         if self.friction is not None and f > 0.0:
             n3 = pad3(self.normal)
@@ -994,6 +1053,11 @@ class NodeContact(ForceColumns):
             slip = (np.eye(3) - np.outer(n3, n3)) @ (P @ rates)
             power -= float(friction_force(slip, f, self.friction)[0] @ slip)
         return float(power)
+
+
+def _values(x) -> list:
+    """A few coordinates as a list of floats (a list as it is)."""
+    return x if isinstance(x, list) else np.asarray(x, dtype=float).tolist()
 
 
 def _sparse_block(positions: np.ndarray, values: np.ndarray, s_count: int):

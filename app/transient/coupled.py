@@ -34,6 +34,8 @@ is three mat-vecs of physical-size vectors, free of cancellation.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse
 from mpi4py import MPI
@@ -43,17 +45,26 @@ from app.blas import limit_blas_threads
 from app.compat import petsc_vector
 from app.transient.active_set import CondensedJacobian, ContactTangent, RigidJacobian, subtract_rows
 from app.transient.fe import EffectiveOperatorCache, InterfaceRows, LinearFE
+from app.transient.kinematics import (
+    increment_kinematics,
+    predictor_arguments,
+    rigid_step_start,
+    scheme_factors,
+    step_kinematics,
+    step_kinematics_at,
+    step_rates,
+    taylor_predictor,
+)
 from app.transient.rigid import RigidSet
 from app.transient.state import TransientState
 from forms.newmark import (
     TimeScheme,
-    acceleration,
     acceleration_per_displacement,
     midpoint,
-    velocity,
     velocity_per_displacement,
 )
 
+_EPS = float(np.finfo(float).eps)
 SNES_PREFIX = "transient_"
 SNES_DEFAULTS = {
     "snes_type": "newtonls",
@@ -93,6 +104,16 @@ class CoupledSystem:
         self.m = rigid.size
         self.m_local = self.m if comm.rank == 0 else 0
         self.active_set = active_set
+        # per-iterate bookkeeping, formed once: the mass factor of the new acceleration, the prescribed axes, brakes
+        self._mass_new = rigid.mass_diagonal * (1 - scheme.alpha_m)
+        self._mass_old = rigid.mass_diagonal * scheme.alpha_m
+        self._fixed_axes = np.flatnonzero(~rigid.free_mask)
+        self._braked = bool(np.any(rigid.damping_diagonal))
+        self._fe_contacts = [c for c in self.interactions if c.fe_coupled]
+        self._rigid_links = [c for c in self.interactions if not c.fe_coupled]
+        self._rigid_jacobians = {}      # RigidJacobian by its Kzz (the same while dt and the links' states stay)
+        self._rigid_jacobians_by_state = {}     # the same by (c_acc, c_vel, the links' tangent keys)
+        self._rigid_diagonal_now = None
         self._setup_contact_dofs()
         for c in self.interactions:
             c.bind(self)
@@ -101,15 +122,29 @@ class CoupledSystem:
         self._rows_layout = InterfaceRows(fe, evaluation, self.contact_global) if evaluation is not None else None
         self.cache = (EffectiveOperatorCache(fe, scheme, self.contact_global, rows=self._rows_layout)
                       if fe is not None else None)
-        self.fields = list({id(c.fields): c.fields for c in self.interactions if hasattr(c, "fields")}.values())
+        # the shared mid-point fields, kept up to date only if an interaction's forms read them
+        self.fields = list({id(c.fields): c.fields for c in self.interactions
+                            if getattr(c, "reads_fields", hasattr(c, "fields"))}.values())
+        self._field_constants = None
+        # bumped whenever the mid-point quantities (u_mid, v_mid, z_mid, zd_mid) change: an interaction may keep
+        # what it derived from them while the version stays (NodeContact._at_iterate)
+        self.iterate_version = 0
+        self.rigid_version = 0          # the same for the rigid mid-point quantities (z_mid, zd_mid) alone
         if fe is not None:
             from dolfinx import fem
 
             self._u1 = fem.Function(fe.space)
+            size = self._u1.x.array.size
+            # a_{n+1}, v_{n+1}, u_mid, v_mid on the local DOFs (owned and ghost), written in place (u_mid, v_mid at
+            # every DOF only for shared fields; else at the evaluation DOFs, see _fe_fields)
+            self.a1, self.v1, self.u_mid, self.v_mid = np.zeros((4, size))
+            self._u1_is_free = False        # _u1 holds u_pred + w of the step (set by _condense)
+            self._fields_formed = False     # formed at every DOF once (the first step's predictor)
             self.translations = fe.translation_vectors()
             self._r = fe.new_vector()
             self._tmp = fe.new_vector()
             self._tmp2 = fe.new_vector()
+            self._matvec_arguments = [fe.new_vector() for _ in range(3)]    # of M, K, C in the predictor residual
             self._u_pred = fe.new_vector()
             self._r0 = fe.new_vector()
             self._du = fe.new_vector()
@@ -123,6 +158,7 @@ class CoupledSystem:
         self.active_set_changes = 0     # Jacobians whose active set differs from the step's previous one
         self.opened_updates = 0         # Newton updates that took DOFs carrying force off the active set
         self._evaluated = self._fe_key = None
+        self._residual_in_R = False
         self._fe_full = False           # the FE fields hold every DOF of the evaluated iterate
         self._jacobian = None
         self._step_count = self._jacobian_step = 0
@@ -261,7 +297,7 @@ class CoupledSystem:
         if self._fe_contact_active:
             return None
         norm0 = R.norm()
-        if not np.isfinite(norm0):
+        if not math.isfinite(norm0):
             raise FloatingPointError("non-finite residual")
         if norm0 <= atol:
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
@@ -271,7 +307,7 @@ class CoupledSystem:
         X.axpy(-1.0, Y)
         self._residual_callback(None, X, R)
         norm1 = R.norm()
-        if self._fe_contact_active or not np.isfinite(norm1):
+        if self._fe_contact_active or not math.isfinite(norm1):
             return None
         if norm1 <= atol:
             return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
@@ -283,45 +319,68 @@ class CoupledSystem:
         """The Jacobian data with every FE contact block zero, as ``_jacobian_callback`` builds it
         when no FE contact is active."""
         s_count, m = self.contact_global.size, self.m
+        # Kzz is a function of dt and of the rigid links' tangent state: reuse its factorisation when the links
+        # say what that state is (``tangent_key``; the same on every rank: the rigid state is replicated)
+        keys = [getattr(c, "tangent_key", None) for c in self._rigid_links]
+        key = None if any(k is None for k in keys) else (self.c_acc, self.c_vel, *(k(self) for k in keys))
+        if key is not None and None not in key and key in self._rigid_jacobians_by_state:
+            if self.comm.rank == 0:
+                self._jacobian = self._rigid_jacobians_by_state[key]
+            return
         Kzz = self._rigid_block(np.diag(self._rigid_diagonal()))
         self._set_jacobian(ContactTangent(s_count), np.zeros((s_count, m)), np.zeros((m, s_count)), Kzz)
+        if key is not None and None not in key and self.comm.rank == 0:
+            if len(self._rigid_jacobians_by_state) >= 16:
+                self._rigid_jacobians_by_state.clear()
+            self._rigid_jacobians_by_state[key] = self._jacobian
 
     def _rigid_diagonal(self) -> np.ndarray:
         """d r_z / d z_{n+1} of the bodies alone: inertia (1 - alpha_m) c_acc m and brake
         (1 - alpha_f) c_vel c (the brake acts on the mid-point rate)."""
-        s = self.scheme
-        return ((1 - s.alpha_m) * self.c_acc * self.rigid.mass_diagonal
-                + (1 - s.alpha_f) * self.c_vel * self.rigid.damping_diagonal)
+        if self._rigid_diagonal_now is None:      # once a step (c_acc, c_vel)
+            s = self.scheme
+            self._rigid_diagonal_now = ((1 - s.alpha_m) * self.c_acc * self.rigid.mass_diagonal
+                                        + (1 - s.alpha_f) * self.c_vel * self.rigid.damping_diagonal)
+        return self._rigid_diagonal_now
 
     def _begin_step(self, state: TransientState, dt: float) -> None:
         s, fe, rigid = self.scheme, self.fe, self.rigid
         self.state0, self.dt = state, dt
         self._step_count += 1
         self._evaluated = self._fe_key = None
+        self._residual_in_R = False
         self.t1 = state.t + dt
         self.t_mid = midpoint(self.t1, state.t, s.alpha_f)
         self.c_acc = acceleration_per_displacement(dt, s)
         self.c_vel = velocity_per_displacement(dt, s)
-        for f in self.fields:
-            f.velocity_per_displacement.value = self.c_vel
-            f.one_minus_alpha_f.value = 1 - s.alpha_f
+        self._factors = scheme_factors(dt, s)
+        if self._field_constants != (self.c_vel, s.alpha_f):     # set the forms' constants when dt changes
+            for f in self.fields:
+                f.velocity_per_displacement.value = self.c_vel
+                f.one_minus_alpha_f.value = 1 - s.alpha_f
+            self._field_constants = (self.c_vel, s.alpha_f)
         scale_sq = 0.0
         if fe is not None:
             self.op = self.cache.get(dt)
             scale_sq = self._predictor_residual(state, dt)
             self._condense()
         z0, zd0, zdd0 = state.z, state.zd, state.zdd
-        self.zdd_hat = acceleration(0.0, 0.0, zd0, zdd0, dt, s)
         self.rigid_force_ext = rigid.external_force_N(self.t_mid)
-        self.rigid_inertia_const = rigid.mass_diagonal * ((1 - s.alpha_m) * self.zdd_hat + s.alpha_m * zdd0)
-        rigid_scale_sq = float(np.sum(self.rigid_force_ext**2 + (rigid.mass_diagonal * zdd0) ** 2
-                                      + rigid.brake_force_N(zd0) ** 2))
-        self._force_scale = float(np.sqrt(scale_sq + rigid_scale_sq))
+        self._inertia_old = self._mass_old * zdd0
+        self._rigid_diagonal_now = None
+        # the predictor, the force scale |F|^2 + |m a_n|^2 (+ brakes) and the round-off bound's rigid inertia
+        # m ((1 - alpha_m) a_hat + alpha_m a_n), a_hat = acceleration(0, 0, v_n, a_n), in one pass
+        z1, inertia_sq, rigid_squares = np.empty((3, z0.size))
+        rigid_step_start(z0, zd0, zdd0, rigid.mass_diagonal, self.rigid_force_ext, self._factors, s.alpha_m, z1,
+                         inertia_sq, rigid_squares)
+        if self._braked:
+            rigid_squares += rigid.brake_force_N(zd0) ** 2
+        rigid_scale_sq = float(np.sum(rigid_squares))
+        self._force_scale = math.sqrt(scale_sq + rigid_scale_sq)
         # Below ~eps |terms| the residual is round-off: never ask for less. The rigid inertia is
         # formed from z / (beta dt^2)-sized terms; the FE terms are physical forces (see above).
-        roundoff_sq = scale_sq + float(np.sum(self.rigid_inertia_const**2))
-        self._roundoff_force = 10 * np.finfo(float).eps * float(np.sqrt(roundoff_sq))
-        z1 = z0 + dt * zd0 + 0.5 * dt * dt * zdd0
+        roundoff_sq = scale_sq + float(np.sum(inertia_sq))
+        self._roundoff_force = 10 * _EPS * math.sqrt(roundoff_sq)
         rigid.apply_prescribed(self.t1, z1)
         self._initial_guess(z1 - z0)
 
@@ -334,59 +393,41 @@ class CoupledSystem:
         u0, v0, a0 = state.u[:n], state.v[:n], state.a[:n]
         bc = fe.bc_local_owned
         predictor = self._u_pred
-        taylor = predictor.array_w
-        np.multiply(v0, dt, out=taylor)
-        taylor += u0
-        taylor += (0.5 * dt * dt) * a0
-        taylor_bc = taylor[bc].copy()
-        fe.apply_dirichlet(self.t1, predictor)
-        pred = predictor.array_r
-        delta_bc = pred[bc] - taylor_bc
-        r0, x, y = self._r0, self._tmp, self._tmp2
+        pred = predictor.array_w
+        taylor_bc = np.empty(bc.size)
+        taylor_predictor(u0, v0, a0, dt, pred, bc, taylor_bc)
+        fe.apply_dirichlet(self.t1, predictor)     # in place: ``pred`` views the same values
+        r0, y = self._r0, self._tmp2
         fe.load_N(self.t_mid, r0)
         scale_sq = r0.norm() ** 2
         r0.scale(-1.0)
-        one_minus_af = 1 - s.alpha_f
-
-        def mass_term(out):
-            out[:] = a0
-            out[bc] += (1 - s.alpha_m) * self.c_acc * delta_bc
-
-        def stiffness_term(out):
-            np.subtract(pred, u0, out=out)
-            out *= one_minus_af
-            out += u0
-
-        def damping_term(out):
-            np.multiply(a0, dt, out=out)
-            out[bc] += self.c_vel * delta_bc
-            out *= one_minus_af
-            out += v0
-
-        terms = [(fe.M, mass_term), (fe.K, stiffness_term)]
-        if fe.C is not None:
-            terms.append((fe.C, damping_term))
-        for matrix, fill in terms:
-            fill(x.array_w)
+        x_M, x_K, x_C = self._matvec_arguments
+        predictor_arguments(pred, u0, v0, a0, dt, bc, taylor_bc, (1 - s.alpha_m) * self.c_acc, self.c_vel,
+                            1 - s.alpha_f, x_M.array_w, x_K.array_w, x_C.array_w)
+        residual = r0.array_w
+        for matrix, x in ((fe.M, x_M), (fe.K, x_K), (fe.C, x_C)):
+            if matrix is None:
+                continue
             matrix.mult(x, y)
             scale_sq += y.norm() ** 2
-            r0.axpy(1.0, y)
-        fe.zero_constrained(r0)
+            residual += y.array_r       # r0.axpy(1.0, y), in numpy: the same sums, ~2x faster at this size
+        residual[bc] = 0.0              # fe.zero_constrained(r0)
+        del residual                    # (restores the array: r0's state changes)
         return scale_sq
 
     def _condense(self) -> None:
         """w = -K_eff^-1 r0: the FE solution without contact forces, and u_pred + w on every local DOF
         (owned and ghost): the end-of-step displacement at g = 0, from which the contact iterates
         differ by -G g."""
-        self.op.solve(self._r0, self._w)
-        self._w.scale(-1.0)
+        self.op.solve(self._r0, self._w)      # -w
         u1 = petsc_vector(self._u1)
-        u1.array_w[:] = self._u_pred.array_r + self._w.array_r
+        np.subtract(self._u_pred.array_r, self._w.array_r, out=u1.array_w)     # u_pred + w
         self._u1.x.scatter_forward()
         self._u1_free = self._u1.x.array.copy()
+        self._u1_is_free = True
         # the fields at g = 0 where the contact forms read them; the accepted iterate is formed on every
         # DOF (_evaluate_everywhere), so nothing reads the others before
-        if self._rows_layout is None or getattr(self, "a1", None) is None:
+        if self._rows_layout is None or not self._fields_formed:
             self._fe_fields(None)
         else:
             self._fe_fields(self._rows_layout.local)
@@ -416,25 +457,28 @@ class CoupledSystem:
         self._g = g = unknown[:s_count]
         return None, unknown[s_count:], g.tobytes()
 
-    def _evaluate(self, X: PETSc.Vec, everywhere: bool = False) -> None:
+    def _evaluate(self, X: PETSc.Vec, everywhere: bool = False) -> bool:
         """Set u_{n+1}, z_{n+1} and every derived (mid-point) quantity from the iterate X.
 
         SNES asks for the Jacobian at the point whose residual it has just evaluated, and the
         accepted state is the last evaluated point: skip the re-evaluation then (the decision is
         global, since the evaluation is collective). While Newton iterates, the FE fields are
         updated at the DOFs the contact forms read only (``_evaluation_dofs``); ``everywhere`` (the
-        accepted iterate, diagnostics) updates every DOF."""
+        accepted iterate, diagnostics) updates every DOF. Returns whether it evaluated (False: X is the last
+        iterate evaluated)."""
         x = X.array_r
-        same = self._evaluated is not None and self._evaluated.shape == x.shape and np.array_equal(self._evaluated, x)
+        # the same iterate, bit for bit (a cheaper test than array_equal on these few entries)
+        same = self._evaluated is not None and self._evaluated_bytes == x.tobytes()
         if self.comm.size > 1:
             same = self.comm.allreduce(same, op=MPI.LAND)
         if same:
             if everywhere:
                 self._evaluate_everywhere()
-            return
+            return False
         self._evaluated = np.array(x)
+        self._evaluated_bytes = self._evaluated.tobytes()
         du, dz, fe_key = self._split(x)
-        s, st, dt = self.scheme, self.state0, self.dt
+        st = self.state0
         # Iterates that differ only in the rigid increments (the contact-free path) share the FE
         # fields: keep them (the key is replicated, so every rank decides alike).
         same_fe = fe_key is not None and fe_key == self._fe_key and (self._fe_full or not everywhere)
@@ -444,16 +488,26 @@ class CoupledSystem:
                 self._condensed_fields(self._g, everywhere)
             else:
                 petsc_vector(self._u1).array_w[:] = self._u_pred.array_r + du
+                self._u1_is_free = False
                 self._u1.x.scatter_forward()
                 self._fe_fields(None)
-        z1 = st.z + dz
-        self.z1 = z1
-        self.zdd1 = acceleration(dz, 0.0, st.zd, st.zdd, dt, s)
-        self.zd1 = velocity(self.zdd1, st.zd, st.zdd, dt, s)
-        self.z_mid = midpoint(z1, st.z, s.alpha_f)
-        self.zd_mid = midpoint(self.zd1, st.zd, s.alpha_f)
+        self.z1 = z1 = st.z + dz
+        rigid = np.empty((4, z1.size))
+        increment_kinematics(dz, z1, st.z, st.zd, st.zdd, self._factors, rigid[0], rigid[1], rigid[2], rigid[3])
+        self.zdd1, self.zd1, self.z_mid, self.zd_mid = rigid
+        self.iterate_version += 1
+        self.rigid_version += 1
         for c in self.interactions:
             c.move_to_iterate(self)
+        return True
+
+    def rigid_mid_values(self) -> tuple[list, list]:
+        """(z_mid, zd_mid) as lists of floats, formed once per rigid iterate (``rigid_version``): the rigid
+        links and node contacts read a few of them, cheaper as floats than as numpy calls."""
+        if self.__dict__.get("_rigid_values_version") != self.rigid_version:
+            self._rigid_values = (self.z_mid.tolist(), self.zd_mid.tolist())
+            self._rigid_values_version = self.rigid_version
+        return self._rigid_values
 
     def _evaluate_everywhere(self) -> None:
         """The last evaluated iterate (the accepted one) on every FE DOF: the new state, the probes and
@@ -469,8 +523,11 @@ class CoupledSystem:
         if everywhere or rows is None:
             u1 = petsc_vector(self._u1)
             if not nonzero.size:
-                self._u1.x.array[:] = self._u1_free
+                if not self._u1_is_free:        # else it holds u_pred + w already
+                    self._u1.x.array[:] = self._u1_free
+                    self._u1_is_free = True
             else:
+                self._u1_is_free = False
                 values = u1.array_w
                 values[:] = self._u1_free[:self.n_fe]
                 if self.op.columns_t is not None:
@@ -489,31 +546,33 @@ class CoupledSystem:
         u1[at] = self._u1_free[at]
         if nonzero.size:
             u1[at] -= rows[:, nonzero] @ g[nonzero]
+            self._u1_is_free = False
         self._fe_fields(at)
 
     def _fe_fields(self, at: np.ndarray | None) -> None:
         """a_{n+1}, v_{n+1} and the mid-point fields from u_{n+1} (in ``_u1``), at the local DOFs
         ``at`` or (None) at every DOF."""
-        s, st, dt = self.scheme, self.state0, self.dt
+        st = self.state0
         u1 = self._u1.x.array
+        self.iterate_version += 1
         if at is None:
-            self.a1 = acceleration(u1, st.u, st.v, st.a, dt, s)
-            self.v1 = velocity(self.a1, st.v, st.a, dt, s)
-            self.u_mid = midpoint(u1, st.u, s.alpha_f)
-            self.v_mid = midpoint(self.v1, st.v, s.alpha_f)
+            if self.fields or self._rows_layout is None:
+                step_kinematics(u1, st.u, st.v, st.a, self._factors, self.a1, self.v1, self.u_mid, self.v_mid)
+            else:
+                # no shared fields: the mid-points are read at the evaluation DOFs only (a node contact's), so form
+                # them there; a_{n+1}, v_{n+1} (the new state) everywhere
+                step_rates(u1, st.u, st.v, st.a, self._factors, self.a1, self.v1)
+                step_kinematics_at(self._rows_layout.local, u1, st.u, st.v, st.a, self._factors, self.a1, self.v1,
+                                   self.u_mid, self.v_mid)
             for f in self.fields:
                 f.u_mid.x.array[:] = self.u_mid
                 f.v_mid.x.array[:] = self.v_mid
-            self._fe_full = True
+            self._fe_full = self._fields_formed = True
             return
-        u0, v0, a0 = st.u[at], st.v[at], st.a[at]
-        a1 = acceleration(u1[at], u0, v0, a0, dt, s)
-        v1 = velocity(a1, v0, a0, dt, s)
-        u_mid, v_mid = midpoint(u1[at], u0, s.alpha_f), midpoint(v1, v0, s.alpha_f)
-        self.a1[at], self.v1[at], self.u_mid[at], self.v_mid[at] = a1, v1, u_mid, v_mid
+        step_kinematics_at(at, u1, st.u, st.v, st.a, self._factors, self.a1, self.v1, self.u_mid, self.v_mid)
         for f in self.fields:
-            f.u_mid.x.array[at] = u_mid
-            f.v_mid.x.array[at] = v_mid
+            f.u_mid.x.array[at] = self.u_mid[at]
+            f.v_mid.x.array[at] = self.v_mid[at]
         self._fe_full = False
 
     def _new_state(self) -> TransientState:
@@ -529,10 +588,13 @@ class CoupledSystem:
         contact DOFs rc_S (all ranks' entries), the rigid residual r_z). With ``r`` (an FE vector
         holding the rest of the FE residual) the contact residual is also added to it."""
         forces = {}
-        r_z = self.rigid.mass_diagonal * (1 - self.scheme.alpha_m) * self.zdd1
-        r_z = r_z + self.rigid.mass_diagonal * self.scheme.alpha_m * self.state0.zdd - self.rigid_force_ext
-        # brakes: a load -c omega at the generalised mid-point, like every other force of the step
-        r_z = r_z - self.rigid.brake_force_N(self.zd_mid)
+        # m (1 - alpha_m) zdd_{n+1} + m alpha_m zdd_n - F_ext
+        r_z = self._mass_new * self.zdd1
+        r_z += self._inertia_old
+        r_z -= self.rigid_force_ext
+        if self._braked:
+            # brakes: a load -c omega at the generalised mid-point, like every other force of the step
+            r_z -= self.rigid.brake_force_N(self.zd_mid)
         rc_S = np.zeros(self.contact_global.size)
         for c in self.interactions:
             forces[c.name] = c.add_residual(self, rc_S, r_z, r)
@@ -540,27 +602,36 @@ class CoupledSystem:
         # surface contact's rc.dot is collective, so "any force" is the same on every rank.
         self._forces = forces
         self._forces_at = self._evaluated
-        self._fe_contact_active = any(np.any(forces[c.name] != 0.0) for c in self.interactions if c.fe_coupled)
-        r_z[~self.rigid.free_mask] = 0.0
+        active = False
+        for c in self._fe_contacts:
+            if (forces[c.name] != 0.0).any():
+                active = True
+                break
+        self._fe_contact_active = active
+        r_z[self._fixed_axes] = 0.0
         return forces, rc_S, r_z
 
     def _residual_callback(self, snes, X, R) -> None:
-        self._evaluate(X)
+        evaluated = self._evaluate(X)
+        if snes is not None and not evaluated and self._residual_in_R and R.handle == self.R.handle:
+            # SNES' first residual, at the iterate the contact-free step left in X and whose residual it left in R
+            self._residual_in_R = False
+            return
         _, rc_S, r_z = self._contact_terms(None)
         out = R.array   # on every rank: write access bumps the Vec state, so no rank reuses a cached norm
         if self.comm.rank == 0:
             s_count = self.contact_global.size
             out[:s_count] = rc_S - self._unknown[:s_count]
             out[s_count:] = r_z
+        self._residual_in_R = snes is None and R.handle == self.R.handle
 
     def _rigid_block(self, Kzz: np.ndarray) -> np.ndarray:
         """Add the rigid-rigid interactions to the rigid block ``Kzz`` and put identity
         rows/columns on the prescribed axes."""
         empty = np.zeros((0, 0))
-        for c in self.interactions:
-            if not c.fe_coupled:
-                c.add_tangent(self, empty, empty, empty, Kzz)
-        fixed = ~self.rigid.free_mask
+        for c in self._rigid_links:
+            c.add_tangent(self, empty, empty, empty, Kzz)
+        fixed = self._fixed_axes
         Kzz[fixed, :] = 0.0
         Kzz[:, fixed] = 0.0
         Kzz[fixed, fixed] = 1.0
@@ -593,11 +664,10 @@ class CoupledSystem:
         B = np.zeros((s_count, m))
         L = np.zeros((m, s_count))
         Kzz = np.diag(self._rigid_diagonal())
-        for c in self.interactions:
-            if c.fe_coupled:
-                c.add_tangent(self, Kss, B, L, Kzz)
+        for c in self._fe_contacts:
+            c.add_tangent(self, Kss, B, L, Kzz)
         Kzz = self._rigid_block(Kzz)
-        fixed = ~self.rigid.free_mask
+        fixed = self._fixed_axes
         L[fixed, :] = 0.0
         B[:, fixed] = 0.0
         return Kss, B, L, Kzz
@@ -633,14 +703,22 @@ class CoupledSystem:
         if self.comm.rank != 0:
             return
         if isinstance(Kss, ContactTangent) and Kss.empty and not B.any() and not L.any():
-            self._jacobian = RigidJacobian(self.contact_global.size, Kzz)     # no FE contact carries force
+            # no FE contact carries force: the factorised Kzz, kept while it recurs (same dt and rigid links)
+            key = Kzz.tobytes()
+            jacobian = self._rigid_jacobians.get(key)
+            if jacobian is None:
+                if len(self._rigid_jacobians) >= 16:
+                    self._rigid_jacobians.clear()
+                jacobian = self._rigid_jacobians[key] = RigidJacobian(self.contact_global.size, Kzz)
+            self._jacobian = jacobian
             return
         previous = self._jacobian
         self._jacobian = CondensedJacobian(self._contact_block(), Kss, B, L, Kzz, active_only=self.active_set)
         self.jacobians += 1
         self.active_dofs += self._jacobian.active_count
-        if previous is not None and self._jacobian_step == self._step_count and not np.array_equal(
-                previous.active, self._jacobian.active):
+        active = self._jacobian.active
+        if previous is not None and self._jacobian_step == self._step_count and (
+                previous.active.shape != active.shape or (previous.active != active).any()):
             self.active_set_changes += 1
         self._jacobian_step = self._step_count
 
@@ -648,7 +726,7 @@ class CoupledSystem:
         """y = J^-1 x for local arrays of the unknown (rank 0 holds it all)."""
         if x.size:
             y[:] = self._jacobian.solve(x)
-            if self._jacobian.inactive.size and np.any(x[self._jacobian.inactive]):
+            if self._jacobian.inactive.size and x[self._jacobian.inactive].any():
                 self.opened_updates += 1
 
     def apply_jacobian(self, x: np.ndarray, y: np.ndarray) -> None:
@@ -663,6 +741,8 @@ class CoupledSystem:
         dt |a_0 error| / 2 in the trapezoidal rule)."""
         rigid = self.rigid
         self.z_mid, self.zd_mid = state.z, state.zd
+        self.iterate_version += 1
+        self.rigid_version += 1
         r_z = -rigid.external_force_N(state.t) - rigid.brake_force_N(state.zd)
         for c in self.interactions:
             if not c.fe_coupled:
@@ -692,6 +772,7 @@ class CoupledSystem:
         """Make ``solution_vector`` show the displacement of ``state`` (e.g. the initial state)."""
         if self.fe is not None:
             self._u1.x.array[:] = state.u
+            self._u1_is_free = False
 
     @property
     def solution_vector(self) -> PETSc.Vec:

@@ -61,8 +61,9 @@ class VoltageDrive:
         return self.amplitude_V * weight * math.sin(self.omega * t + phase + self.start_phase)
 
     def __call__(self, t: float) -> None:
+        values = self.values.x.array
         for _name, dofs, weight, phase in self.electrodes:
-            self.values.x.array[dofs] = self.amplitude_V * weight * math.sin(self.omega * t + phase + self.start_phase)
+            values[dofs] = self.amplitude_V * weight * math.sin(self.omega * t + phase + self.start_phase)
 
 
 class TransientModel:

@@ -33,6 +33,9 @@ class Interaction(Protocol):
     name: str
     kind: str
     fe_coupled: bool              # acts on FE DOFs (local_dofs, dof_axes give the owned ones)
+    # optional: ``reads_fields = False`` on an interaction with shared mid-point ``fields`` whose forms never read
+    # them (a node contact reads system.u_mid and states directly): the system then keeps them up to date only for
+    # the interactions that do (default: every interaction with ``fields``)
 
     def bind(self, system) -> None:
         """Check the bodies and take the contact-DOF layout of ``system`` (after it is set up)."""

@@ -160,13 +160,20 @@ def constant_rate_motion(start, rate) -> PrescribedMotion:
     """q(t) = q0 + rate t for every coordinate (a belt at constant speed, a rotor at constant spin)."""
     q0 = np.asarray(start, dtype=float)
     qd = np.asarray(rate, dtype=float)
+    if not qd.any():
+        return _hold(q0)
     zeros = np.zeros_like(q0)
     return lambda t: (q0 + qd * t, qd, zeros)
 
 
 def _hold(position: np.ndarray) -> PrescribedMotion:
     zeros = np.zeros_like(position)
-    return lambda t: (position, zeros, zeros)
+
+    def hold(t: float):
+        return position, zeros, zeros
+
+    hold.constant = True        # the same values at every t (RigidSet.apply_prescribed keeps them)
+    return hold
 
 
 class RigidSet:
@@ -192,6 +199,15 @@ class RigidSet:
         # brakes act on free coordinates only (a prescribed one is not loaded by anything)
         damping = [b.damping_diagonal() for b in bodies]
         self.damping_diagonal = np.concatenate(damping) * self.free_mask if bodies else np.zeros(0)
+        # each body's packed coordinates and prescribed axes (fixed at construction), for apply_prescribed
+        self._prescribed_layout = [(b, np.arange(self.size)[self.all_dofs(b.name)][~b.free_axes_mask],
+                                    ~b.free_axes_mask) for b in self.bodies]
+        self._constant_load = None
+        self._held = {}     # body -> (its constant motion, the prescribed values)
+
+    def _loads_constant(self) -> bool:
+        """No body has a time-dependent applied force or torque (gravity only)."""
+        return all(b.applied_force_N is None and b.applied_torque_N_m is None for b in self.bodies)
 
     def body(self, name: str) -> RigidBody:
         return self.bodies[self.index[name]]
@@ -238,18 +254,26 @@ class RigidSet:
     def external_force_N(self, t: float) -> np.ndarray:
         if not self.bodies:
             return np.zeros(0)
+        if self._loads_constant():     # gravity only: the same array at every t (a copy: callers may write it)
+            if self._constant_load is None:
+                self._constant_load = np.concatenate([b.external_force_N(t) for b in self.bodies])
+            return self._constant_load.copy()
         return np.concatenate([b.external_force_N(t) for b in self.bodies])
 
     def apply_prescribed(self, t: float, z, v=None, a=None) -> None:
         """Overwrite prescribed components of (z, v, a) with their values at time t."""
-        for b in self.bodies:
-            if b.prescribed is None:
+        for i, (b, index, fixed) in enumerate(self._prescribed_layout):
+            motion = b.prescribed
+            if motion is None or not index.size:
                 continue
-            pos, vel, acc = b.prescribed(t)
-            sl = self.all_dofs(b.name)
-            fixed = ~b.free_axes_mask
-            z[sl][fixed] = np.asarray(pos)[fixed]
+            held = self._held.get(i)
+            if held is None or held[0] is not motion:
+                held = (motion, *(np.asarray(x)[fixed] for x in motion(t)))
+                if getattr(motion, "constant", False):
+                    self._held[i] = held
+            _, pos, vel, acc = held
+            z[index] = pos
             if v is not None:
-                v[sl][fixed] = np.asarray(vel)[fixed]
+                v[index] = vel
             if a is not None:
-                a[sl][fixed] = np.asarray(acc)[fixed]
+                a[index] = acc
