@@ -34,12 +34,9 @@ def _one(u_new, u_old, v_old, a_old, dt, beta_dt2, a_factor, one_minus_gamma, ga
 def step_kinematics(u_new, u_old, v_old, a_old, factors, a_new, v_new, u_mid, v_mid):
     """a_{n+1}, v_{n+1} and the mid-point u, v of every entry, into the four output arrays (one simple loop
     per output, which the compiler vectorises: 2.5x faster than one loop writing all four)."""
-    dt, beta_dt2, a_factor, one_minus_gamma, gamma, alpha_f = factors
+    step_rates(u_new, u_old, v_old, a_old, factors, a_new, v_new)
+    alpha_f = factors[5]
     n = u_new.size
-    for i in range(n):
-        a_new[i] = (u_new[i] - u_old[i] - dt * v_old[i]) / beta_dt2 - a_factor * a_old[i]
-    for i in range(n):
-        v_new[i] = v_old[i] + dt * (one_minus_gamma * a_old[i] + gamma * a_new[i])
     for i in range(n):
         u_mid[i] = (1 - alpha_f) * u_new[i] + alpha_f * u_old[i]
     for i in range(n):
