@@ -666,6 +666,8 @@ class PointContact(ForceColumns):
         self.friction = friction
         self.contact_offset_m = float(contact_offset_m)
         self._normal_values = self.normal.tolist()
+        self._bound_rigid = self._lower_dofs = self._upper_dofs = None     # set by bind
+        self._iterate_key = None          # (system, rigid_version) of the values _at_iterate keeps
 
     def penetration(self, z_lower, z_upper, v_lower, v_upper):
         """(delta [m], d(delta)/dt [m/s])."""
@@ -712,8 +714,9 @@ class PointContact(ForceColumns):
         pass
 
     def _state(self, rigid, z, zd):
-        lo, up = self.__dict__.get("_lower_dofs"), self.__dict__.get("_upper_dofs")
-        if lo is None or rigid is not self._bound_rigid:
+        if rigid is self._bound_rigid:
+            lo, up = self._lower_dofs, self._upper_dofs
+        else:
             lo, up = rigid.dofs(self.lower), rigid.dofs(self.upper)
         return self.penetration(z[lo], z[up], zd[lo], zd[up])
 
@@ -724,7 +727,7 @@ class PointContact(ForceColumns):
         if key[1] is None:
             delta, rate = self._state(system.rigid, system.z_mid, system.zd_mid)
             self._iterate_values = (delta, rate, self.force(delta, rate))
-        elif self.__dict__.get("_iterate_key") != key:
+        elif self._iterate_key != key:
             z, zd = system.rigid_mid_values()
             lo, up = self._lower_dofs, self._upper_dofs
             delta, rate = self.penetration(z[lo], z[up], zd[lo], zd[up])
@@ -851,6 +854,7 @@ class NodeContact(ForceColumns):
         self.fields = fields if fields is not None else MidpointFields(fe)
         self.normal = n
         self._normal_values = n.tolist()
+        self._iterate_key = None          # (system, iterate_version) of the values _at_iterate keeps
         self.friction = friction
         self.radius_m = float(radius_m)
         self.stiffness = float(stiffness_N_per_m1_5)
@@ -950,7 +954,7 @@ class NodeContact(ForceColumns):
         """(delta, rate, force(delta, rate)) at the system's mid-point fields, kept while its
         ``iterate_version`` stays (the residual, the tangent and the dissipation of one iterate)."""
         key = (system, getattr(system, "iterate_version", None))
-        if key[1] is None or self.__dict__.get("_iterate_key") != key:
+        if key[1] is None or self._iterate_key != key:
             sl = self._body_dofs
             z, zd = system.rigid_mid_values() if key[1] is not None else (system.z_mid, system.zd_mid)
             delta, rate = self.penetration(system.u_mid, system.v_mid, z[sl], zd[sl])

@@ -130,6 +130,7 @@ class CoupledSystem:
         # what it derived from them while the version stays (NodeContact._at_iterate)
         self.iterate_version = 0
         self.rigid_version = 0          # the same for the rigid mid-point quantities (z_mid, zd_mid) alone
+        self._rigid_values_version = None       # rigid_version of the floats rigid_mid_values keeps
         if fe is not None:
             from dolfinx import fem
 
@@ -323,13 +324,15 @@ class CoupledSystem:
         # say what that state is (``tangent_key``; the same on every rank: the rigid state is replicated)
         keys = [getattr(c, "tangent_key", None) for c in self._rigid_links]
         key = None if any(k is None for k in keys) else (self.c_acc, self.c_vel, *(k(self) for k in keys))
-        if key is not None and None not in key and key in self._rigid_jacobians_by_state:
+        if key is not None and None in key:     # a link on its general path: its tangent has no key
+            key = None
+        if key is not None and key in self._rigid_jacobians_by_state:
             if self.comm.rank == 0:
                 self._jacobian = self._rigid_jacobians_by_state[key]
             return
         Kzz = self._rigid_block(np.diag(self._rigid_diagonal()))
         self._set_jacobian(ContactTangent(s_count), np.zeros((s_count, m)), np.zeros((m, s_count)), Kzz)
-        if key is not None and None not in key and self.comm.rank == 0:
+        if key is not None and self.comm.rank == 0:
             if len(self._rigid_jacobians_by_state) >= 16:
                 self._rigid_jacobians_by_state.clear()
             self._rigid_jacobians_by_state[key] = self._jacobian
@@ -504,7 +507,7 @@ class CoupledSystem:
     def rigid_mid_values(self) -> tuple[list, list]:
         """(z_mid, zd_mid) as lists of floats, formed once per rigid iterate (``rigid_version``): the rigid
         links and node contacts read a few of them, cheaper as floats than as numpy calls."""
-        if self.__dict__.get("_rigid_values_version") != self.rigid_version:
+        if self._rigid_values_version != self.rigid_version:
             self._rigid_values = (self.z_mid.tolist(), self.zd_mid.tolist())
             self._rigid_values_version = self.rigid_version
         return self._rigid_values

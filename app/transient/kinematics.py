@@ -10,7 +10,6 @@ contract to fused multiply-adds unless asked: no ``fastmath``); tests/test_trans
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 from forms.newmark import TimeScheme
@@ -73,14 +72,6 @@ def increment_kinematics(du, u_new, u_old, v_old, a_old, factors, a_new, v_new, 
         a_new[i], v_new[i], _, v_mid[i] = _one(du[i], 0.0, v_old[i], a_old[i], dt, beta_dt2, a_factor,
                                                one_minus_gamma, gamma, alpha_f)
         u_mid[i] = (1 - alpha_f) * u_new[i] + alpha_f * u_old[i]
-
-
-def kinematics(u_new: np.ndarray, u_old: np.ndarray, v_old: np.ndarray, a_old: np.ndarray,
-               factors: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(a_{n+1}, v_{n+1}, u_mid, v_mid) as new arrays."""
-    out = np.empty((4, u_new.size))
-    step_kinematics(u_new, u_old, v_old, a_old, factors, out[0], out[1], out[2], out[3])
-    return out[0], out[1], out[2], out[3]
 
 
 @njit(cache=True)

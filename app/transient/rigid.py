@@ -202,12 +202,10 @@ class RigidSet:
         # each body's packed coordinates and prescribed axes (fixed at construction), for apply_prescribed
         self._prescribed_layout = [(b, np.arange(self.size)[self.all_dofs(b.name)][~b.free_axes_mask],
                                     ~b.free_axes_mask) for b in self.bodies]
+        # no body has a time-dependent applied force or torque (gravity only): external_force_N keeps one array
+        self._loads_constant = all(b.applied_force_N is None and b.applied_torque_N_m is None for b in self.bodies)
         self._constant_load = None
         self._held = {}     # body -> (its constant motion, the prescribed values)
-
-    def _loads_constant(self) -> bool:
-        """No body has a time-dependent applied force or torque (gravity only)."""
-        return all(b.applied_force_N is None and b.applied_torque_N_m is None for b in self.bodies)
 
     def body(self, name: str) -> RigidBody:
         return self.bodies[self.index[name]]
@@ -254,7 +252,7 @@ class RigidSet:
     def external_force_N(self, t: float) -> np.ndarray:
         if not self.bodies:
             return np.zeros(0)
-        if self._loads_constant():     # gravity only: the same array at every t (a copy: callers may write it)
+        if self._loads_constant:     # gravity only: the same array at every t (a copy: callers may write it)
             if self._constant_load is None:
                 self._constant_load = np.concatenate([b.external_force_N(t) for b in self.bodies])
             return self._constant_load.copy()
