@@ -261,6 +261,38 @@ def test_motor_warm_start_continues_the_state_it_starts_from(one_go, tmp_path):
     assert_same_run(warm, split)
 
 
+def test_motor_warm_start_at_another_frequency_keeps_the_drive_phase(tmp_path):
+    """A warm start at another drive frequency (a frequency sweep, bench/bench_motor_frequency.py) starts where the
+    new drive's phase equals the source drive's phase at the source's end, as a swept generator's phase is
+    continuous: (start time x new frequency) and (source end time x source frequency) agree modulo one cycle, to
+    1e-9 cycles (the round-off of a few products of 1e-4 s and 4e4 Hz). Physically: the drive voltage of the
+    warm run's first step differs from the source's last by at most one step of the sine (2 pi / 40 of the
+    amplitude, x 1.1); the frequencies here differ by 1.5 kHz over 6.3 periods, so a clock moved back by whole
+    periods of the new frequency alone would jump the phase by 0.26 cycles (a 1.6 rad kick of the drive). The
+    drive is locked to the reduced model's resonance (app/drive.py) so the detuning changes no basis."""
+    if MPI.COMM_WORLD.size > 1:
+        pytest.skip("serial")
+    locked = SETS + ['transient.drive.lock="resonance"', "transient.drive.lock_modes=2"]
+    source = tmp_path / "source"
+    source_s = 6.3 / 36065.0
+    res0 = run_case_quiet(CASE, source, *locked, f"transient.end_time_s={source_s!r}")["results"]["transient"]
+    warm = tmp_path / "warm"
+    res = run_case_quiet(CASE, warm, *locked, "transient.drive.detuning_Hz=1500.0",
+                         f"transient.start_from={str(source)!r}", f"transient.end_time_s={1 / 36065.0!r}",
+                         )["results"]["transient"]
+    f0, f1 = res0["drive"]["frequency_Hz"], res["drive"]["frequency_Hz"]
+    assert f1 - f0 == pytest.approx(1500.0, rel=1e-9)
+    record = res["warm_start"]
+    assert record["source_frequency_Hz"] == f0 and record["frequency_Hz"] == f1
+    source_cycles = record["source_time_s"] * f0
+    start_cycles = record["start_time_s"] * f1
+    assert (start_cycles - source_cycles + 0.5) % 1.0 - 0.5 == pytest.approx(0.0, abs=1e-9)
+    assert abs(source_s * (f1 - f0) % 1.0 - 0.5) < 0.4       # the test's premise: a whole-period move would jump
+    a, b = _series_rows(source), _series_rows(warm)
+    amplitude = np.max(np.abs(a["drive_voltage_V"]))
+    assert abs(b["drive_voltage_V"][0] - a["drive_voltage_V"][-1]) <= 1.1 * 2 * np.pi / 40 * amplitude
+
+
 def test_motor_warm_start_errors_are_one_line(capsys, one_go, tmp_path):
     """A warm start from a directory that is missing, holds no checkpoint, or a run of another reduced model: exit
     2, one line naming the case file and transient.start_from (validate and run alike where validate can tell)."""

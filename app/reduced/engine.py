@@ -272,12 +272,21 @@ class ModalEngine:
         self.zdd[held] = 0.0
         period = 1.0 / cfg.drive.frequency_Hz
         t0 = float(data["fstate"][lk.F_TIME])
-        self.fstate[lk.F_TIME] = max(t0 - math.floor(t0 / period + 1e-9) * period, 0.0)
+        source_Hz = float(found.engine.get("drive_frequency_Hz", cfg.drive.frequency_Hz))
+        if source_Hz == cfg.drive.frequency_Hz:
+            self.fstate[lk.F_TIME] = max(t0 - math.floor(t0 / period + 1e-9) * period, 0.0)
+        else:
+            # another drive frequency (a frequency sweep): start where this drive's phase equals the source
+            # drive's phase at t0, as a swept generator keeps its phase continuous (a jump in phase would kick
+            # the stator like a step in the drive)
+            cycles = t0 * source_Hz
+            self.fstate[lk.F_TIME] = max(cycles - math.floor(cycles + 1e-9), 0.0) * period
         self.fstate[lk.F_CAP] = float(data["fstate"][lk.F_CAP])
         source_initial = ((found.record.get("case") or {}).get("transient") or {}).get("initial_state", "rest")
         self.cosine_drive = source_initial == "harmonic"
         self.inputs_record = self._inputs(self._weights, self._phases, self.scale_V)
         self.warm_start = {"directory": str(directory), "source_time_s": t0, "start_time_s": self.t,
+                           "source_frequency_Hz": source_Hz, "frequency_Hz": cfg.drive.frequency_Hz,
                            "source_steps": int(data["istate"][lk.I_STEPS]) if "istate" in data else None}
         self.log(f"modal tier: warm start from {found.pointer} (its t = {t0 * 1e3:.6g} ms, here t = "
                  f"{self.t * 1e3:.6g} ms)")
@@ -528,8 +537,8 @@ class ModalEngine:
                   "istate": self.istate, "fstate": self.fstate, "sums_dissipated": self.sums.dissipated,
                   "sums_power": self.sums.power, "sums_damping": self.sums.damping, "site_force": self.site_force,
                   **site_arrays}
-        record = {"drive_voltage_V": self.scale_V, "cosine_drive": self.cosine_drive, "warm_start": self.warm_start,
-                  **site_record}
+        record = {"drive_voltage_V": self.scale_V, "drive_frequency_Hz": self.cfg.drive.frequency_Hz,
+                  "cosine_drive": self.cosine_drive, "warm_start": self.warm_start, **site_record}
         return (arrays if self.comm.rank == 0 else None), record
 
     def checkpoint_files(self, out_dir: Path) -> dict[str, str]:

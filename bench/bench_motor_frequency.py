@@ -1,0 +1,136 @@
+"""The motor's frequency characteristic: rotor speed against drive frequency, swept up and then down.
+
+The case's drive is locked to its model's F(1,4) (``transient.drive.lock = "resonance"``), so a sweep is a sweep
+of ``transient.drive.detuning_Hz``: the reduced stator is built once (its cache key holds no drive frequency).
+The sweep runs from the lowest detuning to the highest and back, each point a warm start from the previous
+point's end state (``transient.start_from``; the drive's phase is kept continuous across the change of
+frequency, as a swept generator does), so the branch the motor is on is followed, as in a measurement with a
+slow sweep. The first point starts from the case's own start (``--start rest`` or ``harmonic``), which picks the
+branch (docs/motor-rotor.md, "Two branches"). Each point runs to the steady-state rule the ``--set`` options give
+(default: the trend rule, no fixed minimum).
+
+    .venv/bin/python bench/bench_motor_frequency.py --out /tmp/motor_frequency --start rest \
+        [--bandwidths 3] [--step-bandwidths 0.5] [--case cases/wwusm-motor.toml] [--set KEY=VALUE ...]
+
+Writes ``motor_frequency.csv`` (one row per point: direction, detuning [Hz], detuning in half-power bandwidths,
+drive frequency [Hz], speed [rpm], normal force [N], the probe's normal amplitude [um], electrical power [W],
+contact fractions, periods, wall time [s]) and ``motor_frequency.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from app.runner import run_case  # noqa: E402
+
+CASE = ROOT / "cases" / "wwusm-motor.toml"
+COLUMNS = ("direction", "detuning_Hz", "detuning_bandwidths", "frequency_Hz", "speed_rpm", "normal_force_N",
+           "normal_amplitude_um", "tangential_amplitude_um", "electrical_power_W", "friction_torque_N_m",
+           "separation", "stick", "forward_slip", "backward_slip", "steady", "periods", "wall_s", "warm_from")
+
+
+def run_point(case: Path, out: Path, sets: list[str], warm_from: Path | None) -> dict:
+    """One point of the sweep; its row from the motor scene's statistics and the drive record."""
+    start = time.perf_counter()
+    if warm_from is not None:
+        sets = sets + [f"transient.start_from={str(Path(warm_from).resolve())!r}"]
+    tr = run_case(case, sets, out, quiet=True)["results"]["transient"]
+    m = tr["statistics"]["motor"]
+    steady = tr.get("steady_state", {})
+    amplitude = m.get("contact_point_amplitude_m", {})
+    row = {"frequency_Hz": tr["drive"]["frequency_Hz"], "speed_rpm": m["speed_rpm"],
+           "normal_force_N": m["normal_force_N"], "normal_amplitude_um": 1e6 * amplitude.get("normal", float("nan")),
+           "tangential_amplitude_um": 1e6 * amplitude.get("tangential", float("nan")),
+           "electrical_power_W": m["electrical_power_W"], "friction_torque_N_m": m["friction_torque_N_m"],
+           "steady": bool(steady.get("steady")), "periods": steady.get("cycles"),
+           "wall_s": time.perf_counter() - start, "warm_from": Path(warm_from).name if warm_from else ""}
+    row.update(m["fractions"])
+    return row
+
+
+def plot(path: Path, rows: list[dict], title: str) -> None:
+    """Speed [rpm] and the contact's normal amplitude [um] against detuning [Hz], up and down sweeps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (speed_ax, wave_ax) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    for direction, style in (("up", "o-"), ("down", "s--")):
+        mine = [r for r in rows if r["direction"] == direction]
+        d = [r["detuning_Hz"] for r in mine]
+        speed_ax.plot(d, [r["speed_rpm"] for r in mine], style, label=f"swept {direction}")
+        wave_ax.plot(d, [r["normal_amplitude_um"] for r in mine], style, label=f"swept {direction}")
+    speed_ax.set(xlabel="drive frequency - model F(1,4) [Hz]", ylabel="rotor speed [rpm]")
+    wave_ax.set(xlabel="drive frequency - model F(1,4) [Hz]", ylabel="normal amplitude at the contact [um]")
+    for ax in (speed_ax, wave_ax):
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+    fig.suptitle(title)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="/tmp/motor_frequency")
+    parser.add_argument("--case", default=str(CASE))
+    parser.add_argument("--start", choices=("rest", "harmonic"), default="rest",
+                        help="the first point's start: from rest (the stator rings up under the rotor) or the "
+                             "stator's free harmonic state")
+    parser.add_argument("--bandwidths", type=float, default=3.0, help="sweep range: +- this many half-power "
+                                                                      "bandwidths 2 zeta f")
+    parser.add_argument("--step-bandwidths", type=float, default=0.5, help="spacing of the points [bandwidths]")
+    parser.add_argument("--zeta", type=float, default=0.002, help="the stator's damping ratio at F(1,4) (the "
+                                                                   "paper's 0.2 %%): sets the bandwidth")
+    parser.add_argument("--set", nargs="*", default=[], help="further --set overrides for every point")
+    args = parser.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    case = Path(args.case)
+    from app.runner import load_for_run
+
+    base = [f'transient.initial_state="{args.start}"'] + args.set
+    if not any(s.startswith("transient.steady_state.rule") for s in base):
+        base.append('transient.steady_state.rule="trend"')
+    nominal = load_for_run(case, base).transient.drive.frequency_Hz
+    bandwidth_Hz = 2 * args.zeta * nominal
+    n = int(round(args.bandwidths / args.step_bandwidths))
+    steps = [k * args.step_bandwidths for k in range(-n, n + 1)]
+    schedule = [("up", b) for b in steps] + [("down", b) for b in reversed(steps[:-1])]
+    rows, previous = [], None
+    started = time.perf_counter()
+    for i, (direction, b) in enumerate(schedule):
+        detuning = b * bandwidth_Hz
+        name = f"{i:02d}-{direction}-{b:+.2f}bw"
+        row = run_point(case, out / name, base + [f"transient.drive.detuning_Hz={detuning!r}"], previous)
+        row.update(direction=direction, detuning_Hz=detuning, detuning_bandwidths=b)
+        rows.append(row)
+        previous = out / name
+        print(f"{direction:>4} {detuning:+8.1f} Hz ({b:+.2f} bw): {row['speed_rpm']:9.3f} rpm, N "
+              f"{row['normal_force_N']:.3f} N, wave {row['normal_amplitude_um']:.3f} um, "
+              f"{row['electrical_power_W']:.3g} W, steady {row['steady']} after {row['periods']} periods, "
+              f"{row['wall_s']:.0f} s", flush=True)
+    with open(out / "motor_frequency.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: row[k] for k in COLUMNS})
+    plot(out / "motor_frequency.png", rows, f"WW-USM, modal tier: frequency characteristic from {args.start}, "
+                                            f"bandwidth {bandwidth_Hz:.0f} Hz")
+    report = {"points": len(rows), "wall_s": time.perf_counter() - started, "bandwidth_Hz": bandwidth_Hz,
+              "start": args.start, "sets": base}
+    (out / "motor_frequency.json").write_text(json.dumps({"report": report, "rows": rows}, indent=1))
+    print(json.dumps(report, indent=1))
+
+
+if __name__ == "__main__":
+    main()
