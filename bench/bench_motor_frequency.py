@@ -12,6 +12,7 @@ branch (docs/motor-rotor.md, "Two branches"). Each point runs to the steady-stat
     .venv/bin/python bench/bench_motor_frequency.py --out /tmp/motor_frequency --start rest \
         [--bandwidths 3] [--step-bandwidths 0.5] [--case cases/wwusm-motor.toml] [--set KEY=VALUE ...]
 
+Run again with the same ``--out``, a sweep reuses the points it finished and resumes the one it was stopped in.
 Writes ``motor_frequency.csv`` (one row per point: direction, detuning [Hz], detuning in half-power bandwidths,
 drive frequency [Hz], speed [rpm], normal force [N], the probe's normal amplitude [um], electrical power [W],
 contact fractions, periods, wall time [s]) and ``motor_frequency.png``.
@@ -42,7 +43,12 @@ def run_point(case: Path, out: Path, sets: list[str], warm_from: Path | None) ->
     start = time.perf_counter()
     if warm_from is not None:
         sets = sets + [f"transient.start_from={str(Path(warm_from).resolve())!r}"]
-    tr = run_case(case, sets, out, quiet=True)["results"]["transient"]
+    summary = out / "summary.json"
+    if summary.exists():                                   # a point of an earlier, interrupted sweep: reused
+        tr = json.loads(summary.read_text())["results"]["transient"]
+    else:                                                  # resumed from its checkpoint if it was interrupted
+        resume = (out / "checkpoint" / "checkpoint.json").exists()
+        tr = run_case(case, sets, out, quiet=True, resume=resume)["results"]["transient"]
     m = tr["statistics"]["motor"]
     steady = tr.get("steady_state", {})
     amplitude = m.get("contact_point_amplitude_m", {})
@@ -56,7 +62,22 @@ def run_point(case: Path, out: Path, sets: list[str], warm_from: Path | None) ->
     return row
 
 
-def plot(path: Path, rows: list[dict], title: str) -> None:
+def lumped_sweep(case: Path, out: Path, sets: list[str], resonance_Hz: float, detunings_Hz) -> list[dict]:
+    """The lumped tier (``tier = "lumped"``, the friction-drive law on the F(1,4) pair: docs/lumped-motor.md) at
+    the same detunings from ``resonance_Hz``: its no-load speed on the upper (riding) branch, and the lower root
+    where it exists. ``sets`` type the stator's data (bench/motor_lumped_parameters.py on the modal case's reduced
+    stator)."""
+    rows = []
+    for d in detunings_Hz:
+        res = run_case(case, sets + [f"lumped.drive.frequency_Hz={resonance_Hz + d!r}"], out / f"lumped{d:+.1f}",
+                       quiet=True)["results"]
+        m = res["transient"]["statistics"]["motor"] if "transient" in res else res["lumped"]["statistics"]["motor"]
+        rows.append({"detuning_Hz": d, "speed_rpm": m["speed_rpm"],
+                     "normal_amplitude_um": 1e6 * m.get("wave_amplitude_m", float("nan"))})
+    return rows
+
+
+def plot(path: Path, rows: list[dict], title: str, lumped: list[dict] | None = None) -> None:
     """Speed [rpm] and the contact's normal amplitude [um] against detuning [Hz], up and down sweeps."""
     import matplotlib
 
@@ -69,6 +90,10 @@ def plot(path: Path, rows: list[dict], title: str) -> None:
         d = [r["detuning_Hz"] for r in mine]
         speed_ax.plot(d, [r["speed_rpm"] for r in mine], style, label=f"swept {direction}")
         wave_ax.plot(d, [r["normal_amplitude_um"] for r in mine], style, label=f"swept {direction}")
+    if lumped:
+        d = [r["detuning_Hz"] for r in lumped]
+        speed_ax.plot(d, [r["speed_rpm"] for r in lumped], "k:", label="lumped tier (riding)")
+        wave_ax.plot(d, [r["normal_amplitude_um"] for r in lumped], "k:", label="lumped tier (riding)")
     speed_ax.set(xlabel="drive frequency - model F(1,4) [Hz]", ylabel="rotor speed [rpm]")
     wave_ax.set(xlabel="drive frequency - model F(1,4) [Hz]", ylabel="normal amplitude at the contact [um]")
     for ax in (speed_ax, wave_ax):
@@ -92,6 +117,9 @@ def main() -> None:
     parser.add_argument("--zeta", type=float, default=0.002, help="the stator's damping ratio at F(1,4) (the "
                                                                    "paper's 0.2 %%): sets the bandwidth")
     parser.add_argument("--set", nargs="*", default=[], help="further --set overrides for every point")
+    parser.add_argument("--lumped-case", default=None, help="a lumped friction_drive case to sweep beside it")
+    parser.add_argument("--lumped-set", nargs="*", default=[], help="--set overrides of the lumped case (its "
+                                                                     "stator's data)")
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -124,8 +152,19 @@ def main() -> None:
         writer.writeheader()
         for row in rows:
             writer.writerow({k: row[k] for k in COLUMNS})
+    lumped = None
+    if args.lumped_case:
+        resonance = json.loads((out / f"00-up-{steps[0]:+.2f}bw" / "summary.json").read_text())[
+            "results"]["transient"]["drive"]["resonance_Hz"]
+        fine = [k * bandwidth_Hz / 8 for k in range(-8 * n, 8 * n + 1)] if n else [0.0]
+        fine = [d * args.step_bandwidths for d in fine]
+        lumped = lumped_sweep(Path(args.lumped_case), out / "lumped", args.lumped_set, resonance, fine)
+        with open(out / "motor_frequency_lumped.csv", "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=("detuning_Hz", "speed_rpm", "normal_amplitude_um"))
+            writer.writeheader()
+            writer.writerows(lumped)
     plot(out / "motor_frequency.png", rows, f"WW-USM, modal tier: frequency characteristic from {args.start}, "
-                                            f"bandwidth {bandwidth_Hz:.0f} Hz")
+                                            f"bandwidth {bandwidth_Hz:.0f} Hz", lumped)
     report = {"points": len(rows), "wall_s": time.perf_counter() - started, "bandwidth_Hz": bandwidth_Hz,
               "start": args.start, "sets": base}
     (out / "motor_frequency.json").write_text(json.dumps({"report": report, "rows": rows}, indent=1))
