@@ -5,8 +5,9 @@ of ``transient.drive.detuning_Hz``: the reduced stator is built once (its cache 
 The sweep runs from the lowest detuning to the highest and back, each point a warm start from the previous
 point's end state (``transient.start_from``; the drive's phase is kept continuous across the change of
 frequency, as a swept generator does), so the branch the motor is on is followed, as in a measurement with a
-slow sweep. The first point starts from the case's own start (``--start rest`` or ``harmonic``), which picks the
-branch (docs/motor-rotor.md, "Two branches"). Each point runs to the steady-state rule the ``--set`` options give
+slow sweep (``--from-centre``: from the resonance up, then from the resonance down). The first point starts
+from the case's own start (``--start rest`` or ``harmonic``), which picks the branch (docs/motor-rotor.md,
+"Two branches"). Each point runs to the steady-state rule the ``--set`` options give
 (default: the trend rule, no fixed minimum).
 
     .venv/bin/python bench/bench_motor_frequency.py --out /tmp/motor_frequency --start rest \
@@ -117,6 +118,9 @@ def main() -> None:
     parser.add_argument("--zeta", type=float, default=0.002, help="the stator's damping ratio at F(1,4) (the "
                                                                    "paper's 0.2 %%): sets the bandwidth")
     parser.add_argument("--set", nargs="*", default=[], help="further --set overrides for every point")
+    parser.add_argument("--from-centre", action="store_true",
+                        help="start at the resonance (detuning 0) and sweep up from there, then down from there "
+                             "(the branch the start reaches at resonance, as far as it persists either way)")
     parser.add_argument("--lumped-case", default=None, help="a lumped friction_drive case to sweep beside it")
     parser.add_argument("--lumped-set", nargs="*", default=[], help="--set overrides of the lumped case (its "
                                                                      "stator's data)")
@@ -133,10 +137,15 @@ def main() -> None:
     bandwidth_Hz = 2 * args.zeta * nominal
     n = int(round(args.bandwidths / args.step_bandwidths))
     steps = [k * args.step_bandwidths for k in range(-n, n + 1)]
-    schedule = [("up", b) for b in steps] + [("down", b) for b in reversed(steps[:-1])]
+    if args.from_centre:      # the branch the start reaches at the resonance, followed up, then down from there
+        schedule = [("up", b) for b in steps[n:]] + [("down", b) for b in reversed(steps[:n])]
+    else:
+        schedule = [("up", b) for b in steps] + [("down", b) for b in reversed(steps[:-1])]
     rows, previous = [], None
     started = time.perf_counter()
     for i, (direction, b) in enumerate(schedule):
+        if args.from_centre and direction == "down" and b == steps[n - 1]:
+            previous = out / f"{0:02d}-up-{steps[n]:+.2f}bw"
         detuning = b * bandwidth_Hz
         name = f"{i:02d}-{direction}-{b:+.2f}bw"
         row = run_point(case, out / name, base + [f"transient.drive.detuning_Hz={detuning!r}"], previous)
@@ -154,7 +163,8 @@ def main() -> None:
             writer.writerow({k: row[k] for k in COLUMNS})
     lumped = None
     if args.lumped_case:
-        resonance = json.loads((out / f"00-up-{steps[0]:+.2f}bw" / "summary.json").read_text())[
+        first = steps[n] if args.from_centre else steps[0]
+        resonance = json.loads((out / f"00-up-{first:+.2f}bw" / "summary.json").read_text())[
             "results"]["transient"]["drive"]["resonance_Hz"]
         fine = [k * bandwidth_Hz / 8 for k in range(-8 * n, 8 * n + 1)] if n else [0.0]
         fine = [d * args.step_bandwidths for d in fine]
