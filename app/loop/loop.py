@@ -197,7 +197,7 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
         watch.restore(found.loop["steady_state"])
     fields = engine.field_export(out_dir, t_start if found is not None else None)
     if fields is not None and found is not None and hasattr(fields, "resume"):
-        fields.resume(found.loop.get("fields"))        # the frames the checkpoint buffered, buffered again
+        fields.resume(found.loop.get("fields"), found.arrays)     # the frames the checkpoint buffered, again
     if fields is not None and found is None:
         fields.write(engine.t, engine.body_positions())
     end = engine.end_time_s
@@ -215,7 +215,7 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     try:
         while engine.t < end * (1 - 1e-12) and not steady:
             stop_at = math.inf
-            if fields is not None:
+            if fields is not None and getattr(fields, "engine_frames", None) is None:    # else the engine takes them
                 stop_at = fields.next_s - FIELD_TIME_TOLERANCE * fields.interval_s
             if period is not None:       # the steady test runs at period ends: stop there
                 stop_at = min(stop_at, (math.floor(engine.t / period + 1e-9) + 1) * period * (1 - 1e-12))
@@ -234,7 +234,7 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
                 kill_point("series_block")
             for name, (units, table) in engine.take_tables().items():
                 series.append_table(name, table, units)
-            if fields is not None:           # writes only when an output is due
+            if fields is not None:           # the frames the engine took; a frame at t when one is due
                 mark = time.perf_counter()
                 fields.write(engine.t, engine.body_positions())
                 field_wall += time.perf_counter() - mark
@@ -313,6 +313,8 @@ def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, 
     arrays, record = engine.snapshot()
     loop = {"steady_state": watch.snapshot() if watch is not None else None, "tables": dict(series.table_rows)}
     if fields is not None and hasattr(fields, "checkpoint_record"):
-        loop["fields"] = fields.checkpoint_record()
+        loop["fields"], field_arrays = fields.checkpoint_record()
+        if arrays is not None:
+            arrays = {**arrays, **field_arrays}
     checkpoint.write(engine.t, arrays, record, loop, series.rows_written)
     return engine.steps

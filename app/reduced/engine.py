@@ -28,6 +28,9 @@ from app.reduced.model import ReducedModel, load_or_build
 
 MODEL_FILE = "reduced-model.npz"
 ROWS_PER_CALL = 4096
+#: field frames the kernel buffers in a call, and frame times it is given at once (app/reduced/kernel.py Frames)
+FRAMES_PER_CALL = 64
+FRAME_TIMES_PER_CALL = 256
 
 
 class ModalEngine:
@@ -180,6 +183,9 @@ class ModalEngine:
         self.fstate[lk.F_CAP] = np.inf
         self.sums = lk.Sums(np.zeros(n_c + n_l), np.full(n_c + n_l, np.nan), np.zeros(2))   # power: none yet
         self.site_force = np.zeros((ns, 3))
+        self.frames = lk.no_frames(n, m)     # the field frames the kernel takes (field_export), none by default
+        self._frame_series = None
+        self._taken: list[tuple[float, np.ndarray, np.ndarray]] = []
 
     def _harmonic(self, scale: float) -> np.ndarray:
         """Complex steady-state coordinates for the electrodes' phasors (amplitude ``scale`` x weight,
@@ -387,7 +393,8 @@ class ModalEngine:
         mark = time.perf_counter()
         saved = (self.fstate.copy(), self.istate.copy())
         out = lk.Outputs(*(arr[:1] for arr in self._out), self.site_sums)
-        lk.run(self.t, self._state(), self._model(), self.cache, out, self.case.output.energies)
+        lk.run(self.t, self._state(), self._model(), self.cache, out, self.case.output.energies,
+               lk.no_frames(self.q.size, self.z.size))
         self.fstate[:], self.istate[:] = saved
         self.compile_wall_s = time.perf_counter() - mark
         self._loop_wall = 0.0
@@ -449,15 +456,22 @@ class ModalEngine:
         taken = 0
         sites_on = self.case.output.contact_sites
         start = time.perf_counter()
+        if self._frame_series is not None:
+            # the field frames from the series' next frame time on (the loop has taken every earlier one)
+            self._frame_times(self._frame_series.next_s if not self._taken else
+                              self._frame_series.schedule.next_after(self._taken[-1][0]))
         while self.t < t_end * (1 - 1e-12) and taken < max_steps:
             cap = int(min(ROWS_PER_CALL, max_steps - taken))
             out = lk.Outputs(*(arr[:cap] for arr in self._out), self.site_sums)
             stop = min(stop_at_s, self.tables.next_s * (1 - 1e-12)) if sites_on else stop_at_s
             self.fstate[lk.F_STOP] = stop
-            code, rows = lk.run(t_end, self._state(), self._model(), self.cache, out, self.case.output.energies)
+            code, rows = lk.run(t_end, self._state(), self._model(), self.cache, out, self.case.output.energies,
+                                self.frames)
             if rows:
                 blocks.append(self._block(out, rows))
             taken += rows
+            if self.frames.slots[1]:
+                self._take_frames_out()
             if code == lk.STEP_FAILED:
                 raise NumericalFailure(f"modal tier: a step failed at t = {self.t:.6e} s after "
                                        f"{self.istate[lk.I_CUTBACKS]} cut-backs (dt below min_s = "
@@ -470,6 +484,29 @@ class ModalEngine:
         if not blocks:
             return {}
         return {k: np.concatenate([b[k] for b in blocks]) for k in blocks[0]}
+
+    def _frame_times(self, from_s: float) -> None:
+        """Give the kernel the field frame times from ``from_s`` (a frame time) on."""
+        schedule = self._frame_series.schedule
+        times = schedule.upcoming(from_s, FRAME_TIMES_PER_CALL) if math.isfinite(from_s) else np.zeros(0)
+        self.frames = self.frames._replace(times=np.ascontiguousarray(times, dtype=float))
+        self.frames.slots[0] = 0
+
+    def _take_frames_out(self) -> None:
+        """Move the frames the kernel took out of its buffers; give it further frame times when it took its
+        last."""
+        f = self.frames
+        for i in range(int(f.slots[1])):
+            self._taken.append((float(f.t[i]), f.q[i].copy(), f.z[i].copy()))
+        f.slots[1] = 0
+        if f.slots[0] >= f.times.size and f.times.size:
+            self._frame_times(self._frame_series.schedule.next_after(self._taken[-1][0]))
+
+    def taken_frames(self) -> list[tuple[float, np.ndarray, np.ndarray]]:
+        """The field frames (t [s], coordinates q, body coordinates z) the kernel took since the last call
+        (FieldSeriesExport.engine_frames)."""
+        taken, self._taken = self._taken, []
+        return taken
 
     def _block(self, out, rows: int) -> dict[str, np.ndarray]:
         cfg, model, case = self.cfg, self.model, self.case
@@ -545,11 +582,21 @@ class ModalEngine:
 
         case, slices = self.case, dict(self.body_slices)
         vertex = ReducedVertexFields(self.model, self.comm, self.case.output.derived)
-        return FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
-                                 lambda: self.q, frame_schedule(self.case),
-                                 bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
-                                 resume_from_s=resume_from_s,
-                                 sites=self._site_cloud() if case.output.contact_pressure else None)
+        series = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
+                                   lambda: self.q, frame_schedule(self.case),
+                                   bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
+                                   resume_from_s=resume_from_s,
+                                   sites=self._site_cloud() if case.output.contact_pressure else None)
+        if series.engine_can_take:
+            # the kernel takes the frames at its steps (the loop's rule, app/reduced/kernel.py Frames): no stop of
+            # the compiled loop per frame (BENCHMARKS.md, "Field output of a modal run")
+            n, m = self.q.size, self.z.size
+            self.frames = lk.Frames(np.zeros(0), series.due_s, series.after_s, np.zeros(2, np.int64),
+                                    np.zeros(FRAMES_PER_CALL), np.zeros((FRAMES_PER_CALL, n)),
+                                    np.zeros((FRAMES_PER_CALL, m)))
+            self._frame_series = series
+            series.engine_frames = self.taken_frames
+        return series
 
     def _site_cloud(self):
         """``output.contact_pressure``: the surface contacts' sites as the field series' point cloud companion
