@@ -397,9 +397,12 @@ class FieldSeriesExport:
     def write(self, t: float, body_positions=None) -> None:
         """Buffer the frames an engine took (:attr:`engine_frames`), then a frame at ``t`` if one is due."""
         if self.engine_frames is not None:
-            for frame_t, q, z in self.engine_frames():
+            taken = self.engine_frames()
+            for frame_t, q, z in taken:
                 self._add(_Frame(float(frame_t), state=q if self.rank0 else None, scalars={},
-                                 z=z if self.rank0 and self.bodies is not None else None))
+                                 z=z if self.rank0 and self.bodies is not None else None), last=False)
+            if taken:
+                self.next_s = self._next_after(float(taken[-1][0]))
         if t < self.next_s - 1e-9 * self.interval_s:
             return
         x = self.solution()
@@ -423,11 +426,13 @@ class FieldSeriesExport:
             frame.sites = site_state
         self._add(frame)
 
-    def _add(self, frame: _Frame) -> None:
-        """Buffer a frame (a batch full: write it) and move to the next frame time."""
+    def _add(self, frame: _Frame, last: bool = True) -> None:
+        """Buffer a frame (a batch full: write it) and, when it is the ``last`` of those taken, move to the next
+        frame time."""
         self.pending.append(frame)
         self.written += 1
-        self.next_s = self._next_after(frame.t)
+        if last:
+            self.next_s = self._next_after(frame.t)
         kill_point("fields_written")
         if len(self.pending) >= self.batch_frames:
             self.flush()
