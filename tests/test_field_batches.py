@@ -329,3 +329,34 @@ def test_a_checkpoint_record_of_the_older_format_resumes(tmp_path):
     for (_, x), (_, y) in zip(a, b):
         for name in names:
             np.testing.assert_array_equal(x[name], y[name])
+
+
+def test_region_peaks_from_chosen_columns_and_any_pair_order():
+    """app/fe/derived.py frame_region_peaks on the raw columns raw_columns chooses (stress and E for these
+    fields), with the von Mises and principal stresses passed in (``known``), and on the pairs in another order
+    (a region's pairs not consecutive: indices instead of a slice), against the 18-column call on pairs ordered
+    by region: the same peaks exactly (maxima of the same values)."""
+    from types import SimpleNamespace
+
+    from app.fe.derived import RAW_COLUMNS, frame_region_peaks, node_fields, raw_columns
+
+    rng = np.random.default_rng(3)
+    values = rng.standard_normal((4, 30, RAW_COLUMNS)) * 1e6
+    pair_region = np.repeat([1, 2, 5], [8, 12, 10])
+    regions = [SimpleNamespace(tag=1, name="horn", e=None), SimpleNamespace(tag=2, name="piezo", e=True),
+               SimpleNamespace(tag=5, name="stem", e=None)]
+    reference = frame_region_peaks(values, pair_region, regions)
+    names = ("von_mises", "principal_stress")
+    indices, columns = raw_columns(names, electric=True)
+    assert indices.tolist() == list(range(6, 15))
+    chosen = values[..., indices]
+    known = {key: v.reshape(4, 30, *v.shape[1:])
+             for key, v in node_fields(chosen.reshape(120, -1), names, columns=columns).items()}
+    order = rng.permutation(30)
+    for peaks in (frame_region_peaks(chosen, pair_region, regions, columns),
+                  frame_region_peaks(chosen, pair_region, regions, columns, known=known),
+                  frame_region_peaks(chosen[:, order], pair_region[order], regions, columns),
+                  frame_region_peaks(values[:, order], pair_region[order], regions,
+                                     known={k: v[:, order] for k, v in known.items()})):
+        assert peaks == reference
+    assert sorted(reference[0]["piezo"]) == ["electric_field_V_per_m", "max_principal_stress_Pa", "von_mises_Pa"]

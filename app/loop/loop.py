@@ -10,9 +10,10 @@ returns their time-series rows; the loop then exports (series, fields), checkpoi
     engine = make(found)                 build the model (a resumed modal run: its saved reduced model)
     found ? engine.restore(found) : (mark started, engine.start())
     while t < end and not steady:
-        rows = engine.advance(end, steps to the next checkpoint, next field output or period end)
+        rows = engine.advance(end, steps to the next checkpoint, next field output (unless the engine takes
+                              the frames itself: the modal kernel) or period end)
         steady.update_block(rows); series.write_block(rows since the last write) at each progress step;
-        fields (buffered); progress
+        fields (buffered: those the engine took, a frame at t if due); progress
         checkpoint when due (the buffered field frames written first)
     checkpoint at the end; results = the common keys + engine.results()
 

@@ -27,17 +27,20 @@ file unreadable; here it can only hit a batch file that the XML does not name ye
 temporary name and renamed), and the XML is replaced atomically after the batch file exists. So after a
 kill at any moment the XML and every file it names are complete.
 
-Checkpoints (app/loop/loop.py): a frame at or before a checkpoint's time is either on disk when the checkpoint
-is written or in the checkpoint itself. The FE tier's buffered frames (sampled fields, large) are written
-before every checkpoint; the modal tier's (a time, its coordinates q and body coordinates z: a few hundred
-numbers) ride in the checkpoint's record (:meth:`FieldSeriesExport.checkpoint_record`), so its batches are not
-cut at checkpoints (with a contact site cloud, ``output.contact_pressure``, whose site states are larger, they
-are written before it as the FE tier's). A resumed run (``resume_from_s``, then
-:meth:`FieldSeriesExport.resume` with the checkpoint's record) keeps the frames that were on disk at the
-checkpoint (XML entries and the batch files they name), removes every other frame file (a batch written after
-the checkpoint, or not yet named), buffers the checkpoint's frames again and continues the series. Its batches
-are the run in one go's (cut at the same frames), so its values are that run's bit for bit; resumed with
-another checkpoint interval, the FE tier's cut differs and the values agree to round-off.
+The modal tier's compiled loop takes the frames itself (``engine_frames``: app/reduced/kernel.py Frames, given
+:meth:`FrameSchedule.upcoming`), at the steps the loop would, so the loop does not stop it at every frame time.
+
+Checkpoints (app/loop/loop.py): a frame at or before a checkpoint's time is either on disk when the checkpoint is
+written or in the checkpoint itself. The FE tier's buffered frames (sampled fields, large) are written before every
+checkpoint; the modal tier's (a time, its coordinates q and body coordinates z: a few hundred numbers) ride in the
+checkpoint (:meth:`FieldSeriesExport.checkpoint_record`: the times in its record, q and z in its state arrays), so
+its batches are not cut at checkpoints (with a contact site cloud, ``output.contact_pressure``, whose site states
+are larger, they are written before it as the FE tier's). A resumed run (``resume_from_s``, then
+:meth:`FieldSeriesExport.resume` with the checkpoint's record) keeps the frames that were on disk at the checkpoint
+(XML entries and the batch files they name), removes every other frame file (a batch written after the checkpoint,
+or not yet named), buffers the checkpoint's frames again and continues the series. Its batches are the run in one
+go's (cut at the same frames), so its values are that run's bit for bit; resumed with another checkpoint interval,
+the FE tier's cut differs and the values agree to round-off.
 """
 
 from __future__ import annotations
