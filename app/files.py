@@ -110,8 +110,9 @@ class _LowLevel:
         space = self.spaces.get(arr.shape)
         if space is None:
             space = self.spaces[arr.shape] = h5s.create_simple(arr.shape)
-        ds = h5d.create(f.id, name.encode(), self._type(arr.dtype), space, lcpl=self.lcpl)
-        ds.write(h5s.ALL, h5s.ALL, arr)
+        tid = self._type(arr.dtype)
+        ds = h5d.create(f.id, name.encode(), tid, space, lcpl=self.lcpl)
+        ds.write(h5s.ALL, h5s.ALL, arr, mtype=tid)       # the memory type is the file's: no lookup per write
         return ds
 
     def attribute(self, ds, key: str, value) -> None:
@@ -121,11 +122,11 @@ class _LowLevel:
         from h5py import h5a
 
         if isinstance(value, str):
-            data, tid = np.array(value, dtype=self.str_dtype), self.str_type
+            data, tid, mtype = np.array(value, dtype=self.str_dtype), self.str_type, None
         elif isinstance(value, (float, int, np.floating, np.integer)) and not isinstance(value, bool):
             data = np.array(value)
-            tid = self._type(data.dtype)
+            tid = mtype = self._type(data.dtype)
         else:
             h5py.Dataset(ds).attrs[key] = value
             return
-        h5a.create(ds, key.encode(), tid, self.scalar).write(data)
+        h5a.create(ds, key.encode(), tid, self.scalar).write(data, mtype=mtype)
