@@ -64,42 +64,69 @@ def write_h5_atomic(path: Path, datasets: dict[str, np.ndarray], attrs: dict[str
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     with h5py.File(tmp, "w") as f:
+        low = _LowLevel()
         for name, values in datasets.items():
-            ds = _fast_dataset(f, name, values)
+            ds = low.dataset(f, name, values)
             if ds is None:
                 ds = f.create_dataset(name, data=values).id
             for key, value in (attrs or {}).get(name, {}).items():
-                _set_attribute(ds, key, value)
+                low.attribute(ds, key, value)
     os.replace(tmp, path)
 
 
-def _fast_dataset(f, name: str, values):
-    """The low-level dataset of a numeric array (None for anything else: h5py's high level writes it)."""
-    from h5py import h5d, h5p, h5s, h5t
+class _LowLevel:
+    """Datasets and attributes through h5py's low-level API, the property list, types and dataspaces made once per
+    file (a batch of field frames writes hundreds of datasets of a few shapes)."""
 
-    arr = np.asarray(values)
-    if arr.dtype.kind not in "fiub" or arr.ndim == 0 or arr.size == 0:
-        return None
-    arr = np.ascontiguousarray(arr)
-    lcpl = h5p.create(h5p.LINK_CREATE)
-    lcpl.set_create_intermediate_group(True)
-    lcpl.set_char_encoding(h5t.CSET_UTF8)
-    ds = h5d.create(f.id, name.encode(), h5t.py_create(arr.dtype), h5s.create_simple(arr.shape), lcpl=lcpl)
-    ds.write(h5s.ALL, h5s.ALL, arr)
-    return ds
+    def __init__(self):
+        import h5py
+        from h5py import h5p, h5s, h5t
 
+        self.lcpl = h5p.create(h5p.LINK_CREATE)
+        self.lcpl.set_create_intermediate_group(True)
+        self.lcpl.set_char_encoding(h5t.CSET_UTF8)
+        self.types: dict = {}
+        self.spaces: dict = {}
+        self.str_dtype = h5py.string_dtype()
+        self.str_type = h5t.py_create(self.str_dtype, logical=True)
+        self.scalar = h5s.create(h5s.SCALAR)
 
-def _set_attribute(ds, key: str, value) -> None:
-    """A float, int or str attribute through the low-level API, anything else through h5py's AttributeManager."""
-    import h5py
-    from h5py import h5a, h5s, h5t
+    def _type(self, dtype):
+        tid = self.types.get(dtype.str)
+        if tid is None:
+            from h5py import h5t
 
-    if isinstance(value, str):
-        data, tid = np.array(value, dtype=h5py.string_dtype()), h5t.py_create(h5py.string_dtype(), logical=True)
-    elif isinstance(value, (float, int, np.floating, np.integer)) and not isinstance(value, bool):
-        data = np.array(value)
-        tid = h5t.py_create(data.dtype)
-    else:
-        h5py.Dataset(ds).attrs[key] = value
-        return
-    h5a.create(ds, key.encode(), tid, h5s.create(h5s.SCALAR)).write(data)
+            tid = self.types[dtype.str] = h5t.py_create(dtype)
+        return tid
+
+    def dataset(self, f, name: str, values):
+        """The low-level dataset of a numeric array (None for anything else: h5py's high level writes it)."""
+        from h5py import h5d, h5s
+
+        arr = np.asarray(values)
+        if arr.dtype.kind not in "fiub" or arr.ndim == 0 or arr.size == 0:
+            return None
+        arr = np.ascontiguousarray(arr)
+        space = self.spaces.get(arr.shape)
+        if space is None:
+            space = self.spaces[arr.shape] = h5s.create_simple(arr.shape)
+        tid = self._type(arr.dtype)
+        ds = h5d.create(f.id, name.encode(), tid, space, lcpl=self.lcpl)
+        ds.write(h5s.ALL, h5s.ALL, arr, mtype=tid)       # the memory type is the file's: no lookup per write
+        return ds
+
+    def attribute(self, ds, key: str, value) -> None:
+        """A float, int or str attribute through the low-level API, anything else through h5py's
+        AttributeManager."""
+        import h5py
+        from h5py import h5a
+
+        if isinstance(value, str):
+            data, tid, mtype = np.array(value, dtype=self.str_dtype), self.str_type, None
+        elif isinstance(value, (float, int, np.floating, np.integer)) and not isinstance(value, bool):
+            data = np.array(value)
+            tid = mtype = self._type(data.dtype)
+        else:
+            h5py.Dataset(ds).attrs[key] = value
+            return
+        h5a.create(ds, key.encode(), tid, self.scalar).write(data, mtype=mtype)

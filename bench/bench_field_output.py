@@ -11,6 +11,10 @@ run. Two fractions of the run with default outputs are printed:
 - ``difference``: (loop wall with fields - loop wall without) / loop wall with fields (the cost of fields
   wherever it lands, e.g. a checkpoint that waits for them).
 
+The same two fractions of the loop's process CPU time (``cpu_time_s``, ``field_output_cpu_s``) are printed when
+the installation reports them: on a shared machine the wall times of both runs stretch with the load, the CPU
+times much less.
+
     PIEZODYN_CACHE_DIR=/work/wt/cache OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/bench_field_output.py \\
         cases/usdc-fe.toml --set 'tier="modal"' --set transient.end_time_s=0.05 \\
         [--before /path/to/old/.venv/bin/piezodyn] [--repeat 2]
@@ -50,6 +54,7 @@ def run(piezodyn: str, case: Path, sets: list[str], out: Path) -> dict:
         sys.exit(f"{' '.join(cmd)} failed:\n{done.stderr[-3000:]}")
     res = json.loads((out / "summary.json").read_text())["results"]["transient"]
     return {"process_s": wall, "loop_s": res["wall_time_s"], "field_s": res.get("field_output_wall_s", 0.0),
+            "loop_cpu_s": res.get("cpu_time_s"), "field_cpu_s": res.get("field_output_cpu_s"),
             "frames": res.get("field_outputs", 0), "steps": res["steps"], "load": f"{before} -> {load()}",
             "from_cache": res.get("reduction", {}).get("from_cache")}
 
@@ -75,18 +80,26 @@ def main() -> None:
                 for outputs, extra in (("default", []), ("fields off", ["output.fields=false"])):
                     r = run(piezodyn, case, [*args.sets, *extra], tmp / f"{label}-{outputs}-{repeat}".replace(" ", "_"))
                     rows.append((label, outputs, r))
+                    cpu = (f"  loop cpu {r['loop_cpu_s']:6.2f} s  fields cpu {r['field_cpu_s']:5.2f} s"
+                           if r["loop_cpu_s"] is not None else "")
                     print(f"{label:6s} {outputs:10s} process {r['process_s']:7.2f} s  loop {r['loop_s']:7.2f} s  "
-                          f"fields {r['field_s']:6.2f} s  frames {r['frames']:4d}  steps {r['steps']}  "
+                          f"fields {r['field_s']:6.2f} s{cpu}  frames {r['frames']:4d}  steps {r['steps']}  "
                           f"cache {r['from_cache']}  load {r['load']}", flush=True)
     print("\n| code | loop, default outputs [s] | loop, fields off [s] | field output (timer) [s] | frames | "
-          "fraction (timer) | fraction (difference) |")
-    print("|---|---|---|---|---|---|---|")
+          "fraction (timer) | fraction (difference) | loop CPU, default / off [s] | field CPU [s] | "
+          "CPU fraction (timer) | CPU fraction (difference) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for repeat in range(args.repeat):
         for label, _ in installs:
             on = next(r for lab, o, r in rows[repeat * 2 * len(installs):] if lab == label and o == "default")
             off = next(r for lab, o, r in rows[repeat * 2 * len(installs):] if lab == label and o == "fields off")
+            cpu = "| - | - | - | - |"
+            if on["loop_cpu_s"] is not None and off["loop_cpu_s"] is not None:
+                cpu = (f"| {on['loop_cpu_s']:.2f} / {off['loop_cpu_s']:.2f} | {on['field_cpu_s']:.2f} | "
+                       f"{on['field_cpu_s'] / on['loop_cpu_s']:.1%} | "
+                       f"{(on['loop_cpu_s'] - off['loop_cpu_s']) / on['loop_cpu_s']:.1%} |")
             print(f"| {label} | {on['loop_s']:.2f} | {off['loop_s']:.2f} | {on['field_s']:.2f} | {on['frames']} | "
-                  f"{on['field_s'] / on['loop_s']:.1%} | {(on['loop_s'] - off['loop_s']) / on['loop_s']:.1%} |")
+                  f"{on['field_s'] / on['loop_s']:.1%} | {(on['loop_s'] - off['loop_s']) / on['loop_s']:.1%} {cpu}")
 
 
 if __name__ == "__main__":

@@ -133,10 +133,10 @@ def main() -> None:
                 cache = lk.make_cache(engine.structure.free.size, sites.rows.shape[0])
                 if r == 0:         # compile, fill the cache: not timed
                     lk.run(t_end, state, model, cache, lk.Outputs(*(a[:1] for a in out[:-1]), out[-1]),
-                           case.output.energies)
+                           case.output.energies, engine.frames)
                     continue
                 mark = time.perf_counter()
-                code, rows = lk.run(t_end, state, model, cache, out, case.output.energies)
+                code, rows = lk.run(t_end, state, model, cache, out, case.output.energies, engine.frames)
                 walls.append(time.perf_counter() - mark)
             steps = int(state.istate[lk.I_STEPS] - state0["istate"][lk.I_STEPS])
             newton = int(state.istate[lk.I_NEWTON] - state0["istate"][lk.I_NEWTON])

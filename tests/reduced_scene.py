@@ -148,7 +148,7 @@ def run(K, M, C, q, v, a, bodies: list[Body], gdim: int, sites: law.Sites | None
                      np.zeros((sites.contact.size, 3)))
     model = kr.Model(structure, inputs, kr.Scheme(scheme.beta, scheme.gamma, scheme.alpha_m, scheme.alpha_f), control,
                      B, sites, Cr, L, np.zeros((0, n)))
-    code, rows = kr.run(t_end, state, model, cache, out, False)
+    code, rows = kr.run(t_end, state, model, cache, out, False, kr.no_frames(n, z.size))
     assert code == kr.DONE, code
     records = []
     for i in range(rows):

@@ -13,6 +13,7 @@ in one go does (at the checkpoint), so there: bit for bit."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -80,8 +81,8 @@ def scenario(out: Path, batch_frames: int, checkpoints=(), resume_from: int | No
              frames=range(FRAMES)) -> FieldSeriesExport:
     """Frames ``frames`` at t = k PERIOD_S of coordinates(k) and a 'checkpoint' after the frames in
     ``checkpoints`` as the run loop makes one (app/loop/loop.py: ``flush()`` unless the buffer rides in the
-    checkpoint, then the export's ``checkpoint_record()``, saved as ``out/checkpoint.json``); resumed after frame
-    ``resume_from`` from that record; closed at the end."""
+    checkpoint, then the export's ``checkpoint_record()``, saved as ``out/checkpoint.json`` and its arrays as
+    ``out/checkpoint.npz``); resumed after frame ``resume_from`` from that record; closed at the end."""
     state = {"q": None}
     vertex = FakeBasis(expand)
     export = FieldSeriesExport(out / "transient_fields.xdmf", vertex, lambda: state["q"],
@@ -89,14 +90,17 @@ def scenario(out: Path, batch_frames: int, checkpoints=(), resume_from: int | No
                                resume_from_s=None if resume_from is None else resume_from * PERIOD_S,
                                batch_frames=batch_frames)
     if resume_from is not None:
-        export.resume(json.loads((out / "checkpoint.json").read_text()))
+        with np.load(out / "checkpoint.npz") as saved:
+            export.resume(json.loads((out / "checkpoint.json").read_text()), dict(saved))
     for k in frames:
         state["q"] = coordinates(k)
         export.write(k * PERIOD_S)
         if k in checkpoints:
             if not export.carries:
                 export.flush()
-            (out / "checkpoint.json").write_text(json.dumps(export.checkpoint_record()))
+            record, arrays = export.checkpoint_record()
+            np.savez(out / "checkpoint.npz", **arrays)
+            (out / "checkpoint.json").write_text(json.dumps(record))
     export.close()
     return export
 
@@ -275,3 +279,84 @@ def test_fast_hdf5_writer_reads_back_as_h5py_high_level(tmp_path):
             for key in b[name].attrs:
                 x, y = a[name].attrs[key], b[name].attrs[key]
                 assert type(x) is type(y) and np.array_equal(x, y), (name, key)
+
+
+@pytest.mark.parametrize("schedule", [
+    FrameSchedule(1 / 20100.0, 8, interval_periods=16), FrameSchedule(PERIOD_S, 1, interval_periods=1),
+    FrameSchedule(1 / 20100.0, 4, interval_periods=2.5), FrameSchedule(1e-4, 3, burst_times_s=[0.0, 2.5e-4, 2.6e-4])],
+    ids=["bursts", "every_period", "fractional_interval", "burst_times"])
+def test_upcoming_frame_times_are_the_next_after_chain(schedule):
+    """FrameSchedule.upcoming (the frame times the modal kernel is given, app/reduced/kernel.py Frames) against
+    the loop's rule, next_after applied again and again from a frame time: the same floats (rtol 0: the kernel
+    compares step times with them as the loop does), from t = 0 and from a frame far into the run (burst 1000:
+    the burst index from a division that rounds)."""
+    for start in (schedule.frames[0], schedule.next_after(1000 * (schedule.interval_s or 0.0) - 1e-12)):
+        chain = [start]
+        while len(chain) < 40 and math.isfinite(chain[-1]):
+            chain.append(schedule.next_after(chain[-1]))
+        chain = [t for t in chain if math.isfinite(t)]
+        assert schedule.upcoming(start, 40).tolist() == chain
+        assert schedule.upcoming(start, 5).tolist() == chain[:5]
+    assert schedule.ordered
+
+
+def test_overlapping_bursts_are_not_ordered():
+    """Bursts longer than their interval (an interval of half a period): next_after looks at two bursts only, so
+    the kernel does not take such frames (FieldSeriesExport.engine_can_take)."""
+    assert not FrameSchedule(1e-4, 8, interval_periods=0.5).ordered
+
+
+def test_a_checkpoint_record_of_the_older_format_resumes(tmp_path):
+    """A checkpoint of the version that listed the buffered frames' coordinates in its JSON record
+    (``buffered``: t_s, q, z) resumes as one with them in its arrays: the series of the run in one go, bit for
+    bit (the same batches)."""
+    one_go = tmp_path / "one_go"
+    scenario(one_go, batch_frames=3, checkpoints=(4,))
+    out = tmp_path / "older"
+    scenario(out, batch_frames=3, checkpoints=(4,), frames=range(5))
+    record = json.loads((out / "checkpoint.json").read_text())
+    with np.load(out / "checkpoint.npz") as saved:
+        q = saved["fields_buffered_q"]
+    assert len(record["buffered_s"]) == 2                      # frames 3 and 4 rode in the checkpoint
+    older = {"on_disk": record["on_disk"], "buffered": [{"t_s": t, "q": q[k].tolist(), "z": None}
+                                                        for k, t in enumerate(record["buffered_s"])]}
+    (out / "checkpoint.json").write_text(json.dumps(older))
+    np.savez(out / "checkpoint.npz")
+    scenario(out, batch_frames=3, checkpoints=(), resume_from=4, frames=range(5, FRAMES))
+    names = ("displacement", "potential", "von_mises_Pa")
+    a, b = read_frames(one_go / "transient_fields.xdmf", names), read_frames(out / "transient_fields.xdmf", names)
+    assert [t for t, _ in a] == [t for t, _ in b] == [k * PERIOD_S for k in range(FRAMES)]
+    for (_, x), (_, y) in zip(a, b):
+        for name in names:
+            np.testing.assert_array_equal(x[name], y[name])
+
+
+def test_region_peaks_from_chosen_columns_and_any_pair_order():
+    """app/fe/derived.py frame_region_peaks on the raw columns raw_columns chooses (stress and E for these
+    fields), with the von Mises and principal stresses passed in (``known``), and on the pairs in another order
+    (a region's pairs not consecutive: indices instead of a slice), against the 18-column call on pairs ordered
+    by region: the same peaks exactly (maxima of the same values)."""
+    from types import SimpleNamespace
+
+    from app.fe.derived import RAW_COLUMNS, frame_region_peaks, node_fields, raw_columns
+
+    rng = np.random.default_rng(3)
+    values = rng.standard_normal((4, 30, RAW_COLUMNS)) * 1e6
+    pair_region = np.repeat([1, 2, 5], [8, 12, 10])
+    regions = [SimpleNamespace(tag=1, name="horn", e=None), SimpleNamespace(tag=2, name="piezo", e=True),
+               SimpleNamespace(tag=5, name="stem", e=None)]
+    reference = frame_region_peaks(values, pair_region, regions)
+    names = ("von_mises", "principal_stress")
+    indices, columns = raw_columns(names, electric=True)
+    assert indices.tolist() == list(range(6, 15))
+    chosen = values[..., indices]
+    known = {key: v.reshape(4, 30, *v.shape[1:])
+             for key, v in node_fields(chosen.reshape(120, -1), names, columns=columns).items()}
+    order = rng.permutation(30)
+    for peaks in (frame_region_peaks(chosen, pair_region, regions, columns),
+                  frame_region_peaks(chosen, pair_region, regions, columns, known=known),
+                  frame_region_peaks(chosen[:, order], pair_region[order], regions, columns),
+                  frame_region_peaks(values[:, order], pair_region[order], regions,
+                                     known={k: v[:, order] for k, v in known.items()})):
+        assert peaks == reference
+    assert sorted(reference[0]["piezo"]) == ["electric_field_V_per_m", "max_principal_stress_Pa", "von_mises_Pa"]

@@ -260,3 +260,50 @@ def test_modal_resume_errors_are_one_line(capsys, one_go_cli, tmp_path):
     model.unlink()
     assert_one_line(*cli_main(capsys, "run", CASES / CASE, "--resume", out, *sets), "checkpoint.json",
                     "reduced_model", "missing")
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="compares two serial in-process runs")
+def test_frames_taken_inside_the_kernel_are_the_loops(tmp_path, monkeypatch):
+    """The modal kernel takes the field frames at its steps (app/reduced/kernel.py Frames), with a buffer of 1
+    frame and 1 frame time per call here and 32 frames per period (a frame every ~6 steps, the loop's progress
+    stops every 8), so a call returns for more times after each frame and the next frame is often due before the
+    loop's next stop, against
+    the loop stopping the kernel at every frame time (FieldSeriesExport.engine_can_take false: the path of a
+    series with a contact site cloud): the same frames (times, coordinates, fields) and series, bit for bit (the
+    rule and the float comparisons are the loop's, and a call boundary does not change a step)."""
+    import h5py
+
+    from app.reduced import engine as modal
+    from app.transient import fields as series_module
+
+    taken = []
+    original = modal.ModalEngine.taken_frames
+    monkeypatch.setattr(modal.ModalEngine, "taken_frames", lambda self: _record(taken, original(self)))
+    monkeypatch.setattr(modal, "FRAMES_PER_CALL", 1)
+    monkeypatch.setattr(modal, "FRAME_TIMES_PER_CALL", 1)
+    sets = [*TINY, "transient.end_time_s=1e-4", "output.field_interval_periods=1", "output.field_phases=32"]
+    run_case_quiet(CASE, tmp_path / "kernel", *sets)
+    assert len(taken) == 64        # 32 frames in each of two drive periods and the first of the third at 99.5 us;
+    #                                t = 0 is the loop's
+    monkeypatch.setattr(series_module.FieldSeriesExport, "engine_can_take", property(lambda self: False))
+    taken.clear()
+    run_case_quiet(CASE, tmp_path / "loop", *sets)
+    assert not taken
+    a, b = tmp_path / "kernel", tmp_path / "loop"
+    assert_same_series(read_series(a / "transient.h5"), read_series(b / "transient.h5"), rtol=0.0)
+    assert list(xdmf_times(a)) == list(xdmf_times(b)) and len(xdmf_times(a)) == 65
+    for name in ("transient_fields.xdmf", "transient_bodies.xdmf"):
+        assert (a / name).read_text() == (b / name).read_text()
+    for k in range(65):
+        with frame_group(a, k) as f, frame_group(b, k) as g:
+            names = []
+            f.visit(names.append)
+            for name in names:
+                if isinstance(f[name], h5py.Dataset):
+                    np.testing.assert_array_equal(f[name][()], g[name][()])
+                    assert dict(f[name].attrs) == dict(g[name].attrs)
+
+
+def _record(into: list, frames: list) -> list:
+    into.extend(frames)
+    return frames

@@ -202,13 +202,15 @@ def largest_principal_cycle_max(T_re: np.ndarray, T_im: np.ndarray, phases: int 
 
 
 # ------------------------------------------------------------------------------------- fields and peaks
-def node_fields(averaged: np.ndarray, names, kind: str = "real") -> dict[str, np.ndarray]:
-    """File fields (name -> array) from averaged raw vertex values (n, 18) of a real solution."""
+def node_fields(averaged: np.ndarray, names, kind: str = "real", columns: dict = RAW) -> dict[str, np.ndarray]:
+    """File fields (name -> array) from averaged raw vertex values (n, 18) of a real solution; ``columns``: where
+    strain, stress, E and D are in the last axis (another than RAW when only some were formed, see
+    :func:`raw_columns`)."""
     out = {}
-    stress = averaged[:, RAW["stress"]]
+    stress = averaged[:, columns["stress"]]
     for derived in names:
         if derived in RAW:
-            out[field_name(derived)] = averaged[:, RAW[derived]]
+            out[field_name(derived)] = averaged[:, columns[derived]]
         elif derived == "von_mises":
             out[field_name(derived)] = von_mises(stress)
         elif derived == "principal_stress":
@@ -291,22 +293,53 @@ def region_peaks(values: np.ndarray, pair_region: np.ndarray, regions, values_im
     return out
 
 
-def frame_region_peaks(values: np.ndarray, pair_region: np.ndarray, regions) -> list[dict]:
+def raw_columns(names, electric: bool) -> tuple[np.ndarray, dict]:
+    """The raw columns (of the 18: strain, stress, E, D) the derived fields ``names`` and the peaks need (stress;
+    E with a piezoelectric region, ``electric``), and where each block is among them: (indices into the 18,
+    {block: slice}) for :func:`node_fields` and :func:`frame_region_peaks`' ``columns``."""
+    blocks = {"stress"} | ({"electric_field"} if electric else set())
+    blocks |= {n if n in RAW else "stress" for n in names}
+    chosen = [b for b in RAW if b in blocks]           # in RAW's order
+    indices = np.concatenate([np.arange(RAW[b].start, RAW[b].stop) for b in chosen])
+    local, start = {}, 0
+    for b in chosen:
+        width = RAW[b].stop - RAW[b].start
+        local[b] = slice(start, start + width)
+        start += width
+    return indices, local
+
+
+def _rows_of(pair_region: np.ndarray, tag: int):
+    """The pairs of region ``tag``: a slice when they are consecutive (a view, no copy), else their indices."""
+    rows = np.flatnonzero(pair_region == tag)
+    if rows.size and rows[-1] - rows[0] + 1 == rows.size:
+        return slice(int(rows[0]), int(rows[-1]) + 1)
+    return rows
+
+
+def frame_region_peaks(values: np.ndarray, pair_region: np.ndarray, regions, columns: dict = RAW,
+                       known: dict | None = None) -> list[dict]:
     """:func:`region_peaks` of each of a batch of real frames, (frames, pairs, 18) region-wise averaged values,
-    computed for all the frames at once (the field output's batches)."""
+    computed for all the frames at once (the field output's batches). ``columns``: where stress and E are in the
+    last axis (:func:`raw_columns`); ``known``: the batch's von Mises and principal stresses at every pair
+    (frames, pairs[, 3]) by file name (``von_mises_Pa``, ``principal_stress_Pa``), when the vertex fields
+    computed them already."""
+    known = known or {}
+    vm_all, principal_all = known.get(field_name("von_mises")), known.get(field_name("principal_stress"))
     out: list[dict] = [{} for _ in range(values.shape[0])]
     for region in regions:
-        mask = pair_region == region.tag
-        if not mask.any():
+        rows = _rows_of(pair_region, region.tag)
+        if isinstance(rows, np.ndarray) and not rows.size:
             continue
-        re = values[:, mask]
-        T = re[..., RAW["stress"]]
-        columns = {"von_mises_Pa": von_mises(T).max(axis=1)}
+        re = values[:, rows]
+        T = re[..., columns["stress"]]
+        peaks = {"von_mises_Pa": (vm_all[:, rows] if vm_all is not None else von_mises(T)).max(axis=1)}
         if region.e is not None:
-            columns["max_principal_stress_Pa"] = principal_stresses(T)[..., 0].max(axis=1)
-            columns["electric_field_V_per_m"] = np.linalg.norm(re[..., RAW["electric_field"]], axis=-1).max(axis=1)
+            principal = principal_all[:, rows] if principal_all is not None else principal_stresses(T)
+            peaks["max_principal_stress_Pa"] = principal[..., 0].max(axis=1)
+            peaks["electric_field_V_per_m"] = np.linalg.norm(re[..., columns["electric_field"]], axis=-1).max(axis=1)
         for k, frame in enumerate(out):
-            frame[region.name] = {key: float(v[k]) for key, v in columns.items()}
+            frame[region.name] = {key: float(v[k]) for key, v in peaks.items()}
     return out
 
 

@@ -10,9 +10,10 @@ returns their time-series rows; the loop then exports (series, fields), checkpoi
     engine = make(found)                 build the model (a resumed modal run: its saved reduced model)
     found ? engine.restore(found) : (mark started, engine.start())
     while t < end and not steady:
-        rows = engine.advance(end, steps to the next checkpoint, next field output or period end)
+        rows = engine.advance(end, steps to the next checkpoint, next field output (unless the engine takes
+                              the frames itself: the modal kernel) or period end)
         steady.update_block(rows); series.write_block(rows since the last write) at each progress step;
-        fields (buffered); progress
+        fields (buffered: those the engine took, a frame at t if due); progress
         checkpoint when due (the buffered field frames written first)
     checkpoint at the end; results = the common keys + engine.results()
 
@@ -197,7 +198,7 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
         watch.restore(found.loop["steady_state"])
     fields = engine.field_export(out_dir, t_start if found is not None else None)
     if fields is not None and found is not None and hasattr(fields, "resume"):
-        fields.resume(found.loop.get("fields"))        # the frames the checkpoint buffered, buffered again
+        fields.resume(found.loop.get("fields"), found.arrays)     # the frames the checkpoint buffered, again
     if fields is not None and found is None:
         fields.write(engine.t, engine.body_positions())
     end = engine.end_time_s
@@ -205,8 +206,8 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     progress = SimulatedTimeProgress(comm, t_start, end)
     progress_step = max(end - t_start, 0.0) / 50
     setup_wall = time.perf_counter() - setup_start
-    start = time.perf_counter()
-    field_wall = checkpoint_wall = 0.0
+    start, start_cpu = time.perf_counter(), time.process_time()
+    field_wall = checkpoint_wall = field_cpu = 0.0
     steady = watch is not None and watch.steady
     # a resumed run's state is its checkpoint's: nothing to write again unless it takes a step
     checkpointed = engine.steps if found is not None else -1
@@ -215,7 +216,7 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
     try:
         while engine.t < end * (1 - 1e-12) and not steady:
             stop_at = math.inf
-            if fields is not None:
+            if fields is not None and getattr(fields, "engine_frames", None) is None:    # else the engine takes them
                 stop_at = fields.next_s - FIELD_TIME_TOLERANCE * fields.interval_s
             if period is not None:       # the steady test runs at period ends: stop there
                 stop_at = min(stop_at, (math.floor(engine.t / period + 1e-9) + 1) * period * (1 - 1e-12))
@@ -234,39 +235,41 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
                 kill_point("series_block")
             for name, (units, table) in engine.take_tables().items():
                 series.append_table(name, table, units)
-            if fields is not None:           # writes only when an output is due
-                mark = time.perf_counter()
+            if fields is not None:           # the frames the engine took; a frame at t when one is due
+                mark, mark_cpu = time.perf_counter(), time.process_time()
                 fields.write(engine.t, engine.body_positions())
                 field_wall += time.perf_counter() - mark
+                field_cpu += time.process_time() - mark_cpu
             progress.update(engine.t)
             if checkpoint.due(engine.steps) or steady:
-                field_wall += _flush(fields, before_checkpoint=True)
+                field_wall, field_cpu = _flush(fields, field_wall, field_cpu, before_checkpoint=True)
                 mark = time.perf_counter()
                 checkpointed = _checkpoint(engine, checkpoint, series, watch, fields)
                 checkpoint_wall += time.perf_counter() - mark
         _write_rows(series, unwritten)
         if checkpointed != engine.steps:
-            field_wall += _flush(fields)
+            field_wall, field_cpu = _flush(fields, field_wall, field_cpu)
             mark = time.perf_counter()
             _checkpoint(engine, checkpoint, series, watch, fields)
             checkpoint_wall += time.perf_counter() - mark
-        field_wall += _flush(fields)
+        field_wall, field_cpu = _flush(fields, field_wall, field_cpu)
     finally:
         progress.close()
         _write_rows(series, unwritten)          # a failed step: the rows of the steps before it
         series.close()
         if fields is not None:
             fields.close()
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, time.process_time() - start_cpu
     simulated = engine.t - t_start
     results = {"tier": engine.tier, "steps": engine.steps, "simulated_time_s": engine.t,
                "resumed_from_s": t_start if found is not None else None,
-               "wall_time_s": wall, "setup_wall_s": setup_wall,
+               "wall_time_s": wall, "cpu_time_s": cpu, "setup_wall_s": setup_wall,
                "wall_s_per_simulated_ms": wall / (simulated * 1e3) if simulated > 0 else None,
                "time_series": h5_path.name, "checkpoint": f"{checkpoint.dir.name}/{POINTER}",
                "checkpoints_written": checkpoint.written, "checkpoint_wall_s": checkpoint_wall,
                "fields": fields.path.name if fields is not None else None,
-               "field_outputs": fields.written if fields is not None else 0, "field_output_wall_s": field_wall}
+               "field_outputs": fields.written if fields is not None else 0, "field_output_wall_s": field_wall,
+               "field_output_cpu_s": field_cpu}
     if getattr(fields, "peaks", None):      # peaks per region of the derived fields over the frames (app.fe.derived)
         results["field_peaks"] = fields.peaks
     if getattr(getattr(fields, "vertex", None), "region_names", None):    # tag -> name of the files' region tags
@@ -295,16 +298,16 @@ def _write_rows(series: TimeSeriesWriter, blocks: list[dict]) -> None:
     series.write_block(block)
 
 
-def _flush(fields, before_checkpoint: bool = False) -> float:
+def _flush(fields, wall: float, cpu: float, before_checkpoint: bool = False) -> tuple[float, float]:
     """Write the field frames the export buffers (app/transient/fields.py): before every checkpoint, so each frame
     at or before the checkpoint's time is on disk when the checkpoint is (a resumed run writes only the later
     ones again), unless the buffer rides in the checkpoint (``carries``: the modal tier's frames, a few
-    coordinates each); and at the end. Returns its wall time [s]."""
+    coordinates each); and at the end. Returns the field output's wall and CPU time [s] with this flush's."""
     if fields is None or (before_checkpoint and getattr(fields, "carries", False)):
-        return 0.0
-    mark = time.perf_counter()
+        return wall, cpu
+    mark, mark_cpu = time.perf_counter(), time.process_time()
     fields.flush()
-    return time.perf_counter() - mark
+    return wall + time.perf_counter() - mark, cpu + time.process_time() - mark_cpu
 
 
 def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, watch, fields=None) -> int:
@@ -313,6 +316,8 @@ def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, 
     arrays, record = engine.snapshot()
     loop = {"steady_state": watch.snapshot() if watch is not None else None, "tables": dict(series.table_rows)}
     if fields is not None and hasattr(fields, "checkpoint_record"):
-        loop["fields"] = fields.checkpoint_record()
+        loop["fields"], field_arrays = fields.checkpoint_record()
+        if arrays is not None:
+            arrays = {**arrays, **field_arrays}
     checkpoint.write(engine.t, arrays, record, loop, series.rows_written)
     return engine.steps

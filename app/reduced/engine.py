@@ -28,6 +28,9 @@ from app.reduced.model import ReducedModel, load_or_build
 
 MODEL_FILE = "reduced-model.npz"
 ROWS_PER_CALL = 4096
+#: field frames the kernel buffers in a call, and frame times it is given at once (app/reduced/kernel.py Frames)
+FRAMES_PER_CALL = 256
+FRAME_TIMES_PER_CALL = 256
 
 
 class ModalEngine:
@@ -180,6 +183,9 @@ class ModalEngine:
         self.fstate[lk.F_CAP] = np.inf
         self.sums = lk.Sums(np.zeros(n_c + n_l), np.full(n_c + n_l, np.nan), np.zeros(2))   # power: none yet
         self.site_force = np.zeros((ns, 3))
+        self.frames = lk.no_frames(n, m)     # the field frames the kernel takes (field_export), none by default
+        self._frame_series = None
+        self._taken: list[tuple[float, np.ndarray, np.ndarray]] = []
 
     def _harmonic(self, scale: float) -> np.ndarray:
         """Complex steady-state coordinates for the electrodes' phasors (amplitude ``scale`` x weight,
@@ -396,7 +402,8 @@ class ModalEngine:
         mark = time.perf_counter()
         saved = (self.fstate.copy(), self.istate.copy())
         out = lk.Outputs(*(arr[:1] for arr in self._out), self.site_sums)
-        lk.run(self.t, self._state(), self._model(), self.cache, out, self.case.output.energies)
+        lk.run(self.t, self._state(), self._model(), self.cache, out, self.case.output.energies,
+               lk.no_frames(self.q.size, self.z.size))
         self.fstate[:], self.istate[:] = saved
         self.compile_wall_s = time.perf_counter() - mark
         self._loop_wall = 0.0
@@ -458,15 +465,22 @@ class ModalEngine:
         taken = 0
         sites_on = self.case.output.contact_sites
         start = time.perf_counter()
+        if self._frame_series is not None:
+            # the field frames from the series' next frame time on (the loop has taken every earlier one)
+            self._frame_times(self._frame_series.next_s if not self._taken else
+                              self._frame_series.schedule.next_after(self._taken[-1][0]))
         while self.t < t_end * (1 - 1e-12) and taken < max_steps:
             cap = int(min(ROWS_PER_CALL, max_steps - taken))
             out = lk.Outputs(*(arr[:cap] for arr in self._out), self.site_sums)
             stop = min(stop_at_s, self.tables.next_s * (1 - 1e-12)) if sites_on else stop_at_s
             self.fstate[lk.F_STOP] = stop
-            code, rows = lk.run(t_end, self._state(), self._model(), self.cache, out, self.case.output.energies)
+            code, rows = lk.run(t_end, self._state(), self._model(), self.cache, out, self.case.output.energies,
+                                self.frames)
             if rows:
                 blocks.append(self._block(out, rows))
             taken += rows
+            if self.frames.slots[1]:
+                self._take_frames_out()
             if code == lk.STEP_FAILED:
                 raise NumericalFailure(f"modal tier: a step failed at t = {self.t:.6e} s after "
                                        f"{self.istate[lk.I_CUTBACKS]} cut-backs (dt below min_s = "
@@ -479,6 +493,29 @@ class ModalEngine:
         if not blocks:
             return {}
         return {k: np.concatenate([b[k] for b in blocks]) for k in blocks[0]}
+
+    def _frame_times(self, from_s: float) -> None:
+        """Give the kernel the field frame times from ``from_s`` (a frame time) on."""
+        schedule = self._frame_series.schedule
+        times = schedule.upcoming(from_s, FRAME_TIMES_PER_CALL) if math.isfinite(from_s) else np.zeros(0)
+        self.frames = self.frames._replace(times=np.ascontiguousarray(times, dtype=float))
+        self.frames.slots[0] = 0
+
+    def _take_frames_out(self) -> None:
+        """Move the frames the kernel took out of its buffers; give it further frame times when it took its
+        last."""
+        f = self.frames
+        for i in range(int(f.slots[1])):
+            self._taken.append((float(f.t[i]), f.q[i].copy(), f.z[i].copy()))
+        f.slots[1] = 0
+        if f.slots[0] >= f.times.size and f.times.size:
+            self._frame_times(self._frame_series.schedule.next_after(self._taken[-1][0]))
+
+    def taken_frames(self) -> list[tuple[float, np.ndarray, np.ndarray]]:
+        """The field frames (t [s], coordinates q, body coordinates z) the kernel took since the last call
+        (FieldSeriesExport.engine_frames)."""
+        taken, self._taken = self._taken, []
+        return taken
 
     def _block(self, out, rows: int) -> dict[str, np.ndarray]:
         cfg, model, case = self.cfg, self.model, self.case
@@ -554,11 +591,22 @@ class ModalEngine:
 
         case, slices = self.case, dict(self.body_slices)
         vertex = ReducedVertexFields(self.model, self.comm, self.case.output.derived)
-        return FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
-                                 lambda: self.q, frame_schedule(self.case),
-                                 bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
-                                 resume_from_s=resume_from_s,
-                                 sites=self._site_cloud() if case.output.contact_pressure else None)
+        vertex.prepare()
+        series = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
+                                   lambda: self.q, frame_schedule(self.case),
+                                   bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
+                                   resume_from_s=resume_from_s,
+                                   sites=self._site_cloud() if case.output.contact_pressure else None)
+        if series.engine_can_take:
+            # the kernel takes the frames at its steps (the loop's rule, app/reduced/kernel.py Frames): no stop of
+            # the compiled loop per frame (BENCHMARKS.md, "Field output of a modal run")
+            n, m = self.q.size, self.z.size
+            self.frames = lk.Frames(np.zeros(0), series.due_s, series.after_s, np.zeros(2, np.int64),
+                                    np.zeros(FRAMES_PER_CALL), np.zeros((FRAMES_PER_CALL, n)),
+                                    np.zeros((FRAMES_PER_CALL, m)))
+            self._frame_series = series
+            series.engine_frames = self.taken_frames
+        return series
 
     def _site_cloud(self):
         """``output.contact_pressure``: the surface contacts' sites as the field series' point cloud companion
@@ -630,7 +678,13 @@ class ModalEngine:
 class ReducedVertexFields:
     """The field output's vertex values from the reduced model's vertex basis (app/exports.py VertexFields'
     interface): displacement [m] and potential [V] at the mesh vertices = V q, on rank 0; ``expand`` forms a
-    batch of frames at once (app/transient/fields.py writes the modal tier's frames through it)."""
+    batch of frames at once (app/transient/fields.py writes the modal tier's frames through it).
+
+    Every field is linear in q, so each basis vector's fields are laid out once, transposed (coordinates x
+    values: a batch's product is frames x values, each frame's values contiguous): the vertex values, and of
+    the region-wise averaged derived values (app.fe.derived.RegionAveraging) only the columns the derived fields
+    and the peaks need (app.fe.derived.raw_columns; 9 of 18 for the default fields), their (region, vertex)
+    pairs ordered by region so each region's peaks read a slice."""
 
     def __init__(self, model: ReducedModel, comm, derived=()):
         self.comm = comm
@@ -651,6 +705,29 @@ class ReducedVertexFields:
 
             self.averaging = RegionAveraging(model.mesh_topology, model.mesh_region, self.n_nodes,
                                              [r.tag for r in self.regions if r.piezoelectric])
+        self._vertex_T = None         # the per-basis-vector layouts (rank 0): at the first expand
+
+    def _layouts(self) -> None:
+        from app.fe.derived import RAW_COLUMNS, raw_columns
+
+        model = self.model
+        self._vertex_T = np.ascontiguousarray(model.vertex_basis.T)
+        if not self.derived:
+            return
+        indices, self._columns = raw_columns(self.derived, any(r.piezoelectric for r in self.regions))
+        a = self.averaging
+        order = np.argsort(a.pair_region, kind="stable")          # the pairs by region
+        rank = np.empty_like(order)
+        rank[order] = np.arange(order.size)
+        self._pair_region = a.pair_region[order]
+        self._vertex_pair = rank[a.vertex_pair]
+        basis = model.derived_basis.reshape(a.size, RAW_COLUMNS, -1)[order[:, None], indices[None, :]]
+        self._derived_T = np.ascontiguousarray(basis.reshape(-1, basis.shape[-1]).T)
+
+    def prepare(self) -> None:
+        """Lay out the per-basis-vector fields now (set-up) instead of at the first batch (rank 0)."""
+        if self.comm.rank == 0 and self._vertex_T is None:
+            self._layouts()
 
     def sample(self, q: np.ndarray):
         if self.comm.rank != 0:
@@ -663,25 +740,28 @@ class ReducedVertexFields:
         """The frames of the coordinates ``q`` (size, frames) on rank 0: [(displacement (n, 3) [m], potential (n,)
         [V], derived vertex fields, peaks per region or None)], one per column. One product of the vertex basis
         (and of the derived basis) with all the columns: the basis is read once per batch, not once per frame."""
-        from app.fe.derived import RAW_COLUMNS, frame_region_peaks, node_fields
+        from app.fe.derived import frame_region_peaks, node_fields
 
+        if self._vertex_T is None:
+            self._layouts()
         q = np.asarray(q, dtype=float).reshape(self.model.vertex_basis.shape[1], -1)
         n, frames = self.n_nodes, q.shape[1]
-        values = self.model.vertex_basis @ q
-        u, phi = values[:3 * n].reshape(n, 3, frames), values[3 * n:]
+        q = np.ascontiguousarray(q.T)                 # (frames, coordinates)
+        values = q @ self._vertex_T                   # (frames, 3 n + n): displacement, then potential
         fields: list[dict] = [{} for _ in range(frames)]
         peaks: list = [None] * frames
         if self.derived:
-            # (frames, pairs, columns): every frame's region-wise averaged values, then the vertex fields and the
-            # peaks of all the frames at once
-            pairs = np.ascontiguousarray(np.moveaxis(
-                (self.model.derived_basis @ q).reshape(self.averaging.size, RAW_COLUMNS, frames), -1, 0))
-            at_vertices = pairs[:, self.averaging.vertex_pair].reshape(frames * n, RAW_COLUMNS)
-            batch = node_fields(at_vertices, self.derived)
-            fields = [{key: v.reshape(frames, n, *v.shape[1:])[k] for key, v in batch.items()} for k in range(frames)]
-            peaks = frame_region_peaks(pairs, self.averaging.pair_region, self.regions)
-        return [(np.ascontiguousarray(u[:, :, k]), np.ascontiguousarray(phi[:, k]), fields[k], peaks[k])
-                for k in range(frames)]
+            # (frames, pairs, columns): every frame's region-wise averaged values; the derived fields at every
+            # pair, then at the vertices and the peaks per region, of all the frames at once
+            n_pairs = self._pair_region.size
+            pairs = (q @ self._derived_T).reshape(frames, n_pairs, -1)
+            at_pairs = {key: v.reshape(frames, n_pairs, *v.shape[1:])
+                        for key, v in node_fields(pairs.reshape(frames * n_pairs, -1), self.derived,
+                                                  columns=self._columns).items()}
+            at_vertices = {key: v[:, self._vertex_pair] for key, v in at_pairs.items()}
+            fields = [{key: v[k] for key, v in at_vertices.items()} for k in range(frames)]
+            peaks = frame_region_peaks(pairs, self._pair_region, self.regions, self._columns, known=at_pairs)
+        return [(values[k, :3 * n].reshape(n, 3), values[k, 3 * n:], fields[k], peaks[k]) for k in range(frames)]
 
     def derived_frame(self, q: np.ndarray):
         """(derived vertex fields, peaks per region) of the frame (rank 0; (None, None) elsewhere): the basis's

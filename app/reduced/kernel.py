@@ -152,6 +152,28 @@ class Outputs(NamedTuple):
     site_sums: np.ndarray     # (n_sites, 5): time integrals of pressure [Pa s], closed, stick, slip +, slip - [s]
 
 
+class Frames(NamedTuple):
+    """Field frames taken inside a call (app/transient/fields.py's schedule, the loop's rule): a frame (the time,
+    the coordinates q, the body coordinates z after the step) at the first accepted step at or after
+    ``times[next] - due_s``; the next frame time is then the first one after t + ``after_s``. A call returns
+    (BUFFER_FULL) before a step when the frame buffers are full and (STOPPED) after taking the last of ``times``:
+    the caller empties the buffers or gives the next times, so the loop need not stop the kernel at every frame.
+    ``slots``: [index of the next frame time, frames in the buffers]."""
+
+    times: np.ndarray         # (k,) increasing frame times [s]
+    due_s: float              # a frame is due this much before its time [s]
+    after_s: float            # a step at t took the frames up to t + after_s [s]
+    slots: np.ndarray         # (2,) int64
+    t: np.ndarray             # (cap,) [s]
+    q: np.ndarray             # (cap, n)
+    z: np.ndarray             # (cap, m)
+
+
+def no_frames(n: int, m: int) -> Frames:
+    """Frames of a call that takes none (field output off, or taken by the loop)."""
+    return Frames(np.zeros(0), 0.0, 0.0, np.zeros(2, np.int64), np.zeros(0), np.zeros((0, n)), np.zeros((0, m)))
+
+
 class Model(NamedTuple):
     """Everything constant through a run: the structure, its inputs, the scheme and step control, the bodies,
     sites, contacts and links, and the rows of the sampled outputs (named points, electrode charges)."""
@@ -912,10 +934,11 @@ def _status(y, v, z, zd, wk, model, closed_sites, closed):
 
 
 @njit(cache=True)
-def run(t_end, state, model, cache, out, track_energy):
-    """Advance ``state`` (in place) until ``t_end``, until the output buffers are full, or until the first
-    accepted step at or after ``state.fstate[F_STOP]``. Returns (code, rows written): one output row per accepted
-    step (``out``), the per-site diagnostics integrated into ``out.site_sums``."""
+def run(t_end, state, model, cache, out, track_energy, frames):
+    """Advance ``state`` (in place) until ``t_end``, until the output buffers (``out`` or ``frames``) are full, until
+    the first accepted step at or after ``state.fstate[F_STOP]``, or until the last of ``frames.times`` is taken.
+    Returns (code, rows written): one output row per accepted step (``out``), the per-site diagnostics integrated
+    into ``out.site_sums``, the field frames due at the steps in ``frames`` (:class:`Frames`)."""
     q, v, a, z, zd, zdd, istate, fstate, sums, f_last = state
     structure, inputs, scheme, control, bodies, sites, contacts, links, sample_rows = model
     gdim = bodies.gdim
@@ -967,7 +990,7 @@ def run(t_end, state, model, cache, out, track_energy):
     t = fstate[F_TIME]
     stop_at = fstate[F_STOP]
     while t < t_end * (1.0 - 1e-12):
-        if rows >= capacity:
+        if rows >= capacity or (frames.slots[1] >= frames.t.size and frames.slots[0] < frames.times.size):
             fstate[F_TIME] = t
             return BUFFER_FULL, rows
         any_closed = False
@@ -1078,6 +1101,21 @@ def run(t_end, state, model, cache, out, track_energy):
             fstate[F_CAP] = dt_try * control.growth
             if fstate[F_CAP] >= max(control.open_s, control.closed_s):
                 fstate[F_CAP] = np.inf
+        k = frames.slots[0]
+        if k < frames.times.size and t >= frames.times[k] - frames.due_s:
+            # a field frame: the state after the step, as the loop would take it after a stop here
+            r = frames.slots[1]
+            frames.t[r] = t
+            frames.q[r, :] = q
+            frames.z[r, :] = z
+            frames.slots[1] = r + 1
+            after = t + frames.after_s
+            while k < frames.times.size and frames.times[k] <= after:
+                k += 1
+            frames.slots[0] = k
+            if k >= frames.times.size:
+                fstate[F_TIME] = t
+                return STOPPED, rows
         if t >= stop_at:
             fstate[F_TIME] = t
             return STOPPED, rows

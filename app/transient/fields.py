@@ -27,17 +27,20 @@ file unreadable; here it can only hit a batch file that the XML does not name ye
 temporary name and renamed), and the XML is replaced atomically after the batch file exists. So after a
 kill at any moment the XML and every file it names are complete.
 
-Checkpoints (app/loop/loop.py): a frame at or before a checkpoint's time is either on disk when the checkpoint
-is written or in the checkpoint itself. The FE tier's buffered frames (sampled fields, large) are written
-before every checkpoint; the modal tier's (a time, its coordinates q and body coordinates z: a few hundred
-numbers) ride in the checkpoint's record (:meth:`FieldSeriesExport.checkpoint_record`), so its batches are not
-cut at checkpoints (with a contact site cloud, ``output.contact_pressure``, whose site states are larger, they
-are written before it as the FE tier's). A resumed run (``resume_from_s``, then
-:meth:`FieldSeriesExport.resume` with the checkpoint's record) keeps the frames that were on disk at the
-checkpoint (XML entries and the batch files they name), removes every other frame file (a batch written after
-the checkpoint, or not yet named), buffers the checkpoint's frames again and continues the series. Its batches
-are the run in one go's (cut at the same frames), so its values are that run's bit for bit; resumed with
-another checkpoint interval, the FE tier's cut differs and the values agree to round-off.
+The modal tier's compiled loop takes the frames itself (``engine_frames``: app/reduced/kernel.py Frames, given
+:meth:`FrameSchedule.upcoming`), at the steps the loop would, so the loop does not stop it at every frame time.
+
+Checkpoints (app/loop/loop.py): a frame at or before a checkpoint's time is either on disk when the checkpoint is
+written or in the checkpoint itself. The FE tier's buffered frames (sampled fields, large) are written before every
+checkpoint; the modal tier's (a time, its coordinates q and body coordinates z: a few hundred numbers) ride in the
+checkpoint (:meth:`FieldSeriesExport.checkpoint_record`: the times in its record, q and z in its state arrays), so
+its batches are not cut at checkpoints (with a contact site cloud, ``output.contact_pressure``, whose site states
+are larger, they are written before it as the FE tier's). A resumed run (``resume_from_s``, then
+:meth:`FieldSeriesExport.resume` with the checkpoint's record) keeps the frames that were on disk at the checkpoint
+(XML entries and the batch files they name), removes every other frame file (a batch written after the checkpoint,
+or not yet named), buffers the checkpoint's frames again and continues the series. Its batches are the run in one
+go's (cut at the same frames), so its values are that run's bit for bit; resumed with another checkpoint interval,
+the FE tier's cut differs and the values agree to round-off.
 """
 
 from __future__ import annotations
@@ -108,6 +111,25 @@ class FrameSchedule:
         k = math.floor(after / self.interval_s)       # bursts k and k + 1 hold the next frame (they do not overlap)
         frames = np.concatenate([k * self.interval_s + self.frames, (k + 1) * self.interval_s + self.frames])
         return float(frames[frames > after].min())
+
+    @property
+    def ordered(self) -> bool:
+        """Whether :meth:`next_after` is the first of :meth:`upcoming` after its argument: true unless bursts
+        overlap (an interval shorter than the burst)."""
+        return self.interval_s is None or self.interval_s >= self.period_s
+
+    def upcoming(self, from_s: float, count: int) -> np.ndarray:
+        """The first ``count`` frame times at or after the frame time ``from_s``, in order, each the very float
+        :meth:`next_after` returns (the same arithmetic), so a step loop that takes a frame at the first step at or
+        after one of them and then skips to the first after t + 1e-9 spacing takes the frames ``next_after``
+        gives (the modal kernel's field frames, app/reduced/kernel.py Frames)."""
+        if self.interval_s is None:
+            i = int(np.searchsorted(self.frames, from_s, side="left"))
+            return self.frames[i:i + count].copy()
+        first = math.floor(from_s / self.interval_s) - 1         # one burst early: from_s / interval rounds
+        bursts = -(-count // self.phases) + 2
+        times = np.concatenate([k * self.interval_s + self.frames for k in range(max(first, 0), first + bursts + 1)])
+        return times[times >= from_s][:count]
 
 
 def frame_schedule(case) -> FrameSchedule:
@@ -284,6 +306,18 @@ class FieldSeriesExport:
         self.peaks: dict | None = None
         if getattr(vertex, "derived", ()):
             self.peaks = self.comm.bcast(kept_peaks if self.rank0 else None, root=0)
+        # frames an engine takes at its own steps (the modal kernel: app/reduced/kernel.py Frames), a function
+        # returning [(t, q, z)] taken since its last call; the loop then does not stop the engine at frame times
+        self.engine_frames: Callable | None = None
+        self.due_s = 1e-9 * self.interval_s                # a frame is due at the first step at or after next_s - due_s
+        self.after_s = 1e-9 * self.schedule.spacing_s      # a frame at t: the next is after t + after_s (next_after)
+
+    @property
+    def engine_can_take(self) -> bool:
+        """Whether an engine may take this series' frames itself (:attr:`engine_frames`): frames of coordinates
+        only (no vertex ``scalars``, no contact site cloud, whose states the engine does not hold) in a schedule
+        whose next frame is the first after a time (:meth:`FrameSchedule.ordered`)."""
+        return self.expands and self.scalars is None and not self.has_sites and self.schedule.ordered
 
     def _first(self) -> float:
         return float(self.schedule.frames[0])          # t = 0 for regular bursts, else the first burst
@@ -298,21 +332,27 @@ class FieldSeriesExport:
             if stale.name not in self.data_files:
                 stale.unlink()
 
-    def checkpoint_record(self) -> dict:
-        """The series' part of a checkpoint (JSON-able; rank 0's is stored): the number of frames on disk and,
-        when the buffer rides in the checkpoint (``carries``: the modal tier), the buffered frames' times,
-        coordinates q and body coordinates z. Without ``carries`` the run loop flushes before the checkpoint."""
-        frames = []
-        if self.carries and self.rank0:
-            frames = [{"t_s": f.t, "q": f.state.tolist(), "z": None if f.z is None else f.z.tolist()}
-                      for f in self.pending]
-        return {"on_disk": self.written - len(self.pending), "buffered": frames}
+    def checkpoint_record(self) -> tuple[dict, dict]:
+        """The series' part of a checkpoint: (record, arrays). The record (JSON-able; rank 0's is stored): the
+        number of frames on disk and, when the buffer rides in the checkpoint (``carries``: the modal tier), the
+        buffered frames' times; the arrays (rank 0's, stored with the engine's state, bit for bit): their
+        coordinates q (``fields_buffered_q``: frames x coordinates) and body coordinates z
+        (``fields_buffered_z``). Without ``carries`` the run loop flushes before the checkpoint."""
+        times, arrays = [], {}
+        if self.carries and self.rank0 and self.pending:
+            times = [f.t for f in self.pending]
+            arrays["fields_buffered_q"] = np.array([f.state for f in self.pending])
+            if self.pending[0].z is not None:
+                arrays["fields_buffered_z"] = np.array([f.z for f in self.pending])
+        return {"on_disk": self.written - len(self.pending), "buffered_s": times}, arrays
 
-    def resume(self, record: dict | None) -> None:
-        """Continue from a checkpoint's :meth:`checkpoint_record` (collective): the series cut to the frames that
-        were on disk then (a batch written after the checkpoint can hold frames at or before its time: they are
-        in its record) and its buffered frames buffered again, so the batches are the run in one go's. A
-        checkpoint without a record (an older version's) had every frame at or before its time on disk."""
+    def resume(self, record: dict | None, arrays: dict | None = None) -> None:
+        """Continue from a checkpoint's :meth:`checkpoint_record` (collective; ``arrays``: the checkpoint's state
+        arrays, rank 0's read): the series cut to the frames that were on disk then (a batch written after the
+        checkpoint can hold frames at or before its time: they are in its record) and its buffered frames
+        buffered again, so the batches are the run in one go's. A checkpoint without a record (an older
+        version's) had every frame at or before its time on disk; one whose record lists the buffered frames'
+        coordinates (``buffered``, an older version's) is read as well."""
         if not record:
             return
         on_disk = int(record["on_disk"])
@@ -328,11 +368,15 @@ class FieldSeriesExport:
         if self.peaks is not None:
             self.peaks = self.comm.bcast(self.peaks, root=0)
         self.written = self.comm.bcast(len(self.steps), root=0)
-        for frame in record.get("buffered") or []:
-            z = frame.get("z")
-            self.pending.append(_Frame(float(frame["t_s"]), state=np.asarray(frame["q"], dtype=float),
-                                       z=None if z is None else np.asarray(z, dtype=float),
-                                       scalars={}))
+        buffered = [(frame["t_s"], frame["q"], frame.get("z")) for frame in record.get("buffered") or []]
+        if record.get("buffered_s"):
+            q = arrays.get("fields_buffered_q") if self.rank0 and arrays else None
+            z = arrays.get("fields_buffered_z") if self.rank0 and arrays else None
+            buffered = [(t, None if q is None else q[k], None if z is None else z[k])
+                        for k, t in enumerate(record["buffered_s"])]
+        for t, q, z in buffered:
+            self.pending.append(_Frame(float(t), state=None if q is None else np.asarray(q, dtype=float),
+                                       z=None if z is None else np.asarray(z, dtype=float), scalars={}))
             self.written += 1
 
     def files(self) -> list[str]:
@@ -354,6 +398,14 @@ class FieldSeriesExport:
         replace_file(self.path, self._document())
 
     def write(self, t: float, body_positions=None) -> None:
+        """Buffer the frames an engine took (:attr:`engine_frames`), then a frame at ``t`` if one is due."""
+        if self.engine_frames is not None:
+            taken = self.engine_frames()
+            for frame_t, q, z in taken:
+                self._add(_Frame(float(frame_t), state=q if self.rank0 else None, scalars={},
+                                 z=z if self.rank0 and self.bodies is not None else None), last=False)
+            if taken:
+                self.next_s = self._next_after(float(taken[-1][0]))
         if t < self.next_s - 1e-9 * self.interval_s:
             return
         x = self.solution()
@@ -375,9 +427,15 @@ class FieldSeriesExport:
             if self.bodies is not None and body_positions is not None:
                 frame.z = np.array(body_positions, dtype=float, copy=True)     # displaced at the flush
             frame.sites = site_state
+        self._add(frame)
+
+    def _add(self, frame: _Frame, last: bool = True) -> None:
+        """Buffer a frame (a batch full: write it) and, when it is the ``last`` of those taken, move to the next
+        frame time."""
         self.pending.append(frame)
         self.written += 1
-        self.next_s = self._next_after(t)
+        if last:
+            self.next_s = self._next_after(frame.t)
         kill_point("fields_written")
         if len(self.pending) >= self.batch_frames:
             self.flush()
