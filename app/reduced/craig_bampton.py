@@ -57,6 +57,9 @@ REDUCTION_PREFIX = "reduction_"
 MAX_MODES = 2000
 #: static modes solved per MUMPS call (a dense block of right-hand sides: 64 columns of 130 k DOFs, 67 MB)
 STATIC_BLOCK = 64
+#: vectors per step of the block shift-invert eigensolver (app/fe/eigen.py block_shift_invert) for the fixed-interface
+#: modes: one MUMPS solve with this many right-hand sides per step
+EIGEN_BLOCK = 24
 
 
 @dataclass
@@ -452,7 +455,7 @@ def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int |
         M_held = M.copy()
         constraints.apply(M_held, 0.0)
         try:
-            modes = _block_modes(clamped_ksp, M, M_held, constraints, 0.0, wanted)
+            modes = _block_modes(clamped_ksp, M, M_held, constraints, 0.0, wanted, EIGEN_BLOCK)
         except (PETSc.Error, RuntimeError) as exc:
             raise NumericalFailure(f"fixed-interface modes: the block eigensolver failed ({exc}); "
                                    f"lower reduction.cutoff_Hz / n_modes") from None
@@ -466,13 +469,13 @@ def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int |
     return np.array([m.frequency_Hz for m in keep]), [m.vector for m in keep]
 
 
-def _block_modes(factor_ksp, M, M_held, constraints, sigma: float, wanted) -> list:
+def _block_modes(factor_ksp, M, M_held, constraints, sigma: float, wanted, block: int) -> list:
     """``block_shift_invert`` on the factor ``factor_ksp`` holds (of K - sigma M, held DOFs clamped), the pairs as
     app.modal.Mode (frequency [Hz], vector mass-normalised with the full M), ascending in frequency."""
     from app.modal import Mode
 
     factor = factor_ksp.getPC().getFactorMatrix()
-    lambdas, X = block_shift_invert(factor, M_held, sigma, wanted)
+    lambdas, X = block_shift_invert(factor, M_held, sigma, wanted, block=block)
     y = M.createVecRight()
     Mx = M.createVecLeft()
     modes = []
@@ -501,7 +504,9 @@ def _nearest_modes_block(K, M, constraints, near_Hz: float, count: int, prefix: 
     ksp = None
     try:
         ksp = symmetric_factor(shifted, prefix)
-        return _block_modes(ksp, M, M_held, constraints, sigma, lambda lambdas: count)
+        # a few modes wanted: a narrower block (each block step reads the factor once; the Krylov space grows by
+        # the block, and 2 modes need a small space)
+        return _block_modes(ksp, M, M_held, constraints, sigma, lambda lambdas: count, max(8, 2 * count))
     finally:
         for obj in (ksp, shifted, M_held):
             if obj is not None:
