@@ -53,7 +53,7 @@ def symmetric_factor(A, prefix: str):
     return ksp
 
 
-def block_shift_invert(factor, M, sigma: float, wanted, block: int = 24, max_dim: int = 400, tol: float = 1e-10,
+def block_shift_invert(factor, M, sigma: float, wanted, block: int = 8, max_dim: int = 320, tol: float = 1e-10,
                        seed: int = 27, stats: dict | None = None):
     """Eigenpairs of K x = lambda M x nearest ``sigma`` [rad^2/s^2] by a block Krylov subspace of the shift-invert
     operator A = (K - sigma M)^-1 M, with Rayleigh-Ritz in the M inner product. ``factor``: the factored
@@ -68,15 +68,15 @@ def block_shift_invert(factor, M, sigma: float, wanted, block: int = 24, max_dim
     factor per vector: about 10 times the cost per vector on the motor's stator (BENCHMARKS.md, issue 27).
 
     Each step expands the basis V by the images A V_new of its newest block, M-orthogonalised against V (classical
-    Gram-Schmidt twice, Kahan's "twice is enough"; then normalised and once more, with the block's own directions
-    orthonormalised by an eigendecomposition of their Gram matrix, near-dependent ones dropped). Rayleigh-Ritz with
-    H = V^T M A V, symmetric because A is M-self-adjoint. A Ritz pair (theta, x = V s) converges when its residual
-    ||A x - theta x||_M <= tol |theta| (theta = 1 / (lambda - sigma)): SLEPc's relative test on the transformed
-    problem. That residual is estimated from the newest images' part outside V (the block Lanczos estimate) and,
-    when the estimate passes, computed exactly from the stored images A V (no extra solve). Reaching ``max_dim``
-    columns, the basis restarts from the Ritz vectors nearest sigma (thick restart). The start block is random with
-    a fixed seed, drawn over the global numbering (the same on any partition), with A applied once (no part in the
-    massless or held directions)."""
+    Gram-Schmidt twice, Kahan's "twice is enough", the first pass's coefficients those of H; then normalised and
+    once more, with the block's own directions orthonormalised by an eigendecomposition of their Gram matrix,
+    near-dependent ones dropped). Rayleigh-Ritz with H = V^T M A V, symmetric because A is M-self-adjoint. A Ritz
+    pair (theta, x = V s) converges when its residual ||A x - theta x||_M <= tol |theta| (theta = 1 / (lambda -
+    sigma)): SLEPc's relative test on the transformed problem. That residual is estimated from the newest images'
+    part outside V (the block Lanczos estimate) and, when the estimate passes, computed exactly from the stored
+    images A V (no extra solve). Beyond ``max_dim`` columns (and 3 times the wanted), the basis restarts from the
+    Ritz vectors nearest sigma (thick restart). The start block is random with a fixed seed, drawn over the global
+    numbering (the same on any partition), with A applied once (no part in the massless or held directions)."""
     from mpi4py import MPI
     from petsc4py import PETSc
 
@@ -117,15 +117,26 @@ def block_shift_invert(factor, M, sigma: float, wanted, block: int = 24, max_dim
     def column_norms(W: np.ndarray, MW: np.ndarray) -> np.ndarray:
         return np.sqrt(np.abs(comm.allreduce(np.einsum("ij,ij->j", W, MW), op=MPI.SUM)))
 
-    V = np.zeros((n_local, max_dim), order="F")        # M-orthonormal basis
+    capacity = min(max_dim, 8 * block)
+    V = np.zeros((n_local, capacity), order="F")       # M-orthonormal basis
     MV = np.zeros_like(V)                              # M V
     AV = np.zeros_like(V)                              # A V
-    H = np.zeros((max_dim, max_dim))                   # V^T M A V
+    H = np.zeros((capacity, capacity))                 # V^T M A V
     m = 0
 
-    def outside(W: np.ndarray, MW: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """W less its M-projection on V, twice; M W updated alike."""
-        for _ in range(2):
+    def grow(columns: int) -> None:
+        """Room for ``columns`` columns in V, M V, A V and H (their first m kept)."""
+        nonlocal V, MV, AV, H, capacity
+        if columns <= capacity:
+            return
+        capacity = max(columns, 2 * capacity)
+        V, MV, AV = (np.asfortranarray(np.concatenate([a, np.zeros((n_local, capacity - a.shape[1]))], axis=1))
+                     for a in (V, MV, AV))
+        H = np.pad(H, ((0, capacity - H.shape[0]), (0, capacity - H.shape[1])))
+
+    def outside(W: np.ndarray, MW: np.ndarray, passes: int = 2) -> tuple[np.ndarray, np.ndarray]:
+        """W less its M-projection on V, ``passes`` times; M W updated alike."""
+        for _ in range(passes):
             C = gram(MV[:, :m], W)
             W = W - V[:, :m] @ C
             MW = MW - MV[:, :m] @ C
@@ -142,13 +153,14 @@ def block_shift_invert(factor, M, sigma: float, wanted, block: int = 24, max_dim
         norms = column_norms(W, MW)
         live = norms > 1e-13 * before
         W = W[:, live] / norms[live]
-        W, MW = outside(W, times_M(W))
+        W, MW = outside(W, times_M(W), passes=1)      # the third pass, on the normalised columns
         for threshold in (1e-8, 0.5):
             d, U = np.linalg.eigh(gram(W, MW))
             T = U[:, d > threshold] / np.sqrt(d[d > threshold])
             W, MW = W @ T, MW @ T
-        k = min(W.shape[1], max_dim - m)
-        V[:, m:m + k], MV[:, m:m + k] = W[:, :k], MW[:, :k]
+        k = W.shape[1]
+        grow(m + k)
+        V[:, m:m + k], MV[:, m:m + k] = W, MW
         m += k
         return k
 
@@ -179,7 +191,8 @@ def block_shift_invert(factor, M, sigma: float, wanted, block: int = 24, max_dim
             Y = AV[:, newest]
             MY = times_M(Y)
             before = column_norms(Y, MY)
-            W, MW = outside(Y, MY)
+            C = H[:m, newest]                          # the first pass's coefficients V^T M Y: computed above
+            W, MW = outside(Y - V[:, :m] @ C, MY - MV[:, :m] @ C, passes=1)
             G = gram(W, MW)
             S_new = S[newest, :k]
             estimate = np.sqrt(np.abs(np.einsum("ij,ik,kj->j", S_new, G, S_new)))
@@ -190,11 +203,11 @@ def block_shift_invert(factor, M, sigma: float, wanted, block: int = 24, max_dim
                     if stats is not None:
                         stats.update(count, dimension=m, wanted=k)
                     return lambdas[:k], X
-            if m + block > max_dim:
-                # thick restart: the Ritz vectors nearest sigma (twice the wanted, at most half the room) and their
-                # images; the next directions: the residuals of those not converged yet
+            if m + block > max(max_dim, 3 * k + block):
+                # thick restart: the Ritz vectors nearest sigma (twice the wanted) and their images; the next
+                # directions: the residuals of those not converged yet
                 count["restarts"] += 1
-                keep = min(m, max(2 * k, block), max_dim // 2)
+                keep = min(m, max(2 * k, block))
                 Xk, AXk = V[:, :m] @ S[:, :keep], AV[:, :m] @ S[:, :keep]
                 V[:, :keep], AV[:, :keep] = Xk, AXk
                 MV[:, :keep] = times_M(Xk)
@@ -226,7 +239,7 @@ def without_zeros(A):
 
     indptr, indices, values = A.getValuesCSR()
     nonzero = values != 0.0
-    kept = np.concatenate([[0], np.cumsum(nonzero)])[indptr]       # nonzeros before each row's start
+    kept = np.concatenate([[0], np.cumsum(nonzero, dtype=np.int64)])[indptr]       # nonzeros before each row's start
     compact_ptr = kept.astype(PETSc.IntType)
     out = PETSc.Mat().createAIJ(A.getSizes(), csr=(compact_ptr, indices[nonzero].astype(PETSc.IntType),
                                                    values[nonzero]), comm=A.getComm())

@@ -57,9 +57,11 @@ REDUCTION_PREFIX = "reduction_"
 MAX_MODES = 2000
 #: static modes solved per MUMPS call (a dense block of right-hand sides: 64 columns of 130 k DOFs, 67 MB)
 STATIC_BLOCK = 64
-#: vectors per step of the block shift-invert eigensolver (app/fe/eigen.py block_shift_invert) for the fixed-interface
-#: modes: one MUMPS solve with this many right-hand sides per step
-EIGEN_BLOCK = 24
+#: vectors per step of the block shift-invert eigensolver (app/fe/eigen.py block_shift_invert): one MUMPS solve with
+#: this many right-hand sides per step. A wider block costs less per vector solved but grows the Krylov space faster
+#: than it converges: the motor's 28 fixed-interface pairs took 176 vectors with 8 a block, 256 with 16, 336 with 24
+#: (BENCHMARKS.md, issue 27); 4 to 12 cost alike
+EIGEN_BLOCK = 8
 
 
 @dataclass
@@ -504,9 +506,7 @@ def _nearest_modes_block(K, M, constraints, near_Hz: float, count: int, prefix: 
     ksp = None
     try:
         ksp = symmetric_factor(shifted, prefix)
-        # a few modes wanted: a narrower block (each block step reads the factor once; the Krylov space grows by
-        # the block, and 2 modes need a small space)
-        return _block_modes(ksp, M, M_held, constraints, sigma, lambda lambdas: count, max(8, 2 * count))
+        return _block_modes(ksp, M, M_held, constraints, sigma, lambda lambdas: count, max(EIGEN_BLOCK, 2 * count))
     finally:
         for obj in (ksp, shifted, M_held):
             if obj is not None:
