@@ -54,7 +54,7 @@ def symmetric_factor(A, prefix: str):
 
 
 def block_shift_invert(factor, M, sigma: float, wanted, block: int = 8, max_dim: int = 320, tol: float = 1e-10,
-                       seed: int = 27, stats: dict | None = None):
+                       seed: int = 27, stats: dict | None = None, max_restarts: int = 20):
     """Eigenpairs of K x = lambda M x nearest ``sigma`` [rad^2/s^2] by a block Krylov subspace of the shift-invert
     operator A = (K - sigma M)^-1 M, with Rayleigh-Ritz in the M inner product. ``factor``: the factored
     K - sigma M (a PETSc factor matrix; its held rows and columns zeroed, 1 on the diagonal), ``M`` with the same
@@ -75,8 +75,9 @@ def block_shift_invert(factor, M, sigma: float, wanted, block: int = 8, max_dim:
     sigma)): SLEPc's relative test on the transformed problem. That residual is estimated from the newest images'
     part outside V (the block Lanczos estimate) and, when the estimate passes, computed exactly from the stored
     images A V (no extra solve). Beyond ``max_dim`` columns (and 3 times the wanted), the basis restarts from the
-    Ritz vectors nearest sigma (thick restart). The start block is random with a fixed seed, drawn over the global
-    numbering (the same on any partition), with A applied once (no part in the massless or held directions)."""
+    Ritz vectors nearest sigma (thick restart); RuntimeError after ``max_restarts``. The start block is random with
+    a fixed seed, drawn over the global numbering (the same on any partition), with A applied once (no part in the
+    massless or held directions)."""
     from mpi4py import MPI
     from petsc4py import PETSc
 
@@ -207,6 +208,9 @@ def block_shift_invert(factor, M, sigma: float, wanted, block: int = 8, max_dim:
                 # thick restart: the Ritz vectors nearest sigma (twice the wanted) and their images; the next
                 # directions: the residuals of those not converged yet
                 count["restarts"] += 1
+                if count["restarts"] > max_restarts:
+                    raise RuntimeError(f"block shift-invert: {k} pairs not converged to {tol:g} after {max_restarts} "
+                                       f"restarts ({count['columns']} vectors solved)")
                 keep = min(m, max(2 * k, block))
                 Xk, AXk = V[:, :m] @ S[:, :keep], AV[:, :m] @ S[:, :keep]
                 V[:, :keep], AV[:, :keep] = Xk, AXk

@@ -20,7 +20,7 @@ With x the full u-phi vector (every DOF, Dirichlet ones zero):
     x = T q,   T = [Psi_B | Psi_E | Phi],   q = [u_B ; V_E ; eta]
 
 * Psi_B: one static constraint mode per interface DOF b: x_b = 1, every other interface DOF,
-  every electrode and every Dirichlet DOF 0, interior K_II x_I = -K_Ib (one LU of the clamped K).
+  every electrode and every Dirichlet DOF 0, interior K_II x_I = -K_Ib (one factorisation of the clamped K).
 * Psi_E: one static electrode mode per electrode e: potential 1 on e, 0 on the other boundaries.
 * Phi: fixed-interface normal modes K_II phi = omega^2 M_II phi (interface, electrodes and
   supports held; interior potential DOFs are massless and condensed by the eigensolver), mass
@@ -150,8 +150,10 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
     prescribes this pattern instead of the DOF's unit displacement (the band interface,
     app/contact/sites.py ring_band_patterns); every DOF of a pattern is held in the fixed-interface modes.
 
-    ``shared_factorisation`` (the default): the static modes are solved all at once (MUMPS with a dense block of
-    right-hand sides) and the fixed-interface eigenproblem reuses the clamped K's LU; False: one solve per static mode
+    ``shared_factorisation`` (the default): the clamped K factorised once as LDL^T (MUMPS, symmetric indefinite), the
+    static modes solved all at once on it (a dense block of right-hand sides), the fixed-interface modes by a block
+    shift-invert on the same factor and the enrichment by one on an LDL^T of its own (app/fe/eigen.py
+    block_shift_invert); False: an LU, one solve per static mode
     and an eigensolver with its own factorisation (the straightforward path, which tests/test_reduced_build.py holds
     the default against)."""
     if n_modes is None and cutoff_Hz is None:
@@ -184,7 +186,7 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
 
     phases = {}
     mark = (time.perf_counter(), time.process_time())
-    # One LU of K with every boundary DOF clamped: static constraint and electrode modes.
+    # One factorisation of K with every boundary DOF clamped: static constraint and electrode modes.
     clamped = K.copy()
     clamped.zeroRowsColumns(held, 1.0)
     unit_sets = []
@@ -318,8 +320,7 @@ def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint
 
 
 def _damping_solves(C, ksp, held, electrode_modes) -> list[PETSc.Vec]:
-    """K_II^-1 (C psi_e)_I for each electrode mode psi_e (see ``_damping_vectors``), on the clamped K's LU: solved
-    before the fixed-interface eigensolver, which shares that KSP and resets it when it is destroyed."""
+    """K_II^-1 (C psi_e)_I for each electrode mode psi_e (see ``_damping_vectors``), on the clamped K's factor."""
     out = []
     rhs = C.createVecLeft()
     for psi in electrode_modes:
@@ -329,7 +330,7 @@ def _damping_solves(C, ksp, held, electrode_modes) -> list[PETSc.Vec]:
         z = C.createVecRight()
         ksp.solve(rhs, z)
         if ksp.getConvergedReason() < 0:
-            raise NumericalFailure(f"Craig-Bampton damping vector: LU solve failed "
+            raise NumericalFailure(f"Craig-Bampton damping vector: the solve failed "
                                    f"(KSP reason {ksp.getConvergedReason()})")
         out.append(z)
     rhs.destroy()
@@ -402,7 +403,7 @@ def _static_modes_block(K, ksp, held, unit_sets, comm, block: int = STATIC_BLOCK
     lo, hi = K.getOwnershipRange()
     n_local, n_global = hi - lo, K.getSize()[0]
     held_local = held - lo
-    factor = ksp.getPC().getFactorMatrix()            # set up: the LU of the clamped K
+    factor = ksp.getPC().getFactorMatrix()            # set up: the factor of the clamped K
     columns: list[PETSc.Vec] = []
     for first in range(0, len(unit_sets), block):
         chunk = unit_sets[first:first + block]
@@ -421,7 +422,7 @@ def _static_modes_block(K, ksp, held, unit_sets, comm, block: int = STATIC_BLOCK
         try:
             factor.matSolve(rhs, solution)
         except PETSc.Error as exc:
-            raise NumericalFailure(f"Craig-Bampton static modes: LU solve failed ({exc})") from None
+            raise NumericalFailure(f"Craig-Bampton static modes: the solve failed ({exc})") from None
         solved = solution.getDenseArray(readonly=True)
         for j in range(len(chunk)):
             x = K.createVecRight()
