@@ -483,22 +483,41 @@ def _block_modes(factor_ksp, M, M_held, constraints, sigma: float, wanted, block
     Mx = M.createVecLeft()
     modes = []
     for j in np.argsort(lambdas):
+        if lambdas[j] <= 0.0:       # a free body's rigid-body modes (as app.modal.converged_modes, cutoff 0)
+            continue
         y.array[:] = X[:, j]
         x = M.createVecRight()
         constraints.expand(y, x)
         M.mult(x, Mx)
         x.scale(1.0 / math.sqrt(abs(x.dot(Mx))))
-        modes.append(Mode(math.sqrt(abs(lambdas[j])) / (2 * math.pi), x))
+        modes.append(Mode(math.sqrt(lambdas[j]) / (2 * math.pi), x))
     y.destroy()
     Mx.destroy()
     return modes
 
 
 def _nearest_modes_block(K, M, constraints, near_Hz: float, count: int, prefix: str) -> list:
-    """The ``count`` modes nearest ``near_Hz`` of K x = omega^2 M x with ``constraints``' DOFs held: one LDL^T of
-    K - sigma M (sigma = (2 pi near_Hz)^2, indefinite), then ``block_shift_invert`` on it (the default path's
-    enrichment; the reference path: app.modal.solve_modes, SLEPc with an LU)."""
+    """The ``count`` modes nearest ``near_Hz`` in frequency of K x = omega^2 M x with ``constraints``' DOFs held
+    (rigid-body modes, lambda <= 0, left out): one LDL^T of K - sigma M (sigma = (2 pi near_Hz)^2, indefinite), then
+    ``block_shift_invert`` on it (the default path's enrichment; the reference path: app.modal.solve_modes, SLEPc
+    with an LU, which picks the same modes). Nearest in frequency is not nearest in lambda: a mode d Hz above the
+    target lies (2 pi)^2 d (2 f + d) from sigma, one d Hz below (2 pi)^2 d (2 f - d); so every Ritz pair within the
+    lambda-distance of the ``count``-th nearest in frequency is converged, and the ``count`` nearest in frequency
+    kept (a free body's rigid-body modes, 20 kHz below a drill's drive, are nearer in lambda than its next mode
+    above)."""
     sigma = (2 * math.pi * near_Hz) ** 2
+
+    def off_target_Hz(lambdas: np.ndarray) -> np.ndarray:
+        return np.where(lambdas > 0, np.abs(np.sqrt(np.abs(lambdas)) / (2 * math.pi) - near_Hz), np.inf)
+
+    def wanted(lambdas: np.ndarray) -> int:
+        distance = np.sort(off_target_Hz(lambdas))
+        if not np.isfinite(distance[min(count, distance.size) - 1]):
+            return min(count, lambdas.size)
+        d = distance[min(count, distance.size) - 1]
+        reach = (2 * math.pi) ** 2 * d * (2 * near_Hz + d)
+        return max(count, int(np.count_nonzero(np.abs(lambdas - sigma) <= reach * (1 + 1e-9))))
+
     shifted = K.copy()
     shifted.axpy(-sigma, M, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
     constraints.apply(shifted, 1.0)
@@ -507,11 +526,17 @@ def _nearest_modes_block(K, M, constraints, near_Hz: float, count: int, prefix: 
     ksp = None
     try:
         ksp = symmetric_factor(shifted, prefix)
-        return _block_modes(ksp, M, M_held, constraints, sigma, lambda lambdas: count, max(EIGEN_BLOCK, 2 * count))
+        modes = _block_modes(ksp, M, M_held, constraints, sigma, wanted, max(EIGEN_BLOCK, 2 * count))
     finally:
         for obj in (ksp, shifted, M_held):
             if obj is not None:
                 obj.destroy()
+    off = np.array([abs(m.frequency_Hz - near_Hz) for m in modes])
+    nearest = set(np.argsort(off)[:count].tolist())
+    for j, mode in enumerate(modes):
+        if j not in nearest:
+            mode.vector.destroy()
+    return [mode for j, mode in enumerate(modes) if j in nearest]
 
 
 def _lu_factor(A) -> PETSc.KSP:
