@@ -20,7 +20,7 @@ With x the full u-phi vector (every DOF, Dirichlet ones zero):
     x = T q,   T = [Psi_B | Psi_E | Phi],   q = [u_B ; V_E ; eta]
 
 * Psi_B: one static constraint mode per interface DOF b: x_b = 1, every other interface DOF,
-  every electrode and every Dirichlet DOF 0, interior K_II x_I = -K_Ib (one LU of the clamped K).
+  every electrode and every Dirichlet DOF 0, interior K_II x_I = -K_Ib (one factorisation of the clamped K).
 * Psi_E: one static electrode mode per electrode e: potential 1 on e, 0 on the other boundaries.
 * Phi: fixed-interface normal modes K_II phi = omega^2 M_II phi (interface, electrodes and
   supports held; interior potential DOFs are massless and condensed by the eigensolver), mass
@@ -48,15 +48,20 @@ from dataclasses import dataclass, field
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
-from slepc4py import SLEPc
 
 from app.errors import NumericalFailure
 from app.fe.constraints import ConstraintSet
+from app.fe.eigen import block_shift_invert, symmetric_factor
 
 REDUCTION_PREFIX = "reduction_"
 MAX_MODES = 2000
 #: static modes solved per MUMPS call (a dense block of right-hand sides: 64 columns of 130 k DOFs, 67 MB)
 STATIC_BLOCK = 64
+#: vectors per step of the block shift-invert eigensolver (app/fe/eigen.py block_shift_invert): one MUMPS solve with
+#: this many right-hand sides per step. A wider block costs less per vector solved but grows the Krylov space faster
+#: than it converges: the motor's 28 fixed-interface pairs took 176 vectors with 8 a block, 256 with 16, 336 with 24
+#: (BENCHMARKS.md, issue 27); 4 to 12 cost alike
+EIGEN_BLOCK = 8
 
 
 @dataclass
@@ -145,8 +150,10 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
     prescribes this pattern instead of the DOF's unit displacement (the band interface,
     app/contact/sites.py ring_band_patterns); every DOF of a pattern is held in the fixed-interface modes.
 
-    ``shared_factorisation`` (the default): the static modes are solved all at once (MUMPS with a dense block of
-    right-hand sides) and the fixed-interface eigenproblem reuses the clamped K's LU; False: one solve per static mode
+    ``shared_factorisation`` (the default): the clamped K factorised once as LDL^T (MUMPS, symmetric indefinite), the
+    static modes solved all at once on it (a dense block of right-hand sides), the fixed-interface modes by a block
+    shift-invert on the same factor and the enrichment by one on an LDL^T of its own (app/fe/eigen.py
+    block_shift_invert); False: an LU, one solve per static mode
     and an eigensolver with its own factorisation (the straightforward path, which tests/test_reduced_build.py holds
     the default against)."""
     if n_modes is None and cutoff_Hz is None:
@@ -179,16 +186,9 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
 
     phases = {}
     mark = (time.perf_counter(), time.process_time())
-    # One LU of K with every boundary DOF clamped: static constraint and electrode modes.
+    # One factorisation of K with every boundary DOF clamped: static constraint and electrode modes.
     clamped = K.copy()
     clamped.zeroRowsColumns(held, 1.0)
-    ksp = PETSc.KSP().create(comm)
-    ksp.setOptionsPrefix(REDUCTION_PREFIX)
-    ksp.setOperators(clamped)
-    ksp.setType("preonly")
-    ksp.getPC().setType("lu")
-    ksp.getPC().setFactorSolverType("mumps")
-    ksp.setFromOptions()
     unit_sets = []
     for g in interface:
         if int(g) in interface_patterns:
@@ -202,11 +202,13 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
     unit_sets += [(electrode_owned[name], np.ones(electrode_owned[name].size)) for name in electrodes]
     unit_sets += [pattern_owned[name] for name in patterns]
     try:
-        ksp.setUp()                                    # the LU of the clamped K
+        # the default: MUMPS's symmetric indefinite LDL^T (half the LU's factor: every solve reads half as much); the
+        # reference path keeps the LU it always had
+        ksp = symmetric_factor(clamped, REDUCTION_PREFIX) if shared_factorisation else _lu_factor(clamped)
     except PETSc.Error as exc:
-        raise NumericalFailure(f"Craig-Bampton static modes: LU factorisation of the clamped K failed ({exc})") \
+        raise NumericalFailure(f"Craig-Bampton static modes: factorisation of the clamped K failed ({exc})") \
             from None
-    mark = _lap(phases, "clamped K: LU", mark)
+    mark = _lap(phases, "clamped K: " + ("LDL^T" if shared_factorisation else "LU"), mark)
     static = _static_modes_block if shared_factorisation else _static_modes_one_by_one
     columns = static(K, ksp, held, unit_sets, comm)
     damping_solves = _damping_solves(C, ksp, held, columns[interface.size:interface.size + len(electrodes)]) \
@@ -230,7 +232,8 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
                                                           + [g for g, _ in pattern_owned.values()])
                                            ).astype(PETSc.IntType)
         enrichment_Hz, extra = _enrichment_vectors(K, M, W, support_and_electrodes - lo, n_enrich, enrich_near_Hz,
-                                                   columns[:interface.size], interface, modes, comm, band_owned)
+                                                   columns[:interface.size], interface, modes, comm, band_owned,
+                                                   block=shared_factorisation)
         modes += extra
         mark = _lap(phases, f"{n_enrich} enrichment modes", mark)
     if damping_solves:
@@ -260,22 +263,26 @@ def _lap(phases: dict, name: str, mark: tuple[float, float]) -> tuple[float, flo
 
 
 def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint_modes, interface, modes, comm,
-                        band_owned=None):
+                        band_owned=None, block=True):
     """The full model's ``n_enrich`` modes nearest ``near_Hz`` (``held_owned_local`` held, the interface free), each
     less its constraint-mode part (so it vanishes on the interface, like Phi) and M-orthogonalised against
     ``modes`` and each other: interior vectors whose span, with the constraint modes, holds the full modes.
     With the band interface (``band_owned``: the band's owned DOFs) what is left on the band between the stations
     (the mode's band displacement less its interpolation) is set to zero: the basis holds the full mode as the
-    band interface constrains it."""
+    band interface constrains it. ``block``: the block shift-invert on an LDL^T factor (``_nearest_modes_block``);
+    False: SLEPc's Krylov-Schur on an LU (the reference path)."""
     from app.fe.operators import Operators
     from app.modal import solve_modes
 
     constraints = ConstraintSet(W, held_owned_local.astype(np.int32), [])
     try:
-        full = solve_modes(Operators(K, M), constraints, near_Hz, n_enrich, 0.0,
-                           prefix=REDUCTION_PREFIX + "enrich_eps_")
+        if block:
+            full = _nearest_modes_block(K, M, constraints, near_Hz, n_enrich, REDUCTION_PREFIX + "enrich_")
+        else:
+            full = solve_modes(Operators(K, M), constraints, near_Hz, n_enrich, 0.0,
+                               prefix=REDUCTION_PREFIX + "enrich_eps_")
     except PETSc.Error as exc:
-        raise NumericalFailure(f"basis enrichment: SLEPc failed for {n_enrich} modes near {near_Hz:.0f} Hz "
+        raise NumericalFailure(f"basis enrichment: the eigensolver failed for {n_enrich} modes near {near_Hz:.0f} Hz "
                                f"({exc})") from None
     lo, hi = K.getOwnershipRange()
     owned = (interface >= lo) & (interface < hi)
@@ -313,8 +320,7 @@ def _enrichment_vectors(K, M, W, held_owned_local, n_enrich, near_Hz, constraint
 
 
 def _damping_solves(C, ksp, held, electrode_modes) -> list[PETSc.Vec]:
-    """K_II^-1 (C psi_e)_I for each electrode mode psi_e (see ``_damping_vectors``), on the clamped K's LU: solved
-    before the fixed-interface eigensolver, which shares that KSP and resets it when it is destroyed."""
+    """K_II^-1 (C psi_e)_I for each electrode mode psi_e (see ``_damping_vectors``), on the clamped K's factor."""
     out = []
     rhs = C.createVecLeft()
     for psi in electrode_modes:
@@ -324,7 +330,7 @@ def _damping_solves(C, ksp, held, electrode_modes) -> list[PETSc.Vec]:
         z = C.createVecRight()
         ksp.solve(rhs, z)
         if ksp.getConvergedReason() < 0:
-            raise NumericalFailure(f"Craig-Bampton damping vector: LU solve failed "
+            raise NumericalFailure(f"Craig-Bampton damping vector: the solve failed "
                                    f"(KSP reason {ksp.getConvergedReason()})")
         out.append(z)
     rhs.destroy()
@@ -397,7 +403,7 @@ def _static_modes_block(K, ksp, held, unit_sets, comm, block: int = STATIC_BLOCK
     lo, hi = K.getOwnershipRange()
     n_local, n_global = hi - lo, K.getSize()[0]
     held_local = held - lo
-    factor = ksp.getPC().getFactorMatrix()            # set up: the LU of the clamped K
+    factor = ksp.getPC().getFactorMatrix()            # set up: the factor of the clamped K
     columns: list[PETSc.Vec] = []
     for first in range(0, len(unit_sets), block):
         chunk = unit_sets[first:first + block]
@@ -416,7 +422,7 @@ def _static_modes_block(K, ksp, held, unit_sets, comm, block: int = STATIC_BLOCK
         try:
             factor.matSolve(rhs, solution)
         except PETSc.Error as exc:
-            raise NumericalFailure(f"Craig-Bampton static modes: LU solve failed ({exc})") from None
+            raise NumericalFailure(f"Craig-Bampton static modes: the solve failed ({exc})") from None
         solved = solution.getDenseArray(readonly=True)
         for j in range(len(chunk)):
             x = K.createVecRight()
@@ -429,45 +435,121 @@ def _static_modes_block(K, ksp, held, unit_sets, comm, block: int = STATIC_BLOCK
 
 def _fixed_interface_modes(K, M, W, held_owned_local: np.ndarray, n_modes: int | None, cutoff_Hz: float | None,
                            interior: int = MAX_MODES, clamped_ksp: PETSc.KSP | None = None):
-    """Lowest fixed-interface modes (mass normalised), by SLEPc shift-invert about 0. With a cutoff,
-    the number asked for grows until the highest mode found lies above it. ``clamped_ksp``: a KSP whose operator
-    is K with the held DOFs' rows and columns zeroed (1 on the diagonal) and that holds its LU: the shift-invert
-    about 0 applies that operator's inverse, so it solves with that LU instead of factorising K again."""
-    from app.fe.eigen import shift_invert_solver
+    """Lowest fixed-interface modes (mass normalised), by shift-invert about 0. With a cutoff, every mode below it
+    (and at least ``n_modes`` if given). ``clamped_ksp``: a KSP whose operator is K with the held DOFs' rows and
+    columns zeroed (1 on the diagonal) and that holds its factor: the block shift-invert (``block_shift_invert``)
+    solves on that factor, a block of vectors per MUMPS call. None: SLEPc's Krylov-Schur with its own LU, restarted
+    for more modes while the highest lies below the cutoff (the reference path)."""
     from app.fe.operators import Operators
 
     constraints = ConstraintSet(W, held_owned_local.astype(np.int32), [])
-    ops = Operators(K, M)
     want = min(n_modes or 16, interior)
-    dim = W.mesh.geometry.dim
-    prefix = REDUCTION_PREFIX + "eps_"
-    eps = M_held = None
-    if clamped_ksp is not None:
+    if clamped_ksp is None:
+        modes = _lowest_modes_by_restart(Operators(K, M), constraints, REDUCTION_PREFIX + "eps_", want, n_modes,
+                                         cutoff_Hz, interior, W.mesh.geometry.dim)
+    else:
+        limit = min(MAX_MODES, interior)
+        lambda_cut = (2 * math.pi * cutoff_Hz) ** 2 if cutoff_Hz is not None else -math.inf
+
+        def wanted(lambdas: np.ndarray) -> int:
+            # every Ritz value below the cutoff and the first above it (its convergence shows none is left below)
+            return min(limit, max(n_modes or 0, int(np.count_nonzero(lambdas <= lambda_cut)) + 1))
+
         M_held = M.copy()
         constraints.apply(M_held, 0.0)
-        eps = shift_invert_solver(K.getComm(), clamped_ksp.getOperators()[0], M_held, want, 0.0, prefix)
-        st = eps.getST()
-        # in place: the ST's operator is the clamped K itself (the shift is 0), the object the KSP factorised, so the
-        # KSP sees its operator unchanged and keeps its LU (SLEPc's default copy mode did the same at shift 0 with
-        # slepc 3.18: 2 factorisations either way, tests/test_reduced_build.py; in place states it). One EPS for
-        # every pass of the cutoff's loop: destroying it resets the shared KSP (its LU gone)
-        st.setMatMode(SLEPc.ST.MatMode.INPLACE)
-        st.setKSP(clamped_ksp)
-    try:
-        if eps is None:
-            modes = _lowest_modes_by_restart(ops, constraints, prefix, want, n_modes, cutoff_Hz, interior, dim)
-        else:
-            modes = _lowest_modes_by_deflation(eps, M, constraints, prefix, want, n_modes, cutoff_Hz, interior, dim)
-    finally:
-        for obj in (eps, M_held):
-            if obj is not None:
-                obj.destroy()
+        try:
+            modes = _block_modes(clamped_ksp, M, M_held, constraints, 0.0, wanted, EIGEN_BLOCK)
+        except (PETSc.Error, RuntimeError) as exc:
+            raise NumericalFailure(f"fixed-interface modes: the block eigensolver failed ({exc}); "
+                                   f"lower reduction.cutoff_Hz / n_modes") from None
+        finally:
+            M_held.destroy()
     keep = [m for m in modes if (n_modes is not None and modes.index(m) < n_modes)
             or (cutoff_Hz is not None and m.frequency_Hz <= cutoff_Hz)]
     for m in modes:
         if m not in keep:
             m.vector.destroy()
     return np.array([m.frequency_Hz for m in keep]), [m.vector for m in keep]
+
+
+def _block_modes(factor_ksp, M, M_held, constraints, sigma: float, wanted, block: int) -> list:
+    """``block_shift_invert`` on the factor ``factor_ksp`` holds (of K - sigma M, held DOFs clamped), the pairs as
+    app.modal.Mode (frequency [Hz], vector mass-normalised with the full M), ascending in frequency."""
+    from app.modal import Mode
+
+    factor = factor_ksp.getPC().getFactorMatrix()
+    lambdas, X = block_shift_invert(factor, M_held, sigma, wanted, block=block)
+    y = M.createVecRight()
+    Mx = M.createVecLeft()
+    modes = []
+    for j in np.argsort(lambdas):
+        if lambdas[j] <= 0.0:       # a free body's rigid-body modes (as app.modal.converged_modes, cutoff 0)
+            continue
+        y.array[:] = X[:, j]
+        x = M.createVecRight()
+        constraints.expand(y, x)
+        M.mult(x, Mx)
+        x.scale(1.0 / math.sqrt(abs(x.dot(Mx))))
+        modes.append(Mode(math.sqrt(lambdas[j]) / (2 * math.pi), x))
+    y.destroy()
+    Mx.destroy()
+    return modes
+
+
+def _nearest_modes_block(K, M, constraints, near_Hz: float, count: int, prefix: str) -> list:
+    """The ``count`` modes nearest ``near_Hz`` in frequency of K x = omega^2 M x with ``constraints``' DOFs held
+    (rigid-body modes, lambda <= 0, left out): one LDL^T of K - sigma M (sigma = (2 pi near_Hz)^2, indefinite), then
+    ``block_shift_invert`` on it (the default path's enrichment; the reference path: app.modal.solve_modes, SLEPc
+    with an LU, which picks the same modes). Nearest in frequency is not nearest in lambda: a mode d Hz above the
+    target lies (2 pi)^2 d (2 f + d) from sigma, one d Hz below (2 pi)^2 d (2 f - d); so every Ritz pair within the
+    lambda-distance of the ``count``-th nearest in frequency is converged, and the ``count`` nearest in frequency
+    kept (a free body's rigid-body modes, 20 kHz below a drill's drive, are nearer in lambda than its next mode
+    above)."""
+    sigma = (2 * math.pi * near_Hz) ** 2
+
+    def off_target_Hz(lambdas: np.ndarray) -> np.ndarray:
+        return np.where(lambdas > 0, np.abs(np.sqrt(np.abs(lambdas)) / (2 * math.pi) - near_Hz), np.inf)
+
+    def wanted(lambdas: np.ndarray) -> int:
+        distance = np.sort(off_target_Hz(lambdas))
+        if not np.isfinite(distance[min(count, distance.size) - 1]):
+            return min(count, lambdas.size)
+        d = distance[min(count, distance.size) - 1]
+        reach = (2 * math.pi) ** 2 * d * (2 * near_Hz + d)
+        return max(count, int(np.count_nonzero(np.abs(lambdas - sigma) <= reach * (1 + 1e-9))))
+
+    shifted = K.copy()
+    shifted.axpy(-sigma, M, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+    constraints.apply(shifted, 1.0)
+    M_held = M.copy()
+    constraints.apply(M_held, 0.0)
+    ksp = None
+    try:
+        ksp = symmetric_factor(shifted, prefix)
+        modes = _block_modes(ksp, M, M_held, constraints, sigma, wanted, max(EIGEN_BLOCK, 2 * count))
+    finally:
+        for obj in (ksp, shifted, M_held):
+            if obj is not None:
+                obj.destroy()
+    off = np.array([abs(m.frequency_Hz - near_Hz) for m in modes])
+    nearest = set(np.argsort(off)[:count].tolist())
+    for j, mode in enumerate(modes):
+        if j not in nearest:
+            mode.vector.destroy()
+    return [mode for j, mode in enumerate(modes) if j in nearest]
+
+
+def _lu_factor(A) -> PETSc.KSP:
+    """A KSP (preonly) holding MUMPS's LU of ``A``, set up (the reference path's factorisation)."""
+    ksp = PETSc.KSP().create(A.getComm())
+    ksp.setOptionsPrefix(REDUCTION_PREFIX)
+    ksp.setOperators(A)
+    ksp.setType("preonly")
+    ksp.getPC().setType("lu")
+    ksp.getPC().setFactorSolverType("mumps")
+    ksp.setFromOptions()
+    ksp.setUp()
+    return ksp
 
 
 def _lowest_modes_by_restart(ops, constraints, prefix, want, n_modes, cutoff_Hz, interior, dim):
@@ -490,40 +572,6 @@ def _lowest_modes_by_restart(ops, constraints, prefix, want, n_modes, cutoff_Hz,
         for m in modes:
             m.vector.destroy()
         want = min(max(estimate, 2 * want), MAX_MODES, interior)
-
-
-def _lowest_modes_by_deflation(eps, M, constraints, prefix, want, n_modes, cutoff_Hz, interior, dim):
-    """The lowest modes by passes of ``eps`` (set up, shift-invert about 0): the first asks for ``want``; while the
-    highest found lies below the cutoff, the next pass deflates the modes found (SLEPc seeks the rest in their
-    M-orthogonal complement) and asks for at most as many again as were found (a Weyl estimate of what the cutoff
-    needs, +20 %, capped: the estimate's f^dim overshoots a thin-walled body's count). No mode is computed twice,
-    and the overshoot beyond the cutoff is bounded by the last pass."""
-    from app.modal import converged_modes
-
-    found: list = []
-    ask = want
-    while True:
-        try:
-            eps.setDimensions(nev=ask, ncv=SLEPc.DECIDE, mpd=SLEPc.DECIDE)
-            if found:
-                eps.setDeflationSpace([m.vector for m in found])
-            eps.solve()
-            new = converged_modes(eps, M, constraints, 0.0, ask, 0.0, prefix)
-        except PETSc.Error as exc:
-            raise NumericalFailure(f"fixed-interface modes: SLEPc failed for {len(found) + ask} modes ({exc}); "
-                                   f"lower reduction.cutoff_Hz / n_modes") from None
-        found = sorted(found + new, key=lambda m: m.frequency_Hz)
-        total, top = len(found), (found[-1].frequency_Hz if found else 0.0)
-        limit = min(MAX_MODES, interior)
-        if not new or total >= limit:
-            return found
-        if n_modes is not None and total < n_modes:
-            ask = min(n_modes, limit) - total
-            continue
-        if cutoff_Hz is None or top > cutoff_Hz:
-            return found
-        estimate = int(math.ceil(1.2 * total * (cutoff_Hz / max(top, 1e-30)) ** dim)) + 8
-        ask = max(1, min(estimate - total, total, limit - total))
 
 
 def _project(A: PETSc.Mat, columns: list[PETSc.Vec], comm, keep_products: bool = False):
