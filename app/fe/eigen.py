@@ -42,11 +42,19 @@ def symmetric_factor(A, prefix: str):
 
     A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
     A.setOption(PETSc.Mat.Option.SYMMETRY_ETERNAL, True)
+    return direct_factor(A, prefix, "cholesky")
+
+
+def direct_factor(A, prefix: str, kind: str = "lu"):
+    """A KSP (preonly) holding MUMPS's factorisation of ``A`` (``kind``: PETSc's PC type, "lu" or "cholesky"), set
+    up, options under ``prefix`` applied. The caller destroys it."""
+    from petsc4py import PETSc
+
     ksp = PETSc.KSP().create(A.getComm())
     ksp.setOptionsPrefix(prefix)
     ksp.setOperators(A)
     ksp.setType("preonly")
-    ksp.getPC().setType("cholesky")
+    ksp.getPC().setType(kind)
     ksp.getPC().setFactorSolverType("mumps")
     ksp.setFromOptions()
     ksp.setUp()

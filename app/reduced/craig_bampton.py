@@ -51,7 +51,7 @@ from petsc4py import PETSc
 
 from app.errors import NumericalFailure
 from app.fe.constraints import ConstraintSet
-from app.fe.eigen import block_shift_invert, symmetric_factor
+from app.fe.eigen import block_shift_invert, direct_factor, symmetric_factor
 
 REDUCTION_PREFIX = "reduction_"
 MAX_MODES = 2000
@@ -541,15 +541,7 @@ def _nearest_modes_block(K, M, constraints, near_Hz: float, count: int, prefix: 
 
 def _lu_factor(A) -> PETSc.KSP:
     """A KSP (preonly) holding MUMPS's LU of ``A``, set up (the reference path's factorisation)."""
-    ksp = PETSc.KSP().create(A.getComm())
-    ksp.setOptionsPrefix(REDUCTION_PREFIX)
-    ksp.setOperators(A)
-    ksp.setType("preonly")
-    ksp.getPC().setType("lu")
-    ksp.getPC().setFactorSolverType("mumps")
-    ksp.setFromOptions()
-    ksp.setUp()
-    return ksp
+    return direct_factor(A, REDUCTION_PREFIX, "lu")
 
 
 def _lowest_modes_by_restart(ops, constraints, prefix, want, n_modes, cutoff_Hz, interior, dim):
