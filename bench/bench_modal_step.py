@@ -63,6 +63,17 @@ def load_kernel(name: str):
     return importlib.import_module(f"kernel_{name}")
 
 
+def site_outputs(lk, arrays, n_sites):
+    """Copies of the per-site diagnostics' accumulators for a kernel's Outputs: since issue 25 the sums (14 columns),
+    the wave-frame bins, the sites' groups and phases; before, the sums' first 5 columns alone."""
+    sums = arrays[0][:n_sites, :5 if "site_bins" not in lk.Outputs._fields else None].copy()
+    if "site_bins" not in lk.Outputs._fields:
+        return (sums,)
+    bins, groups, phase = arrays[1:] if len(arrays) > 1 else (np.zeros((1, 36, 8)), np.zeros(n_sites, np.int64),
+                                                             np.full(n_sites, np.nan))
+    return sums, bins.copy(), groups[:n_sites].copy(), phase[:n_sites].copy()
+
+
 def no_sites(sites):
     """The sites record with no site (the contact-free step)."""
     return type(sites)(*(np.ascontiguousarray(a[:0]) for a in sites))
@@ -102,7 +113,8 @@ def main() -> None:
     state0 = {k: getattr(engine, k).copy() for k in ("q", "v", "a", "z", "zd", "zdd", "istate", "fstate")}
     force0 = engine.site_force.copy() if hasattr(engine, "site_force") else np.zeros((engine.q.size, 3))
     sums0 = [a.copy() for a in engine.sums]
-    site_sums0 = engine.site_sums.copy()
+    site_arrays0 = [a.copy() for a in engine._site_outputs()] if hasattr(engine, "_site_outputs") \
+        else [engine.site_sums.copy()]
     dt = engine.control.closed_s
     t_end = engine.t + args.steps * dt * (1 + 1e-9)
     results = []
@@ -129,10 +141,11 @@ def main() -> None:
                                                                                     for a in engine._out[4:10]),
                                  np.zeros((cap,) + engine._out[10].shape[1:], np.bool_),
                                  *(np.zeros((cap,) + a.shape[1:]) for a in engine._out[11:]),
-                                 site_sums0[:sites.contact.size].copy())
+                                 *site_outputs(lk, site_arrays0, sites.contact.size))
                 cache = lk.make_cache(engine.structure.free.size, sites.rows.shape[0])
+                n_site = len(out) - 15
                 if r == 0:         # compile, fill the cache: not timed
-                    lk.run(t_end, state, model, cache, lk.Outputs(*(a[:1] for a in out[:-1]), out[-1]),
+                    lk.run(t_end, state, model, cache, lk.Outputs(*(a[:1] for a in out[:-n_site]), *out[-n_site:]),
                            case.output.energies)
                     continue
                 mark = time.perf_counter()

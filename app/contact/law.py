@@ -437,20 +437,78 @@ def link_force(l, z_mid, zd_mid, bodies, links, F, P, want):
 
 
 @njit(cache=True)
-def accumulate_sites(y, v, z, zd, dt, sites, contacts, bodies, sums, work):
-    """Per-site diagnostics of a state (site displacements ``y`` and velocities ``v``, (n, 3); body coordinates
-    and rates): adds dt x (pressure, closed, stick, slip along +e1, slip along -e1) to ``sums`` (n, 5), the
-    modal tier's rule (app/reduced/kernel.py) for the FE tier."""
+def accumulate_site(i, fn, s1, s2, speed, un, dt, cos_f, sin_f, drive_phase_f, cos_d, sin_d, sites, contacts,
+                    sums, bins, group, phase):
+    """Adds one step (length dt) of site i to the per-site diagnostics (app/contact/tables.py, the one rule of
+    every tier): its normal force ``fn`` [N], slip s1 = s.e1, s2 = s.e2 and |s| [m/s] (at the time of the force,
+    drive phase ``drive_phase_f`` = omega t [rad], cos_f / sin_f of it) and its normal displacement towards the
+    obstacle ``un`` = -n.y [m] (cos_d / sin_d of the drive phase at its time). ``sums`` (n, 14): pressure,
+    closed, stick, slip +e1, slip -e1; while slipping |s1|, |s2|, |s|; the friction power per area along e1 and
+    e2 (tau s_k^2 / sqrt(|s|^2 + eps^2), which sum to the law's tau |s|^2 / sqrt(...)); the first harmonic at the
+    drive frequency of the pressure and of un (cos, sin parts) - each times dt. ``bins`` (groups, n_bins, 8):
+    with the site's wave phase known (``phase[i]``: the phase of un's harmonic, not NaN), area-weighted, in bin
+    of the wave phase xi = phase[i] - omega t (0: the crest passes the site; positive: the crest has yet to
+    come) of the site's group: area, normal force, area closed, sticking, slipping +e1 / -e1, area x |s1|,
+    area x |s2| while slipping - each times dt."""
+    c = sites.contact[i]
+    w = sites.weight[i]
+    row = sums[i]
+    p = fn / w if fn > 0.0 else 0.0
+    row[10] += dt * p * cos_f
+    row[11] += dt * p * sin_f
+    row[12] += dt * un * cos_d
+    row[13] += dt * un * sin_d
+    ph = phase[i]
+    b = -1
+    if ph == ph:                                   # not NaN: the site's wave phase is known
+        n_bins = bins.shape[1]
+        width = 2.0 * math.pi / n_bins
+        xi = (ph - drive_phase_f + 0.5 * width) % (2.0 * math.pi)
+        b = min(int(xi / width), n_bins - 1)        # bin 0 centred on the crest
+        bins[group[i], b, 0] += dt * w
+    if fn <= 0.0:
+        return
+    row[0] += dt * p
+    row[1] += dt
+    if b >= 0:
+        bins[group[i], b, 1] += dt * fn
+        bins[group[i], b, 2] += dt * w
+    if speed <= contacts.eps[c] or contacts.mu[c] <= 0.0:
+        row[2] += dt
+        if b >= 0:
+            bins[group[i], b, 3] += dt * w
+        return
+    if s1 > 0.0:
+        row[3] += dt
+        if b >= 0:
+            bins[group[i], b, 4] += dt * w
+    else:
+        row[4] += dt
+        if b >= 0:
+            bins[group[i], b, 5] += dt * w
+    a1, a2 = abs(s1), abs(s2)
+    row[5] += dt * a1
+    row[6] += dt * a2
+    row[7] += dt * speed
+    eps = contacts.eps[c]
+    tau = _friction_shear(speed, p, contacts.mu[c], contacts.fact[c], contacts.decay[c], contacts.cap[c])[0]
+    reg = math.sqrt(speed * speed + eps * eps)
+    row[8] += dt * tau * s1 * s1 / reg
+    row[9] += dt * tau * s2 * s2 / reg
+    if b >= 0:
+        bins[group[i], b, 6] += dt * w * a1
+        bins[group[i], b, 7] += dt * w * a2
+
+
+@njit(cache=True)
+def accumulate_sites(y, v, z, zd, dt, t, omega, sites, contacts, bodies, sums, bins, group, phase, work):
+    """Per-site diagnostics of a state at time t [s] (site displacements ``y`` and velocities ``v``, (n, 3); body
+    coordinates and rates), the drive at ``omega`` [rad/s]: :func:`accumulate_site` for every site, the modal
+    tier's rule (app/reduced/kernel.py) for the FE tier."""
+    drive_phase = omega * t
+    cos_t, sin_t = math.cos(drive_phase), math.sin(drive_phase)
     for i in range(sites.contact.size):
         fn, gap, s1, s2, speed = site_force(i, y[i], v[i], z, zd, sites, contacts, bodies, 1.0, 1.0, False, work)
-        if fn <= 0.0:
-            continue
-        c = sites.contact[i]
-        sums[i, 0] += dt * fn / sites.weight[i]
-        sums[i, 1] += dt
-        if speed <= contacts.eps[c] or contacts.mu[c] <= 0.0:
-            sums[i, 2] += dt
-        elif s1 > 0.0:
-            sums[i, 3] += dt
-        else:
-            sums[i, 4] += dt
+        un = -_dot3(sites.frame[i, 0], y[i])
+        accumulate_site(i, fn, s1, s2, speed, un, dt, cos_t, sin_t, drive_phase, cos_t, sin_t, sites, contacts,
+                        sums, bins, group, phase)

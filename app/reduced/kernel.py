@@ -53,6 +53,7 @@ from app.contact.law import (
     _friction_coefficient,
     _penalty_energy,
     _penalty_pressure,
+    accumulate_site,
     friction_tangent,
     link_force,
     shape_gap,
@@ -149,7 +150,10 @@ class Outputs(NamedTuple):
     energy: np.ndarray        # (cap, 5): kinetic, strain, rigid kinetic, contact penalty [J], damping loss [J]
     probe: np.ndarray         # (cap, n_contacts, 3) displacement of each contact's first site in its frame
     peak: np.ndarray          # (cap, n_contacts) largest site pressure fn / weight of a surface contact [Pa]
-    site_sums: np.ndarray     # (n_sites, 5): time integrals of pressure [Pa s], closed, stick, slip +, slip - [s]
+    site_sums: np.ndarray     # (n_sites, 14): the per-site diagnostics' time integrals (app/contact/tables.py)
+    site_bins: np.ndarray     # (groups, bins, 8): their wave-frame bins (app/contact/law.py accumulate_site)
+    site_group: np.ndarray    # (n_sites,) int64 each site's group of bins
+    site_phase: np.ndarray    # (n_sites,) each site's wave-phase reference [rad] (NaN: none yet)
 
 
 class Model(NamedTuple):
@@ -1112,22 +1116,22 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
     power = np.zeros(n_c + n_l)
     tq = np.zeros(3)
     fneg = np.zeros(3)
+    # diagnostics: the forces act at the generalized mid-point t1 - alpha_f dt, the displacements y_end at t1
+    diagnose = out.site_sums.shape[0] == sites.contact.size
+    omega = model.inputs.omega
+    phase_f = omega * (t1 - model.scheme.alpha_f * dt)
+    cos_f, sin_f = math.cos(phase_f), math.sin(phase_f)
+    cos_d, sin_d = math.cos(omega * t1), math.sin(omega * t1)
     for i in range(sites.contact.size):
         c = sites.contact[i]
         if wk.gap[i] < 0.0:
             out.area[row, c] += sites.weight[i]
         fn = wk.fn[i]
         # diagnostics: time integrals of the pressure and of the site's state over accepted steps
-        if fn > 0.0:
-            sums_row = out.site_sums[i]
-            sums_row[0] += dt * fn / sites.weight[i]
-            sums_row[1] += dt
-            if wk.slip[i, 2] <= contacts.eps[c] or contacts.mu[c] <= 0.0:
-                sums_row[2] += dt
-            elif wk.slip[i, 0] > 0.0:
-                sums_row[3] += dt
-            else:
-                sums_row[4] += dt
+        if diagnose:
+            accumulate_site(i, fn, wk.slip[i, 0], wk.slip[i, 1], wk.slip[i, 2], -_dot3(sites.frame[i, 0], y_end[i]),
+                            dt, cos_f, sin_f, phase_f, cos_d, sin_d, sites, contacts, out.site_sums, out.site_bins,
+                            out.site_group, out.site_phase)
         if fn <= 0.0:
             continue
         for k in range(3):
