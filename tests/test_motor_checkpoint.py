@@ -60,7 +60,7 @@ def assert_same_run(reference: Path, out: Path) -> None:
     ref = json.loads((reference / "summary.json").read_text())["results"]["transient"]
     res = json.loads((out / "summary.json").read_text())["results"]["transient"]
     assert _computed(res) == _computed(ref)
-    for name in ("motor_ring.csv", "motor_contact_path.csv"):
+    for name in ("motor_ring.csv", "motor_contact_path.csv", "motor_wave_frame.csv"):
         assert (out / name).read_bytes() == (reference / name).read_bytes(), name
 
 

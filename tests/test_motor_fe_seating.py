@@ -8,7 +8,9 @@ harmonic steady state:
   rotor just touches the highest crest; app/reduced/engine.py), found here by the FE contact's secant iteration;
 * seated, the rotor starts without an impulse and is not thrown: over three periods it never rises above its
   seat and the contact stays closed (started on the design position instead, it overlaps the crests and its
-  first step takes 3.6 N, 3.7 times the preload).
+  first step takes 3.6 N, 3.7 times the preload);
+* the FE tier writes the per-site diagnostics of the modal tier under the same names, the wave-frame bins' normal
+  force equal to the sites' pressure x area (round-off: the same products summed).
 """
 
 from __future__ import annotations
@@ -80,3 +82,27 @@ def test_a_seated_held_rotor_stays_on_the_crests(seated):
     preload = -case.transient.bodies[0].applied_force_N[2]
     assert abs(data["stator_rotor_force_N"][0, 2]) < 0.1 * preload
 
+
+
+def test_the_fe_tier_writes_the_contact_diagnostics_of_the_modal_tier(seated):
+    """The per-site diagnostics under the same names as the modal tier (app/contact/tables.py, one rule in
+    app/contact/law.py): every quantity's table, the wave-frame bins (one group: one ring), and their normal force
+    equal to the sites' pressure x area over the rows with the wave phase known (the same products summed,
+    round-off 1e-12); the motor's summary carries the contact centre and the slip split."""
+    from app.contact.tables import BIN_COLUMNS, QUANTITIES, WAVE_BINS
+
+    _, results, data = seated
+    names = {f"stator_rotor_sites_{key}" for _, key, _, _ in QUANTITIES} | {"stator_rotor_sites_wave_frame"}
+    assert names <= set(data)
+    bins = data["stator_rotor_sites_wave_frame"]
+    assert bins.shape[1:] == (1, WAVE_BINS, len(BIN_COLUMNS))
+    populated = bins[..., 0].reshape(len(bins), -1).sum(axis=1) > 0
+    assert not populated[0] and populated[1:].all()
+    area = data["stator_rotor_sites_geometry"][:, 3]
+    force = bins[populated][..., 1].reshape(int(populated.sum()), -1).sum(axis=1)
+    assert np.allclose(force, data["stator_rotor_sites_pressure"][populated] @ area, rtol=1e-12, atol=0)
+    assert force.min() > 0
+    motor = results["statistics"]["motor"]
+    assert math.isfinite(motor["contact_centre_from_crest_deg"])
+    assert {"slip_speed_circumferential_m_per_s", "slip_speed_meridional_m_per_s",
+            "meridional_slip_power_share"} <= set(motor)

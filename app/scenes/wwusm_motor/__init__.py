@@ -9,6 +9,14 @@ offset and vibration, the fractions of the contact that separate, stick and slip
 per-site tables), the contact point's path and the pressure round the ring (``motor_ring.csv``,
 ``motor_contact_path.csv`` and their plots), the speed against time with the window marked.
 
+Why the drive sits where it does (docs/motor-rotor.md, "Diagnostics of the contact"): the contact in the wave's
+frame, the pressure, contact, stick and forward / backward slip fractions and the slip speed's circumferential
+(e1) and meridional (e2) parts against the wave's phase (0: the crest, positive ahead of it), per ring across the
+band (``motor_wave_frame.csv`` and its plot, from the ``wave_frame`` table of app/contact/tables.py); in
+``statistics.motor`` and the table, the contact's centre against the crest (``contact_centre_from_crest_deg``,
+from the sites' first harmonics of pressure and normal displacement), the slip speeds' parts while slipping and
+the meridional share of the friction power.
+
 The case needs ``output.energies`` (charges and energies) and, for the ring and the fractions,
 ``output.contact_sites``; one rotor with one rotation and a surface contact on it.
 
