@@ -76,13 +76,13 @@ def _run(delta: float, periods: int, clipped: bool = True):
         p = P0 * np.where(np.cos(xi - delta) > 0, pulse, 0.0) if clipped else P0 * (1 + np.cos(xi - delta)) ** 2 / 4
         s1, s2 = V1 * np.cos(xi), V2 * np.sin(xi)
         speed = np.sqrt(s1 ** 2 + s2 ** 2 + 1e-30)
+        tau = np.minimum(MU * FACT * p, CAP)     # the law's shear stress: DC = 0, mu_s at every speed
         for i in range(N_SITES):
-            law.accumulate_site(i, p[i] * AREA, s1[i], s2[i], speed[i], u[i], dt, math.cos(wt), math.sin(wt), wt,
-                                math.cos(wt), math.sin(wt), sites, contacts, tables.sums, tables.bins, tables.groups,
+            law.accumulate_site(i, p[i] * AREA, s1[i], s2[i], speed[i], tau[i], u[i], AREA, EPS, dt, math.cos(wt),
+                                math.sin(wt), wt, math.cos(wt), math.sin(wt), tables.sums, tables.bins, tables.groups,
                                 tables.phase)
         if n > (periods - 1) * STEPS:
             slipping = (p > 0) & (speed > EPS)
-            tau = np.minimum(MU * FACT * p, CAP)
             reg = np.sqrt(speed ** 2 + EPS ** 2)
             check += dt * slipping[:, None] * np.column_stack([np.abs(s1), np.abs(s2), tau * s1 ** 2 / reg,
                                                                tau * s2 ** 2 / reg])

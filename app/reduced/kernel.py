@@ -59,6 +59,7 @@ from app.contact.law import (
     shape_gap,
     site_force,
     site_work,
+    stick_speed,
 )
 
 __all__ = ["CONE", "NODE", "PLANE", "SPHERE", "SURFACE", "Bodies", "Contacts", "Links", "Sites", "shape_gap",
@@ -1118,6 +1119,7 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
     fneg = np.zeros(3)
     # diagnostics: the forces act at the generalized mid-point t1 - alpha_f dt, the displacements y_end at t1
     diagnose = out.site_sums.shape[0] == sites.contact.size
+    site_sums, site_bins, site_group, site_phase = out.site_sums, out.site_bins, out.site_group, out.site_phase
     omega = model.inputs.omega
     phase_f = omega * (t1 - model.scheme.alpha_f * dt)
     cos_f, sin_f = math.cos(phase_f), math.sin(phase_f)
@@ -1127,12 +1129,11 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
         if wk.gap[i] < 0.0:
             out.area[row, c] += sites.weight[i]
         fn = wk.fn[i]
-        # diagnostics: time integrals of the pressure and of the site's state over accepted steps
-        if diagnose:
-            accumulate_site(i, fn, wk.slip[i, 0], wk.slip[i, 1], wk.slip[i, 2], -_dot3(sites.frame[i, 0], y_end[i]),
-                            dt, cos_f, sin_f, phase_f, cos_d, sin_d, sites, contacts, out.site_sums, out.site_bins,
-                            out.site_group, out.site_phase)
         if fn <= 0.0:
+            if diagnose:        # an open site: its displacement's harmonic and its time in the wave-frame bins
+                accumulate_site(i, 0.0, 0.0, 0.0, 0.0, 0.0, -_dot3(sites.frame[i, 0], y_end[i]), sites.weight[i],
+                                0.0, dt, cos_f, sin_f, phase_f, cos_d, sin_d, site_sums, site_bins, site_group,
+                                site_phase)
             continue
         for k in range(3):
             fneg[k] = -wk.f[i, k]
@@ -1150,12 +1151,18 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
             elastic = sites.weight[i] * _penalty_pressure(wk.gap[i], 0.0, contacts.stiffness[c], 0.0,
                                                           contacts.rounding[c])[0]
         tangential = 0.0            # -f_t . s = T |s|^2 / reg
+        T = 0.0
         if contacts.mu[c] > 0.0:
             mu_, _ = _friction_coefficient(wk.slip[i, 2], contacts.mu[c], contacts.fact[c], contacts.decay[c])
             T = min(mu_ * fn, contacts.cap[c] * sites.weight[i])
             speed = wk.slip[i, 2]
             eps = contacts.eps[c]
             tangential = T * speed * speed / math.sqrt(speed * speed + eps * eps)
+        # diagnostics: time integrals of the pressure and of the site's state over accepted steps
+        if diagnose:
+            accumulate_site(i, fn, wk.slip[i, 0], wk.slip[i, 1], wk.slip[i, 2], T / sites.weight[i],
+                            -_dot3(sites.frame[i, 0], y_end[i]), sites.weight[i], stick_speed(contacts, c), dt, cos_f,
+                            sin_f, phase_f, cos_d, sin_d, site_sums, site_bins, site_group, site_phase)
         power[c] += (fn - elastic) * _closing_rate(fn, elastic, contacts.damping[c], contacts.kind[c],
                                                     sites.weight[i]) + tangential
     for l in range(n_l):
