@@ -148,7 +148,8 @@ def _check_wave_frame(out, results):
     rings, 36 bins of wave phase each; its normal force per bin sums to the mean of the sites' pressure x area over
     the same rows and to the time series' normal force over the same steps (the same products summed: the CSV's 8
     digits, 1e-7); contact = stick + forward + backward slip in every bin (8 digits); the contact centre of the
-    summary (from the sites' first harmonics) within half a bin (5 deg) of the bins' pressure-weighted mean phase;
+    summary (from the sites' first harmonics) within half a bin (5 deg) of the bins' pressure-weighted mean phase,
+    and near the crest (within 45 deg of wave: the rotor rests on the crests, where the stator comes closest);
     the slip speed's parts while slipping bound the slip speed, max(e1, e2) <= |s| <= e1 + e2 (round-off)."""
     import csv
 
@@ -182,6 +183,7 @@ def _check_wave_frame(out, results):
     assert np.allclose(frame["contact_fraction"], parts, rtol=1e-7, atol=1e-8)
     centre = math.degrees(wave_frame_centre_rad(bins[1:].sum(axis=0)))
     assert abs(motor["contact_centre_from_crest_deg"] - centre) < 5.0
+    assert abs(centre) < 45.0        # the rotor rests on the crests (not 180 deg away, in a trough)
     e1, e2, s = (motor[f"slip_speed{k}_m_per_s"] for k in ("_circumferential", "_meridional", ""))
     assert max(e1, e2) <= s * (1 + 1e-12) and s <= (e1 + e2) * (1 + 1e-12) and s > 0
     assert 0.0 <= motor["meridional_slip_power_share"] <= 1.0
