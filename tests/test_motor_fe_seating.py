@@ -17,6 +17,7 @@ harmonic steady state:
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -42,8 +43,9 @@ def quiet(*args):
 def seated(tmp_path_factory):
     comm = MPI.COMM_WORLD
     case = load_case(PINNED_MOTOR, TINY_FE)
-    out = tmp_path_factory.mktemp("seated")
+    out = Path(comm.bcast(str(tmp_path_factory.mktemp("seated")), root=0))      # one directory on every rank
     results = run_case(PINNED_MOTOR, TINY_FE, out / "out", comm=comm, quiet=True)["results"]["transient"]
+    comm.barrier()                                   # rank 0 has written the series
     with h5py.File(out / "out" / "transient.h5", "r") as f:
         data = {k: f[k][()] for k in f}
     return case, results, data
@@ -85,11 +87,13 @@ def test_a_seated_held_rotor_stays_on_the_crests(seated):
 
 
 
+@pytest.mark.mpi
 def test_the_fe_tier_writes_the_contact_diagnostics_of_the_modal_tier(seated):
     """The per-site diagnostics under the same names as the modal tier (app/contact/tables.py, one rule in
     app/contact/law.py): every quantity's table, the wave-frame bins (one group: one ring), and their normal force
     equal to the sites' pressure x area over the rows with the wave phase known (the same products summed,
-    round-off 1e-12); the motor's summary carries the contact centre and the slip split."""
+    round-off 1e-12); the motor's summary carries the contact centre and the slip split. On 2 ranks the sites are
+    evaluated on the partitions that own them (app/fe/probe.py PointSet) and summed to every rank."""
     from app.contact.tables import BIN_COLUMNS, QUANTITIES, WAVE_BINS
 
     _, results, data = seated
