@@ -117,7 +117,10 @@ def contact_probe(contact: str) -> str:
 def sites_table(contact: str, quantity: str) -> str:
     """A per-site diagnostics table of a sampled contact: ``time`` (interval start, end [s]), ``geometry``
     (x, y, z [m], area [m^2] per site, written once), ``pressure`` [Pa] and the fractions ``closed``,
-    ``stick``, ``slip_positive``, ``slip_negative`` (rows: output intervals; columns: sites)."""
+    ``stick``, ``slip_positive``, ``slip_negative``; ``slip_speed_e1``, ``slip_speed_e2``, ``slip_speed`` [m/s],
+    ``friction_power_e1``, ``friction_power_e2`` [W/m^2]; the first harmonics ``pressure_cos``, ``pressure_sin``
+    [Pa], ``normal_displacement_cos``, ``normal_displacement_sin`` [m] (rows: output intervals; columns: sites);
+    ``wave_frame`` (rows x groups x wave-phase bins x 8: app/contact/tables.py)."""
     return f"{contact}_sites_{quantity}"
 
 

@@ -17,6 +17,7 @@ coordinates and body state from the first kernel's (the results must agree to th
 
     .venv/bin/python bench/bench_modal_step.py --kernels 2630325 new --warm-s 0.0005 --steps 400
     .venv/bin/python bench/bench_modal_step.py --kernels 2630325 new --preload 4.116 --rest --warm-s 0.004
+    .venv/bin/python bench/bench_modal_step.py --kernels 63b700d new 63b700d new --clock cpu --repeat 9
 """
 
 from __future__ import annotations
@@ -63,6 +64,17 @@ def load_kernel(name: str):
     return importlib.import_module(f"kernel_{name}")
 
 
+def site_outputs(lk, arrays, n_sites):
+    """Copies of the per-site diagnostics' accumulators for a kernel's Outputs: since issue 25 the sums (14 columns),
+    the wave-frame bins, the sites' groups and phases; before, the sums' first 5 columns alone."""
+    sums = arrays[0][:n_sites, :5 if "site_bins" not in lk.Outputs._fields else None].copy()
+    if "site_bins" not in lk.Outputs._fields:
+        return (sums,)
+    bins, groups, phase = arrays[1:] if len(arrays) > 1 else (np.zeros((1, 36, 8)), np.zeros(n_sites, np.int64),
+                                                             np.full(n_sites, np.nan))
+    return sums, bins.copy(), groups[:n_sites].copy(), phase[:n_sites].copy()
+
+
 def no_sites(sites):
     """The sites record with no site (the contact-free step)."""
     return type(sites)(*(np.ascontiguousarray(a[:0]) for a in sites))
@@ -80,6 +92,8 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--kernels", nargs="+", default=["new"])
     parser.add_argument("--json", default=None, help="write the results here")
+    parser.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                        help="time the steps by the wall clock or by this process's CPU time (a loaded machine)")
     args = parser.parse_args()
 
     from mpi4py import MPI
@@ -87,6 +101,7 @@ def main() -> None:
     from app.reduced.engine import ModalEngine
     from app.runner import load_for_run
 
+    clock = time.process_time if args.clock == "cpu" else time.perf_counter
     sets = ([] if args.fine else COARSE) + ["output.fields=false", "output.plots=false"] + list(args.set)
     if args.preload is not None:
         sets.append(f"transient.bodies[0].applied_force_N=[0.0, 0.0, {-args.preload!r}]")
@@ -102,13 +117,15 @@ def main() -> None:
     state0 = {k: getattr(engine, k).copy() for k in ("q", "v", "a", "z", "zd", "zdd", "istate", "fstate")}
     force0 = engine.site_force.copy() if hasattr(engine, "site_force") else np.zeros((engine.q.size, 3))
     sums0 = [a.copy() for a in engine.sums]
-    site_sums0 = engine.site_sums.copy()
+    site_arrays0 = [a.copy() for a in engine._site_outputs()] if hasattr(engine, "_site_outputs") \
+        else [engine.site_sums.copy()]
     dt = engine.control.closed_s
     t_end = engine.t + args.steps * dt * (1 + 1e-9)
     results = []
     reference = None
     for name in args.kernels:
         lk = load_kernel(name)
+        frames = (lk.no_frames(engine.q.size, engine.z.size),) if hasattr(lk, "Frames") else ()   # since issue 27
         row = {"kernel": name}
         for label, sites in (("contact", engine.sites_record), ("free", no_sites(engine.sites_record))):
             model = lk.Model(engine.structure, engine.inputs_record, engine.scheme, engine.control,
@@ -129,15 +146,16 @@ def main() -> None:
                                                                                     for a in engine._out[4:10]),
                                  np.zeros((cap,) + engine._out[10].shape[1:], np.bool_),
                                  *(np.zeros((cap,) + a.shape[1:]) for a in engine._out[11:]),
-                                 site_sums0[:sites.contact.size].copy())
+                                 *site_outputs(lk, site_arrays0, sites.contact.size))
                 cache = lk.make_cache(engine.structure.free.size, sites.rows.shape[0])
+                n_site = len(out) - 15
                 if r == 0:         # compile, fill the cache: not timed
-                    lk.run(t_end, state, model, cache, lk.Outputs(*(a[:1] for a in out[:-1]), out[-1]),
-                           case.output.energies, engine.frames)
+                    lk.run(t_end, state, model, cache, lk.Outputs(*(a[:1] for a in out[:-n_site]), *out[-n_site:]),
+                           case.output.energies, *frames)
                     continue
-                mark = time.perf_counter()
-                code, rows = lk.run(t_end, state, model, cache, out, case.output.energies, engine.frames)
-                walls.append(time.perf_counter() - mark)
+                mark = clock()
+                code, rows = lk.run(t_end, state, model, cache, out, case.output.energies, *frames)
+                walls.append(clock() - mark)
             steps = int(state.istate[lk.I_STEPS] - state0["istate"][lk.I_STEPS])
             newton = int(state.istate[lk.I_NEWTON] - state0["istate"][lk.I_NEWTON])
             row[label] = {"ms_per_step_median": 1e3 * float(np.median(walls)) / steps,

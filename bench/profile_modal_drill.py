@@ -43,7 +43,7 @@ def main() -> None:
     calls = 200
     mark = time.perf_counter()
     for _ in range(calls):
-        out = lk.Outputs(*(arr[:100] for arr in engine._out), engine.site_sums)
+        out = lk.Outputs(*(arr[:100] for arr in engine._out), *engine._site_outputs())
         lk.run(engine.t, engine._state(), engine._model(), engine.cache, out, False, engine.frames)
     print(f"one compiled call taking no step: {(time.perf_counter() - mark) / calls * 1e3:.3f} ms")
     cpu, wall = time.process_time(), time.perf_counter()

@@ -137,7 +137,8 @@ def run(K, M, C, q, v, a, bodies: list[Body], gdim: int, sites: law.Sites | None
                      np.zeros((cap, m)), np.zeros((cap, n_c + n_l, 3)), np.zeros((cap, n_c, 3)), np.zeros((cap, n_c)),
                      np.zeros((cap, n_c)), np.zeros((cap, n_c + n_l), np.bool_), np.zeros((cap, n_c + n_l)),
                      np.zeros((cap, 5)), np.zeros((cap, n_c, 3)), np.zeros((cap, n_c)),
-                     np.zeros((sites.contact.size, 5)))
+                     np.zeros((sites.contact.size, 14)), np.zeros((1, 36, 8)),
+                     np.zeros(sites.contact.size, np.int64), np.full(sites.contact.size, np.nan))
     sums = kr.Sums(np.zeros(n_c + n_l), np.full(n_c + n_l, np.nan), np.zeros(2))
     istate = np.zeros(kr.N_ISTATE, np.int64)
     fstate = np.zeros(kr.N_FSTATE)

@@ -11,7 +11,8 @@ The run: the coarse test stator of tests/test_motor_modal.py (its reduced model 
 cache, PIEZODYN_CACHE_DIR of tests/conftest.py, which the subprocesses share), at most 12 drive periods,
 checkpoints every 2 periods (80 steps), a steady-state window of 4 periods and a loose tolerance (0.8) so
 that the steady-state rule stops the free rotor at period 10: the stop decision then needs the cycle means of
-periods before the checkpoint, and the summary's window spans it.
+periods before the checkpoint, and the summary's window spans it. One more split falls within an output interval
+(6.5 periods): the per-site tables' open sums, wave-frame bins and wave phases travel in the checkpoint.
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ def assert_same_run(reference: Path, out: Path) -> None:
     ref = json.loads((reference / "summary.json").read_text())["results"]["transient"]
     res = json.loads((out / "summary.json").read_text())["results"]["transient"]
     assert _computed(res) == _computed(ref)
-    for name in ("motor_ring.csv", "motor_contact_path.csv"):
+    for name in ("motor_ring.csv", "motor_contact_path.csv", "motor_wave_frame.csv"):
         assert (out / name).read_bytes() == (reference / name).read_bytes(), name
 
 
@@ -98,6 +99,20 @@ def test_motor_resume_from_half_time_equals_one_run(one_go, shared_tmp):
             str(p.relative_to(shared_tmp)) for p in shared_tmp.rglob("*") if p.is_file())
         for name in ("checkpoint/run.json", "checkpoint/checkpoint.json", "checkpoint/reduced-model.npz"):
             assert name in second["outputs"]
+
+
+def test_motor_resume_within_an_output_interval_equals_one_run(one_go, tmp_path):
+    """Split at 6.5 periods, halfway through a per-site table's interval (one period): the checkpoint carries the
+    interval's open sums, its wave-frame bins and the sites' wave phases (app/contact/tables.py), so the resumed run
+    is the one-go run bit for bit (the splits above fall on the intervals' ends, where the sums are empty)."""
+    from app.runner import run_case
+
+    if MPI.COMM_WORLD.size > 1:
+        pytest.skip("serial")
+    first = run_case_quiet(CASE, tmp_path, *SETS, f"transient.end_time_s={HALF_S * 13 / 12!r}")
+    assert not first["results"]["transient"]["steady_state"]["steady"]
+    run_case(CASE, SETS, tmp_path, quiet=True, resume=True)
+    assert_same_run(one_go, tmp_path)
 
 
 # ------------------------------------------------------------------ killed at the worst moments

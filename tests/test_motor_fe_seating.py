@@ -8,12 +8,16 @@ harmonic steady state:
   rotor just touches the highest crest; app/reduced/engine.py), found here by the FE contact's secant iteration;
 * seated, the rotor starts without an impulse and is not thrown: over three periods it never rises above its
   seat and the contact stays closed (started on the design position instead, it overlaps the crests and its
-  first step takes 3.6 N, 3.7 times the preload).
+  first step takes 3.6 N, 3.7 times the preload);
+* the FE tier writes the per-site diagnostics of the modal tier under the same names, the wave-frame bins' normal
+  force equal to the sites' pressure x area (round-off: the same products summed), the contact's centre near the
+  crest (within 45 deg of wave: the rotor rests on the crests).
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -39,8 +43,9 @@ def quiet(*args):
 def seated(tmp_path_factory):
     comm = MPI.COMM_WORLD
     case = load_case(PINNED_MOTOR, TINY_FE)
-    out = tmp_path_factory.mktemp("seated")
+    out = Path(comm.bcast(str(tmp_path_factory.mktemp("seated")), root=0))      # one directory on every rank
     results = run_case(PINNED_MOTOR, TINY_FE, out / "out", comm=comm, quiet=True)["results"]["transient"]
+    comm.barrier()                                   # rank 0 has written the series
     with h5py.File(out / "out" / "transient.h5", "r") as f:
         data = {k: f[k][()] for k in f}
     return case, results, data
@@ -80,3 +85,31 @@ def test_a_seated_held_rotor_stays_on_the_crests(seated):
     preload = -case.transient.bodies[0].applied_force_N[2]
     assert abs(data["stator_rotor_force_N"][0, 2]) < 0.1 * preload
 
+
+
+@pytest.mark.mpi
+def test_the_fe_tier_writes_the_contact_diagnostics_of_the_modal_tier(seated):
+    """The per-site diagnostics under the same names as the modal tier (app/contact/tables.py, one rule in
+    app/contact/law.py): every quantity's table, the wave-frame bins (one group: one ring), and their normal force
+    equal to the sites' pressure x area over the rows with the wave phase known (the same products summed,
+    round-off 1e-12); the motor's summary carries the contact centre and the slip split. On 2 ranks the sites are
+    evaluated on the partitions that own them (app/fe/probe.py PointSet) and summed to every rank."""
+    from app.contact.tables import BIN_COLUMNS, QUANTITIES, WAVE_BINS
+
+    _, results, data = seated
+    names = {f"stator_rotor_sites_{key}" for _, key, _, _ in QUANTITIES} | {"stator_rotor_sites_wave_frame"}
+    assert names <= set(data)
+    bins = data["stator_rotor_sites_wave_frame"]
+    assert bins.shape[1:] == (1, WAVE_BINS, len(BIN_COLUMNS))
+    populated = bins[..., 0].reshape(len(bins), -1).sum(axis=1) > 0
+    assert not populated[0] and populated[1:].all()
+    area = data["stator_rotor_sites_geometry"][:, 3]
+    force = bins[populated][..., 1].reshape(int(populated.sum()), -1).sum(axis=1)
+    assert np.allclose(force, data["stator_rotor_sites_pressure"][populated] @ area, rtol=1e-12, atol=0)
+    assert force.min() > 0
+    motor = results["statistics"]["motor"]
+    # the rotor rests on the crests, where the stator comes closest to it: the contact's centre is near a crest,
+    # not in a trough (180 deg away); 45 deg, a quarter of the way to a trough, is a loose physical bound
+    assert abs(motor["contact_centre_from_crest_deg"]) < 45.0
+    assert {"slip_speed_circumferential_m_per_s", "slip_speed_meridional_m_per_s",
+            "meridional_slip_power_share"} <= set(motor)

@@ -291,8 +291,10 @@ class OutputSection:
                    "electrodes' charges, for an energy balance")
     contact_sites: bool = param(
         False, doc="transient: per output interval and per sample point of every sampled surface contact, the mean "
-                   "pressure and the fractions of time closed, sticking and slipping either way (tables "
-                   "'<contact>_sites_*' in transient.h5)")
+                   "pressure and the fractions of time closed, sticking and slipping either way, the slip speed's "
+                   "parts along e1 and e2 and the friction power's, the first harmonics of the pressure and the normal "
+                   "displacement, and the contact against the wave's phase per ring (tables '<contact>_sites_*' in "
+                   "transient.h5; app/contact/tables.py)")
     series_csv: bool = param(
         False, doc="transient and lumped: the time series also as transient.csv (a header line of names with units, "
                    "one column per component, the rows of transient.h5; docs/transient.md)")

@@ -437,20 +437,82 @@ def link_force(l, z_mid, zd_mid, bodies, links, F, P, want):
 
 
 @njit(cache=True)
-def accumulate_sites(y, v, z, zd, dt, sites, contacts, bodies, sums, work):
-    """Per-site diagnostics of a state (site displacements ``y`` and velocities ``v``, (n, 3); body coordinates
-    and rates): adds dt x (pressure, closed, stick, slip along +e1, slip along -e1) to ``sums`` (n, 5), the
-    modal tier's rule (app/reduced/kernel.py) for the FE tier."""
+def accumulate_site(i, fn, s1, s2, speed, tau, un, area, eps, dt, cos_f, sin_f, drive_phase_f, cos_d, sin_d, sums,
+                    bins, group, phase):
+    """Adds one step (length dt) of site i (area ``area`` [m^2]) to the per-site diagnostics (app/contact/tables.py,
+    the one rule of every tier): its normal force ``fn`` [N], slip s1 = s.e1, s2 = s.e2 and |s| [m/s], friction
+    shear stress ``tau`` [Pa] (at the time of the force, drive phase ``drive_phase_f`` = omega t [rad], cos_f /
+    sin_f of it) and its normal displacement towards the obstacle ``un`` = -n.y [m] (cos_d / sin_d of the drive
+    phase at its time); ``eps`` the friction's regularisation speed [m/s] (inf: frictionless, a closed site
+    sticks). ``sums`` (n, 14): pressure, closed, stick, slip +e1, slip -e1; while slipping |s1|, |s2|, |s|; the
+    friction power per area along e1 and e2 (tau s_k^2 / sqrt(|s|^2 + eps^2), which sum to the law's
+    tau |s|^2 / sqrt(...)); the first harmonic at the drive frequency of the pressure and of un (cos, sin parts) -
+    each times dt. ``bins`` (groups, n_bins, 8): with the site's wave phase known (``phase[i]``: the phase of un's
+    harmonic, not NaN), area-weighted, in the bin of the wave phase xi = phase[i] - omega t (0: the crest passes
+    the site; positive: the crest has yet to come) of the site's group: area, normal force, area closed,
+    sticking, slipping +e1 / -e1, area x |s1|, area x |s2| while slipping - each times dt.
+    Scalars and arrays only (no records): called per site and step, its arguments cost nothing to pass."""
+    p = fn / area if fn > 0.0 else 0.0
+    sums[i, 10] += dt * p * cos_f
+    sums[i, 11] += dt * p * sin_f
+    sums[i, 12] += dt * un * cos_d
+    sums[i, 13] += dt * un * sin_d
+    ph = phase[i]
+    b = -1
+    g = group[i]
+    if ph == ph:                                   # not NaN: the site's wave phase is known
+        n_bins = bins.shape[1]
+        turns = (ph - drive_phase_f) * (0.5 / math.pi) + 0.5 / n_bins      # bin 0 centred on the crest
+        b = min(int((turns - math.floor(turns)) * n_bins), n_bins - 1)
+        bins[g, b, 0] += dt * area
+    if fn <= 0.0:
+        return
+    sums[i, 0] += dt * p
+    sums[i, 1] += dt
+    if b >= 0:
+        bins[g, b, 1] += dt * fn
+        bins[g, b, 2] += dt * area
+    if speed <= eps:
+        sums[i, 2] += dt
+        if b >= 0:
+            bins[g, b, 3] += dt * area
+        return
+    k = 3 if s1 > 0.0 else 4
+    sums[i, k] += dt
+    a1, a2 = abs(s1), abs(s2)
+    sums[i, 5] += dt * a1
+    sums[i, 6] += dt * a2
+    sums[i, 7] += dt * speed
+    power = dt * tau / math.sqrt(speed * speed + eps * eps)
+    sums[i, 8] += power * s1 * s1
+    sums[i, 9] += power * s2 * s2
+    if b >= 0:
+        bins[g, b, k + 1] += dt * area
+        bins[g, b, 6] += dt * area * a1
+        bins[g, b, 7] += dt * area * a2
+
+
+@njit(cache=True)
+def stick_speed(contacts, c):
+    """The slip speed [m/s] at or below which a closed site of contact c counts as sticking: the friction's
+    regularisation speed, inf for a frictionless contact."""
+    return contacts.eps[c] if contacts.mu[c] > 0.0 else math.inf
+
+
+@njit(cache=True)
+def accumulate_sites(y, v, z, zd, dt, t, omega, sites, contacts, bodies, sums, bins, group, phase, work):
+    """Per-site diagnostics of a state at time t [s] (site displacements ``y`` and velocities ``v``, (n, 3); body
+    coordinates and rates), the drive at ``omega`` [rad/s]: :func:`accumulate_site` for every site, the modal
+    tier's rule (app/reduced/kernel.py) for the FE tier."""
+    drive_phase = omega * t
+    cos_t, sin_t = math.cos(drive_phase), math.sin(drive_phase)
     for i in range(sites.contact.size):
         fn, gap, s1, s2, speed = site_force(i, y[i], v[i], z, zd, sites, contacts, bodies, 1.0, 1.0, False, work)
-        if fn <= 0.0:
-            continue
+        un = -_dot3(sites.frame[i, 0], y[i])
         c = sites.contact[i]
-        sums[i, 0] += dt * fn / sites.weight[i]
-        sums[i, 1] += dt
-        if speed <= contacts.eps[c] or contacts.mu[c] <= 0.0:
-            sums[i, 2] += dt
-        elif s1 > 0.0:
-            sums[i, 3] += dt
-        else:
-            sums[i, 4] += dt
+        tau = 0.0
+        if fn > 0.0 and contacts.mu[c] > 0.0:
+            tau = _friction_shear(speed, fn / sites.weight[i], contacts.mu[c], contacts.fact[c], contacts.decay[c],
+                                  contacts.cap[c])[0]
+        accumulate_site(i, fn, s1, s2, speed, tau, un, sites.weight[i], stick_speed(contacts, c), dt, cos_t, sin_t,
+                        drive_phase, cos_t, sin_t, sums, bins, group, phase)

@@ -51,8 +51,11 @@ class PointSet:
             owned = [c for c in links.links(i) if c < n_owned]
             if owned:
                 cells[i] = owned[0]
-        rank = np.where(cells >= 0, comm.rank, comm.size)
-        owner = comm.allreduce(rank, op=MPI.MIN) if comm.size > 1 else rank
+        rank = np.where(cells >= 0, comm.rank, comm.size).astype(np.int64)
+        owner = rank
+        if comm.size > 1:      # elementwise: the pickling allreduce's MIN compares whole arrays (and raises)
+            owner = np.empty_like(rank)
+            comm.Allreduce(rank, owner, op=MPI.MIN)
         self.mine = np.nonzero(owner == comm.rank)[0]
         self.cells = cells[self.mine]
         self.missing = np.nonzero(owner == comm.size)[0]

@@ -18,7 +18,7 @@ import numpy as np
 
 from app import series as S
 from app.contact.records import AXES, bodies_record, contact_records, sites_record
-from app.contact.tables import SiteTables
+from app.contact.tables import SiteTables, site_groups
 from app.drive import electrode_amplitudes
 from app.errors import CaseError, NumericalFailure
 from app.killpoint import kill_point
@@ -174,8 +174,8 @@ class ModalEngine:
         ns = self.sites_record.contact.size
         sampled = [(name, self.sites_record.contact == k) for k, name in enumerate(self._kernel_contact_names())
                    if self.contacts_record.kind[k] == lk.SURFACE]
-        self.tables = SiteTables(sampled, ns, self.cfg.output_interval_s)
-        self.site_sums = self.tables.sums
+        self.tables = SiteTables(sampled, ns, self.cfg.output_interval_s,
+                                 site_groups(self.case, np.asarray(self.model.site_contact)))
         self.q, self.v, self.a = np.zeros(n), np.zeros(n), np.zeros(n)
         self.z, self.zd, self.zdd = np.zeros(m), np.zeros(m), np.zeros(m)
         self.istate = np.zeros(lk.N_ISTATE, np.int64)
@@ -401,12 +401,17 @@ class ModalEngine:
         # load (or compile) the kernel on a call that takes no step: set-up, not time-loop cost
         mark = time.perf_counter()
         saved = (self.fstate.copy(), self.istate.copy())
-        out = lk.Outputs(*(arr[:1] for arr in self._out), self.site_sums)
+        out = lk.Outputs(*(arr[:1] for arr in self._out), *self._site_outputs())
         lk.run(self.t, self._state(), self._model(), self.cache, out, self.case.output.energies,
                lk.no_frames(self.q.size, self.z.size))
         self.fstate[:], self.istate[:] = saved
         self.compile_wall_s = time.perf_counter() - mark
         self._loop_wall = 0.0
+
+    def _site_outputs(self) -> tuple:
+        """The per-site diagnostics' accumulators the kernel adds to (app/contact/tables.py)."""
+        tables = self.tables
+        return tables.sums, tables.bins, tables.groups, tables.phase
 
     def _state(self) -> lk.State:
         return lk.State(self.q, self.v, self.a, self.z, self.zd, self.zdd, self.istate, self.fstate, self.sums,
@@ -471,7 +476,7 @@ class ModalEngine:
                               self._frame_series.schedule.next_after(self._taken[-1][0]))
         while self.t < t_end * (1 - 1e-12) and taken < max_steps:
             cap = int(min(ROWS_PER_CALL, max_steps - taken))
-            out = lk.Outputs(*(arr[:cap] for arr in self._out), self.site_sums)
+            out = lk.Outputs(*(arr[:cap] for arr in self._out), *self._site_outputs())
             stop = min(stop_at_s, self.tables.next_s * (1 - 1e-12)) if sites_on else stop_at_s
             self.fstate[lk.F_STOP] = stop
             code, rows = lk.run(t_end, self._state(), self._model(), self.cache, out, self.case.output.energies,

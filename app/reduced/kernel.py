@@ -53,11 +53,13 @@ from app.contact.law import (
     _friction_coefficient,
     _penalty_energy,
     _penalty_pressure,
+    accumulate_site,
     friction_tangent,
     link_force,
     shape_gap,
     site_force,
     site_work,
+    stick_speed,
 )
 
 __all__ = ["CONE", "NODE", "PLANE", "SPHERE", "SURFACE", "Bodies", "Contacts", "Links", "Sites", "shape_gap",
@@ -149,7 +151,10 @@ class Outputs(NamedTuple):
     energy: np.ndarray        # (cap, 5): kinetic, strain, rigid kinetic, contact penalty [J], damping loss [J]
     probe: np.ndarray         # (cap, n_contacts, 3) displacement of each contact's first site in its frame
     peak: np.ndarray          # (cap, n_contacts) largest site pressure fn / weight of a surface contact [Pa]
-    site_sums: np.ndarray     # (n_sites, 5): time integrals of pressure [Pa s], closed, stick, slip +, slip - [s]
+    site_sums: np.ndarray     # (n_sites, 14): the per-site diagnostics' time integrals (app/contact/tables.py)
+    site_bins: np.ndarray     # (groups, bins, 8): their wave-frame bins (app/contact/law.py accumulate_site)
+    site_group: np.ndarray    # (n_sites,) int64 each site's group of bins
+    site_phase: np.ndarray    # (n_sites,) each site's wave-phase reference [rad] (NaN: none yet)
 
 
 class Frames(NamedTuple):
@@ -1150,23 +1155,23 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
     power = np.zeros(n_c + n_l)
     tq = np.zeros(3)
     fneg = np.zeros(3)
+    # diagnostics: the forces act at the generalized mid-point t1 - alpha_f dt, the displacements y_end at t1
+    diagnose = out.site_sums.shape[0] == sites.contact.size
+    site_sums, site_bins, site_group, site_phase = out.site_sums, out.site_bins, out.site_group, out.site_phase
+    omega = model.inputs.omega
+    phase_f = omega * (t1 - model.scheme.alpha_f * dt)
+    cos_f, sin_f = math.cos(phase_f), math.sin(phase_f)
+    cos_d, sin_d = math.cos(omega * t1), math.sin(omega * t1)
     for i in range(sites.contact.size):
         c = sites.contact[i]
         if wk.gap[i] < 0.0:
             out.area[row, c] += sites.weight[i]
         fn = wk.fn[i]
-        # diagnostics: time integrals of the pressure and of the site's state over accepted steps
-        if fn > 0.0:
-            sums_row = out.site_sums[i]
-            sums_row[0] += dt * fn / sites.weight[i]
-            sums_row[1] += dt
-            if wk.slip[i, 2] <= contacts.eps[c] or contacts.mu[c] <= 0.0:
-                sums_row[2] += dt
-            elif wk.slip[i, 0] > 0.0:
-                sums_row[3] += dt
-            else:
-                sums_row[4] += dt
         if fn <= 0.0:
+            if diagnose:        # an open site: its displacement's harmonic and its time in the wave-frame bins
+                accumulate_site(i, 0.0, 0.0, 0.0, 0.0, 0.0, -_dot3(sites.frame[i, 0], y_end[i]), sites.weight[i],
+                                0.0, dt, cos_f, sin_f, phase_f, cos_d, sin_d, site_sums, site_bins, site_group,
+                                site_phase)
             continue
         for k in range(3):
             fneg[k] = -wk.f[i, k]
@@ -1184,12 +1189,18 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
             elastic = sites.weight[i] * _penalty_pressure(wk.gap[i], 0.0, contacts.stiffness[c], 0.0,
                                                           contacts.rounding[c])[0]
         tangential = 0.0            # -f_t . s = T |s|^2 / reg
+        T = 0.0
         if contacts.mu[c] > 0.0:
             mu_, _ = _friction_coefficient(wk.slip[i, 2], contacts.mu[c], contacts.fact[c], contacts.decay[c])
             T = min(mu_ * fn, contacts.cap[c] * sites.weight[i])
             speed = wk.slip[i, 2]
             eps = contacts.eps[c]
             tangential = T * speed * speed / math.sqrt(speed * speed + eps * eps)
+        # diagnostics: time integrals of the pressure and of the site's state over accepted steps
+        if diagnose:
+            accumulate_site(i, fn, wk.slip[i, 0], wk.slip[i, 1], wk.slip[i, 2], T / sites.weight[i],
+                            -_dot3(sites.frame[i, 0], y_end[i]), sites.weight[i], stick_speed(contacts, c), dt, cos_f,
+                            sin_f, phase_f, cos_d, sin_d, site_sums, site_bins, site_group, site_phase)
         power[c] += (fn - elastic) * _closing_rate(fn, elastic, contacts.damping[c], contacts.kind[c],
                                                     sites.weight[i]) + tangential
     for l in range(n_l):

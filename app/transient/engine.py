@@ -4,6 +4,7 @@ under the output convention of every tier (app/series.py)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -283,7 +284,7 @@ class SiteProbe:
         from app.contact.law import site_work
         from app.contact.records import bodies_record, contact_records, sites_record
         from app.contact.sites import contact_site_sets
-        from app.contact.tables import SiteTables
+        from app.contact.tables import SiteTables, site_groups
         from app.fe.probe import PointSet
 
         model = tm.model
@@ -309,7 +310,8 @@ class SiteProbe:
         self.v = fem.Function(V)
         names = [c.name for c in case.transient.contacts]
         self.tables = SiteTables([(s.name, index == s.contact) for s in surface], self.points.shape[0],
-                                 case.transient.output_interval_s)
+                                 case.transient.output_interval_s, site_groups(case, index))
+        self.omega = 2 * math.pi * case.transient.drive.frequency_Hz      # the case as run: a locked drive resolved
         self.first = {s.name: int(np.argmax(index == s.contact)) for s in surface}
         self.work = site_work(self.bodies.mass.size)
         self.rigid = tm.rigid
@@ -330,7 +332,9 @@ class SiteProbe:
         y[:, :gdim] = self.pointset(self.u)[:, :gdim]
         v[:, :gdim] = self.pointset(self.v)[:, :gdim]
         z, zd = self._packed(state.z), self._packed(state.zd)
-        accumulate_sites(y, v, z, zd, dt, self.record, self.contacts, self.bodies, self.tables.sums, self.work)
+        tables = self.tables
+        accumulate_sites(y, v, z, zd, dt, state.t, self.omega, self.record, self.contacts, self.bodies, tables.sums,
+                         tables.bins, tables.groups, tables.phase, self.work)
         return {S.contact_probe(name): self.record.frame[i] @ y[i] for name, i in self.first.items()}
 
     def _packed(self, values: np.ndarray) -> np.ndarray:

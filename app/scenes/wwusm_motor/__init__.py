@@ -9,6 +9,14 @@ offset and vibration, the fractions of the contact that separate, stick and slip
 per-site tables), the contact point's path and the pressure round the ring (``motor_ring.csv``,
 ``motor_contact_path.csv`` and their plots), the speed against time with the window marked.
 
+Why the drive sits where it does (docs/motor-rotor.md, "Diagnostics of the contact"): the contact in the wave's
+frame, the pressure, contact, stick and forward / backward slip fractions and the slip speed's circumferential
+(e1) and meridional (e2) parts against the wave's phase (0: the crest, positive ahead of it), per ring across the
+band (``motor_wave_frame.csv`` and its plot, from the ``wave_frame`` table of app/contact/tables.py); in
+``statistics.motor`` and the table, the contact's centre against the crest (``contact_centre_from_crest_deg``,
+from the sites' first harmonics of pressure and normal displacement), the slip speeds' parts while slipping and
+the meridional share of the friction power.
+
 The case needs ``output.energies`` (charges and energies) and, for the ring and the fractions,
 ``output.contact_sites``; one rotor with one rotation and a surface contact on it.
 
@@ -26,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from app import series as S
+from app.contact.tables import contact_centre_rad
 from app.errors import CaseError
 from app.scenes.registry import SceneReport, register
 
@@ -198,9 +207,40 @@ class WedgeWaveMotor(SceneReport):
         drive = np.sign(speed) if free and speed else (np.sign(torque) or 1.0)
         forward, backward = (positive, negative) if drive > 0 else (negative, positive)
         n_sites = data[S.sites_table(contact, "closed")].shape[1]
-        return {"fractions": {"separation": float(1 - closed), "stick": float(stick), "forward_slip": float(forward),
-                              "backward_slip": float(backward)},
-                "points_in_contact_mean": float(closed * n_sites), "contact_points": int(n_sites)}
+        out = {"fractions": {"separation": float(1 - closed), "stick": float(stick), "forward_slip": float(forward),
+                             "backward_slip": float(backward)},
+               "points_in_contact_mean": float(closed * n_sites), "contact_points": int(n_sites),
+               "forward_slip_direction_e1": float(drive)}
+        out.update(WedgeWaveMotor._contact_diagnostics(data, contact, rows))
+        return out
+
+    @staticmethod
+    def _contact_diagnostics(data, contact: str, rows: np.ndarray) -> dict:
+        """Why the drive sits where it does (docs/motor-rotor.md, "Diagnostics of the contact"), from the per-site
+        tables over the window's rows: the contact's centre against the wave's crest (the pressure-weighted mean
+        wave phase from the sites' first harmonics, app/contact/tables.py), the slip speed's circumferential (e1)
+        and meridional (e2) parts while slipping, and the meridional share of the friction power."""
+        def table(key):
+            return data[S.sites_table(contact, key)][rows]
+
+        if S.sites_table(contact, "pressure_cos") not in data:      # a series written before these diagnostics
+            return {}
+        area = data[S.sites_table(contact, "geometry")][:, 3]
+        centre = contact_centre_rad(area, table("pressure_cos"), table("pressure_sin"),
+                                    table("normal_displacement_cos"), table("normal_displacement_sin"))
+        slipping = float(area @ (table("slip_positive") + table("slip_negative")).mean(axis=0))
+        power_e1 = float(area @ table("friction_power_e1").mean(axis=0))
+        power_e2 = float(area @ table("friction_power_e2").mean(axis=0))
+
+        def while_slipping(key):
+            return float(area @ table(key).mean(axis=0)) / slipping if slipping > 0 else 0.0
+
+        return {"contact_centre_from_crest_deg": math.degrees(centre) if math.isfinite(centre) else None,
+                "slip_speed_circumferential_m_per_s": while_slipping("slip_speed_e1"),
+                "slip_speed_meridional_m_per_s": while_slipping("slip_speed_e2"),
+                "slip_speed_m_per_s": while_slipping("slip_speed"),
+                "friction_power_circumferential_W": power_e1, "friction_power_meridional_W": power_e2,
+                "meridional_slip_power_share": power_e2 / (power_e1 + power_e2) if power_e1 + power_e2 > 0 else 0.0}
 
     # ------------------------------------------------------------------ tables, CSVs, plots
     def table_rows(self, results: dict) -> list[tuple[str, str, str]]:
@@ -232,6 +272,14 @@ class WedgeWaveMotor(SceneReport):
                      ("contact sticking", f"{100 * f['stick']:.3g}", "%"),
                      ("contact slipping forward", f"{100 * f['forward_slip']:.3g}", "%"),
                      ("contact slipping backward", f"{100 * f['backward_slip']:.3g}", "%")]
+        if p.get("contact_centre_from_crest_deg") is not None:
+            rows.append(("contact centre from the crest (+: ahead)", f"{p['contact_centre_from_crest_deg']:.3g}",
+                         "deg of wave"))
+        if "slip_speed_circumferential_m_per_s" in p:
+            rows += [("slip speed circumferential (slipping)", f"{p['slip_speed_circumferential_m_per_s'] * 1e3:.4g}",
+                      "mm/s"),
+                     ("slip speed meridional (slipping)", f"{p['slip_speed_meridional_m_per_s'] * 1e3:.4g}", "mm/s"),
+                     ("meridional share of the friction power", f"{100 * p['meridional_slip_power_share']:.3g}", "%")]
         return rows
 
     def outputs(self, results: dict, out_dir: Path, title: str, plots: bool = True) -> list[str]:

@@ -1,6 +1,8 @@
 """The motor's CSVs and plots of one operating point (from the time series of any tier): the pressure round the
-ring and the contact states along it (``motor_ring.csv``), the contact point's path over the last period
-(``motor_contact_path.csv``), and the rotor's speed against time with the steady window marked."""
+ring and the contact states along it (``motor_ring.csv``), the contact in the wave's frame: pressure, contact,
+stick and slip against the wave's phase per ring across the band (``motor_wave_frame.csv``), the contact point's
+path over the last period (``motor_contact_path.csv``), and the rotor's speed against time with the steady window
+marked."""
 
 from __future__ import annotations
 
@@ -17,6 +19,8 @@ PATH_CSV = "motor_contact_path.csv"
 RING_PLOT = "motor_ring_pressure.png"
 PATH_PLOT = "motor_contact_path.png"
 SPEED_PLOT = "motor_speed.png"
+WAVE_CSV = "motor_wave_frame.csv"
+WAVE_PLOT = "motor_wave_frame.png"
 
 
 def write_csv(path: Path, rows: dict) -> None:
@@ -65,6 +69,12 @@ def write_outputs(results: dict, out_dir: Path, title: str, plots: bool) -> list
                 "stick_fraction": across(data[S.sites_table(contact, "stick")][rows].mean(axis=0))}
         write_csv(out_dir / RING_CSV, ring)
         written.append(RING_CSV)
+        frame = wave_frame(data, contact, rows, point.get("forward_slip_direction_e1", 1.0))
+        if frame is not None:
+            write_csv(out_dir / WAVE_CSV, frame)
+            written.append(WAVE_CSV)
+            if plots:
+                written += _wave_plot(out_dir, frame, title)
         probe = S.contact_probe(contact)
         if probe in data:
             period = point["window_s"] / max(point["window_periods"], 1)
@@ -76,6 +86,82 @@ def write_outputs(results: dict, out_dir: Path, title: str, plots: bool) -> list
         if plots:
             written += _plots(out_dir, ring, data, probe, t, start, title)
     return written
+
+
+def wave_frame(data: dict, contact: str, rows: np.ndarray, forward: float) -> dict | None:
+    """The contact in the wave's frame over the window's rows (the ``wave_frame`` table, app/contact/tables.py):
+    per ring across the band (``ring`` 0: the one nearest the band's middle; its height ``ring_height_m``) and per
+    bin of wave phase (``wave_phase_deg``, the bin's centre, 0 the crest, positive ahead of it in the direction
+    the wave travels, -180 to 180), the mean pressure, the fractions of the time the ring's sites at that phase
+    are in contact, sticking, slipping forward (``forward``: the sign of e1 that is forward) or backward, the
+    slip speed's circumferential and meridional parts while slipping, and the bin's share of the mean normal force
+    (its sum over bins and rings: the contact's mean normal force). None for a series without the table."""
+    name = S.sites_table(contact, "wave_frame")
+    if name not in data:
+        return None
+    table = data[name]
+    # the rows with the sites' wave phases known (not a run's first interval)
+    rows = rows & (table[..., 0].reshape(len(table), -1).sum(axis=1) > 0)
+    if not rows.any():
+        return None
+    bins = table[rows].sum(axis=0)                         # (rings, bins, columns), each row a mean over its interval
+    n_rows = int(rows.sum())
+    n_rings, n_bins = bins.shape[:2]
+    heights = data[S.sites_table(contact, "geometry")][:, 2].reshape(n_rings, -1).mean(axis=1)
+    centre = 360.0 * np.arange(n_bins) / n_bins
+    phase = np.where(centre > 180.0, centre - 360.0, centre)
+    order = np.argsort(phase)
+    area, force, closed, stick, positive, negative, along_e1, along_e2 = np.moveaxis(bins[:, order], -1, 0)
+    slipping = positive + negative
+
+    def ratio(a, b):
+        return np.divide(a, b, out=np.zeros_like(a), where=b > 0)
+
+    forward_area, backward_area = (positive, negative) if forward > 0 else (negative, positive)
+    return {"ring": np.repeat(np.arange(n_rings), n_bins).astype(float),
+            "ring_height_m": np.repeat(heights, n_bins),
+            "wave_phase_deg": np.tile(phase[order], n_rings),
+            "mean_pressure_Pa": ratio(force, area).ravel(),
+            "contact_fraction": ratio(closed, area).ravel(),
+            "stick_fraction": ratio(stick, area).ravel(),
+            "forward_slip_fraction": ratio(forward_area, area).ravel(),
+            "backward_slip_fraction": ratio(backward_area, area).ravel(),
+            "slip_speed_circumferential_m_per_s": ratio(along_e1, slipping).ravel(),
+            "slip_speed_meridional_m_per_s": ratio(along_e2, slipping).ravel(),
+            "normal_force_N": (force / n_rows).ravel()}
+
+
+def _wave_plot(out_dir, frame, title) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
+    for ring in np.unique(frame["ring"]):
+        mine = frame["ring"] == ring
+        label = f"ring {int(ring)} (z = {frame['ring_height_m'][mine][0] * 1e3:.4g} mm)"
+        line, = top.plot(frame["wave_phase_deg"][mine], frame["mean_pressure_Pa"][mine] * 1e-6, "o-", ms=3,
+                         label=label)
+        bottom.plot(frame["wave_phase_deg"][mine], frame["stick_fraction"][mine], "-", color=line.get_color(),
+                    label=f"stick, ring {int(ring)}")
+        bottom.plot(frame["wave_phase_deg"][mine], frame["forward_slip_fraction"][mine], "--",
+                    color=line.get_color(), label=f"forward slip, ring {int(ring)}")
+        bottom.plot(frame["wave_phase_deg"][mine], frame["backward_slip_fraction"][mine], ":",
+                    color=line.get_color(), label=f"backward slip, ring {int(ring)}")
+    top.axvline(0.0, color="0.6", lw=0.8)
+    bottom.axvline(0.0, color="0.6", lw=0.8)
+    top.set_ylabel("mean contact pressure [MPa]")
+    bottom.set_ylabel("fraction of the time")
+    bottom.set_xlabel("wave phase from the crest [deg] (+: ahead, in the direction the wave travels)")
+    bottom.set_xlim(-180, 180)
+    top.legend(loc="best", fontsize=7)
+    bottom.legend(loc="best", fontsize=6, ncol=2)
+    top.set_title(f"{title}\nthe contact in the wave's frame (steady window)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out_dir / WAVE_PLOT, dpi=110)
+    plt.close(fig)
+    return [WAVE_PLOT]
 
 
 def _plots(out_dir, ring, data, probe, t, start, title) -> list[str]:
