@@ -12,6 +12,8 @@ from the case's own start (``--start rest`` or ``harmonic``), which picks the br
 
     .venv/bin/python bench/bench_motor_frequency.py --out /tmp/motor_frequency --start rest \
         [--bandwidths 3] [--step-bandwidths 0.5] [--case cases/wwusm-motor.toml] [--set KEY=VALUE ...]
+    .venv/bin/python bench/bench_motor_frequency.py --out /tmp/motor_frequency_up --warm-from DIR --up-from 3 \
+        --up-to 15 --step-bandwidths 2      (an extension upwards from the end state of the point in DIR)
 
 Run again with the same ``--out``, a sweep reuses the points it finished and resumes the one it was stopped in.
 Writes ``motor_frequency.csv`` (one row per point: direction, detuning [Hz], detuning in half-power bandwidths,
@@ -121,6 +123,11 @@ def main() -> None:
     parser.add_argument("--from-centre", action="store_true",
                         help="start at the resonance (detuning 0) and sweep up from there, then down from there "
                              "(the branch the start reaches at resonance, as far as it persists either way)")
+    parser.add_argument("--warm-from", default=None, help="the first point starts from this run's end state")
+    parser.add_argument("--up-from", type=float, default=0.0, help="with --up-to: the detuning [bandwidths] of the "
+                                                                    "--warm-from run")
+    parser.add_argument("--up-to", type=float, default=None, help="sweep only up, from --up-from (exclusive) to this "
+                                                                   "detuning [bandwidths], from --warm-from")
     parser.add_argument("--lumped-case", default=None, help="a lumped friction_drive case to sweep beside it")
     parser.add_argument("--lumped-set", nargs="*", default=[], help="--set overrides of the lumped case (its "
                                                                      "stator's data)")
@@ -137,11 +144,18 @@ def main() -> None:
     bandwidth_Hz = 2 * args.zeta * nominal
     n = int(round(args.bandwidths / args.step_bandwidths))
     steps = [k * args.step_bandwidths for k in range(-n, n + 1)]
-    if args.from_centre:      # the branch the start reaches at the resonance, followed up, then down from there
+    if args.up_to is not None:      # an extension of a sweep upwards from an earlier point's end state
+        k = 1
+        steps = []
+        while args.up_from + k * args.step_bandwidths <= args.up_to + 1e-9:
+            steps.append(args.up_from + k * args.step_bandwidths)
+            k += 1
+        schedule = [("up", b) for b in steps]
+    elif args.from_centre:      # the branch the start reaches at the resonance, followed up, then down from there
         schedule = [("up", b) for b in steps[n:]] + [("down", b) for b in reversed(steps[:n])]
     else:
         schedule = [("up", b) for b in steps] + [("down", b) for b in reversed(steps[:-1])]
-    rows, previous = [], None
+    rows, previous = [], (Path(args.warm_from) if args.warm_from else None)
     started = time.perf_counter()
     for i, (direction, b) in enumerate(schedule):
         if args.from_centre and direction == "down" and b == steps[n - 1]:
@@ -163,7 +177,7 @@ def main() -> None:
             writer.writerow({k: row[k] for k in COLUMNS})
     lumped = None
     if args.lumped_case:
-        first = steps[n] if args.from_centre else steps[0]
+        first = steps[n] if args.from_centre and args.up_to is None else steps[0]
         resonance = json.loads((out / f"00-up-{first:+.2f}bw" / "summary.json").read_text())[
             "results"]["transient"]["drive"]["resonance_Hz"]
         fine = [k * bandwidth_Hz / 8 for k in range(-8 * n, 8 * n + 1)] if n else [0.0]
