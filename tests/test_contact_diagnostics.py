@@ -78,9 +78,9 @@ def _run(delta: float, periods: int, clipped: bool = True):
         speed = np.sqrt(s1 ** 2 + s2 ** 2 + 1e-30)
         tau = np.minimum(MU * FACT * p, CAP)     # the law's shear stress: DC = 0, mu_s at every speed
         for i in range(N_SITES):
-            law.accumulate_site(i, p[i] * AREA, s1[i], s2[i], speed[i], tau[i], u[i], AREA, EPS, dt, math.cos(wt),
-                                math.sin(wt), wt, math.cos(wt), math.sin(wt), tables.sums, tables.bins, tables.groups,
-                                tables.phase)
+            law.accumulate_site(i, law.SiteSample(p[i] * AREA, s1[i], s2[i], speed[i], tau[i], u[i], AREA, EPS),
+                                law.DriveClock(dt, math.cos(wt), math.sin(wt), wt, math.cos(wt), math.sin(wt)),
+                                law.SiteAccumulators(tables.sums, tables.bins, tables.groups, tables.phase))
         if n > (periods - 1) * STEPS:
             slipping = (p > 0) & (speed > EPS)
             reg = np.sqrt(speed ** 2 + EPS ** 2)

@@ -436,22 +436,59 @@ def link_force(l, z_mid, zd_mid, bodies, links, F, P, want):
     return f, delta, rate, links.stiffness[l], links.damping[l], T, dT_ds, dT_dfn, reg, speed
 
 
+class SiteSample(NamedTuple):
+    """One site at one step, what the diagnostics accumulate (:func:`accumulate_site`): its normal force ``fn`` [N],
+    slip s1 = s.e1, s2 = s.e2 and ``speed`` = |s| [m/s], friction shear stress ``tau`` [Pa], normal displacement
+    towards the obstacle ``un`` = -n.y [m], ``area`` [m^2], and ``eps``, the friction's regularisation speed [m/s]
+    (inf: frictionless, a closed site sticks)."""
+
+    fn: float
+    s1: float
+    s2: float
+    speed: float
+    tau: float
+    un: float
+    area: float
+    eps: float
+
+
+class DriveClock(NamedTuple):
+    """The step's length ``dt`` [s] and the drive's phase: ``phase_f`` = omega t [rad] at the time of the forces
+    (cos_f, sin_f of it) and cos_d, sin_d of it at the time of the displacements."""
+
+    dt: float
+    cos_f: float
+    sin_f: float
+    phase_f: float
+    cos_d: float
+    sin_d: float
+
+
+class SiteAccumulators(NamedTuple):
+    """The per-site diagnostics' accumulators (app/contact/tables.py): ``sums`` (n, 14), the wave-frame ``bins``
+    (groups, n_bins, 8), each site's ``group`` of bins and its wave-phase reference ``phase`` [rad] (NaN: none)."""
+
+    sums: np.ndarray
+    bins: np.ndarray
+    group: np.ndarray
+    phase: np.ndarray
+
+
 @njit(cache=True)
-def accumulate_site(i, fn, s1, s2, speed, tau, un, area, eps, dt, cos_f, sin_f, drive_phase_f, cos_d, sin_d, sums,
-                    bins, group, phase):
-    """Adds one step (length dt) of site i (area ``area`` [m^2]) to the per-site diagnostics (app/contact/tables.py,
-    the one rule of every tier): its normal force ``fn`` [N], slip s1 = s.e1, s2 = s.e2 and |s| [m/s], friction
-    shear stress ``tau`` [Pa] (at the time of the force, drive phase ``drive_phase_f`` = omega t [rad], cos_f /
-    sin_f of it) and its normal displacement towards the obstacle ``un`` = -n.y [m] (cos_d / sin_d of the drive
-    phase at its time); ``eps`` the friction's regularisation speed [m/s] (inf: frictionless, a closed site
-    sticks). ``sums`` (n, 14): pressure, closed, stick, slip +e1, slip -e1; while slipping |s1|, |s2|, |s|; the
-    friction power per area along e1 and e2 (tau s_k^2 / sqrt(|s|^2 + eps^2), which sum to the law's
-    tau |s|^2 / sqrt(...)); the first harmonic at the drive frequency of the pressure and of un (cos, sin parts) -
-    each times dt. ``bins`` (groups, n_bins, 8): with the site's wave phase known (``phase[i]``: the phase of un's
-    harmonic, not NaN), area-weighted, in the bin of the wave phase xi = phase[i] - omega t (0: the crest passes
-    the site; positive: the crest has yet to come) of the site's group: area, normal force, area closed,
-    sticking, slipping +e1 / -e1, area x |s1|, area x |s2| while slipping - each times dt.
-    Scalars and arrays only (no records): called per site and step, its arguments cost nothing to pass."""
+def accumulate_site(i, site, clock, acc):
+    """Adds one step of site i (``site``: :class:`SiteSample`; ``clock``: :class:`DriveClock`) to the per-site
+    diagnostics ``acc`` (:class:`SiteAccumulators`, app/contact/tables.py), the one rule of every tier.
+    ``acc.sums`` (n, 14): pressure, closed, stick, slip +e1, slip -e1; while slipping |s1|, |s2|, |s|; the friction
+    power per area along e1 and e2 (tau s_k^2 / sqrt(|s|^2 + eps^2), which sum to the law's tau |s|^2 / sqrt(...));
+    the first harmonic at the drive frequency of the pressure and of un (cos, sin parts) - each times dt.
+    ``acc.bins`` (groups, n_bins, 8): with the site's wave phase known (``acc.phase[i]``: the phase of un's harmonic,
+    not NaN), area-weighted, in the bin of the wave phase xi = phase[i] - omega t (0: the crest passes the site;
+    positive: the crest has yet to come) of the site's group: area, normal force, area closed, sticking, slipping
+    +e1 / -e1, area x |s1|, area x |s2| while slipping - each times dt. The records hold scalars or four arrays:
+    passing them costs nothing measurable per site and step (BENCHMARKS.md, the diagnostics' cost)."""
+    fn, s1, s2, speed, tau, un, area, eps = site
+    dt, cos_f, sin_f, drive_phase_f, cos_d, sin_d = clock
+    sums, bins, group, phase = acc
     p = fn / area if fn > 0.0 else 0.0
     sums[i, 10] += dt * p * cos_f
     sums[i, 11] += dt * p * sin_f
@@ -500,12 +537,13 @@ def stick_speed(contacts, c):
 
 
 @njit(cache=True)
-def accumulate_sites(y, v, z, zd, dt, t, omega, sites, contacts, bodies, sums, bins, group, phase, work):
+def accumulate_sites(y, v, z, zd, dt, t, omega, sites, contacts, bodies, acc, work):
     """Per-site diagnostics of a state at time t [s] (site displacements ``y`` and velocities ``v``, (n, 3); body
-    coordinates and rates), the drive at ``omega`` [rad/s]: :func:`accumulate_site` for every site, the modal
-    tier's rule (app/reduced/kernel.py) for the FE tier."""
+    coordinates and rates), the drive at ``omega`` [rad/s]: :func:`accumulate_site` for every site into ``acc``
+    (:class:`SiteAccumulators`), the modal tier's rule (app/reduced/kernel.py) for the FE tier."""
     drive_phase = omega * t
     cos_t, sin_t = math.cos(drive_phase), math.sin(drive_phase)
+    clock = DriveClock(dt, cos_t, sin_t, drive_phase, cos_t, sin_t)
     for i in range(sites.contact.size):
         fn, gap, s1, s2, speed = site_force(i, y[i], v[i], z, zd, sites, contacts, bodies, 1.0, 1.0, False, work)
         un = -_dot3(sites.frame[i, 0], y[i])
@@ -514,5 +552,5 @@ def accumulate_sites(y, v, z, zd, dt, t, omega, sites, contacts, bodies, sums, b
         if fn > 0.0 and contacts.mu[c] > 0.0:
             tau = _friction_shear(speed, fn / sites.weight[i], contacts.mu[c], contacts.fact[c], contacts.decay[c],
                                   contacts.cap[c])[0]
-        accumulate_site(i, fn, s1, s2, speed, tau, un, sites.weight[i], stick_speed(contacts, c), dt, cos_t, sin_t,
-                        drive_phase, cos_t, sin_t, sums, bins, group, phase)
+        accumulate_site(i, SiteSample(fn, s1, s2, speed, tau, un, sites.weight[i], stick_speed(contacts, c)), clock,
+                        acc)

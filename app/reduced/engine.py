@@ -395,7 +395,8 @@ class ModalEngine:
 
     def _started(self) -> None:
         cfg = self.cfg
-        self.log(f"modal tier: {cfg.initial_state} start, drive {self.scale_V:.4g} V at {cfg.drive.frequency_Hz:.2f} "
+        start = "warm" if self.warm_start is not None else cfg.initial_state
+        self.log(f"modal tier: {start} start, drive {self.scale_V:.4g} V at {cfg.drive.frequency_Hz:.2f} "
                  f"Hz, {len(cfg.bodies)} rigid bodies, {len(cfg.contacts)} contacts, {self.model.size} coordinates, "
                  f"{self.sites_record.contact.size} contact sites, {cfg.end_time_s * 1e3:.4g} ms")
         # load (or compile) the kernel on a call that takes no step: set-up, not time-loop cost

@@ -44,8 +44,11 @@ from app.contact.law import (
     SURFACE,
     Bodies,
     Contacts,
+    DriveClock,
     Links,
+    SiteAccumulators,
     Sites,
+    SiteSample,
     SiteWork,
     _body_rotations,
     _cross,
@@ -1157,11 +1160,10 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
     fneg = np.zeros(3)
     # diagnostics: the forces act at the generalized mid-point t1 - alpha_f dt, the displacements y_end at t1
     diagnose = out.site_sums.shape[0] == sites.contact.size
-    site_sums, site_bins, site_group, site_phase = out.site_sums, out.site_bins, out.site_group, out.site_phase
+    acc = SiteAccumulators(out.site_sums, out.site_bins, out.site_group, out.site_phase)
     omega = model.inputs.omega
     phase_f = omega * (t1 - model.scheme.alpha_f * dt)
-    cos_f, sin_f = math.cos(phase_f), math.sin(phase_f)
-    cos_d, sin_d = math.cos(omega * t1), math.sin(omega * t1)
+    clock = DriveClock(dt, math.cos(phase_f), math.sin(phase_f), phase_f, math.cos(omega * t1), math.sin(omega * t1))
     for i in range(sites.contact.size):
         c = sites.contact[i]
         if wk.gap[i] < 0.0:
@@ -1169,9 +1171,8 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
         fn = wk.fn[i]
         if fn <= 0.0:
             if diagnose:        # an open site: its displacement's harmonic and its time in the wave-frame bins
-                accumulate_site(i, 0.0, 0.0, 0.0, 0.0, 0.0, -_dot3(sites.frame[i, 0], y_end[i]), sites.weight[i],
-                                0.0, dt, cos_f, sin_f, phase_f, cos_d, sin_d, site_sums, site_bins, site_group,
-                                site_phase)
+                accumulate_site(i, SiteSample(0.0, 0.0, 0.0, 0.0, 0.0, -_dot3(sites.frame[i, 0], y_end[i]),
+                                              sites.weight[i], 0.0), clock, acc)
             continue
         for k in range(3):
             fneg[k] = -wk.f[i, k]
@@ -1198,9 +1199,9 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
             tangential = T * speed * speed / math.sqrt(speed * speed + eps * eps)
         # diagnostics: time integrals of the pressure and of the site's state over accepted steps
         if diagnose:
-            accumulate_site(i, fn, wk.slip[i, 0], wk.slip[i, 1], wk.slip[i, 2], T / sites.weight[i],
-                            -_dot3(sites.frame[i, 0], y_end[i]), sites.weight[i], stick_speed(contacts, c), dt, cos_f,
-                            sin_f, phase_f, cos_d, sin_d, site_sums, site_bins, site_group, site_phase)
+            accumulate_site(i, SiteSample(fn, wk.slip[i, 0], wk.slip[i, 1], wk.slip[i, 2], T / sites.weight[i],
+                                          -_dot3(sites.frame[i, 0], y_end[i]), sites.weight[i],
+                                          stick_speed(contacts, c)), clock, acc)
         power[c] += (fn - elastic) * _closing_rate(fn, elastic, contacts.damping[c], contacts.kind[c],
                                                     sites.weight[i]) + tangential
     for l in range(n_l):

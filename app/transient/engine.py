@@ -322,7 +322,7 @@ class SiteProbe:
 
     def step(self, state, dt: float) -> dict:
         """Accumulate the step's site states (end-of-step fields) and return the probe columns of the row."""
-        from app.contact.law import accumulate_sites
+        from app.contact.law import SiteAccumulators, accumulate_sites
 
         gdim = self.gdim
         self.u.x.array[:] = state.u[self.parent]
@@ -333,8 +333,8 @@ class SiteProbe:
         v[:, :gdim] = self.pointset(self.v)[:, :gdim]
         z, zd = self._packed(state.z), self._packed(state.zd)
         tables = self.tables
-        accumulate_sites(y, v, z, zd, dt, state.t, self.omega, self.record, self.contacts, self.bodies, tables.sums,
-                         tables.bins, tables.groups, tables.phase, self.work)
+        accumulate_sites(y, v, z, zd, dt, state.t, self.omega, self.record, self.contacts, self.bodies,
+                         SiteAccumulators(tables.sums, tables.bins, tables.groups, tables.phase), self.work)
         return {S.contact_probe(name): self.record.frame[i] @ y[i] for name, i in self.first.items()}
 
     def _packed(self, values: np.ndarray) -> np.ndarray:
