@@ -137,12 +137,12 @@ def _check_geometry_parameters(case) -> None:
 
 
 def scalar_results(results: dict, prefix: str = "") -> dict:
-    """Every numeric scalar in ``results`` by its dotted path (lists, strings and None left out, and wall
+    """Every numeric scalar in ``results`` by its dotted path (lists, strings and None left out, and wall and CPU
     times: those are in each point's summary.json, and the table must not depend on the machine)."""
     out = {}
     for key, value in results.items():
         name = f"{prefix}{key}"
-        if "wall" in key:
+        if "wall" in key or "cpu" in key:
             continue
         if isinstance(value, dict):
             out.update(scalar_results(value, name + "."))

@@ -76,7 +76,10 @@ def test_held_rotor_against_the_friction_drive_law(motor_runs):
 def test_free_rotor_turns_with_the_wave_below_the_surface_speed(motor_runs):
     root, held, free, _ = motor_runs
     m = free["statistics"]["motor"]
-    assert free["cutbacks"] == 0
+    # a cut-back is the step controller doing its job (a Newton failure cuts dt): 0 in the basis before issue 27's
+    # build, 1 in 11 542 steps in the equivalent basis after it (the same step's contact state met from another
+    # round-off); more than a few would be a Newton problem
+    assert free["cutbacks"] <= 2
     surface_speed = 2 * math.pi / PERIOD_S * m["contact_point_amplitude_m"]["tangential"]
     rim_speed = m["speed_rad_per_s"] * m["contact_radius_m"]
     assert 0 < abs(rim_speed) < surface_speed
@@ -121,5 +124,11 @@ def test_reduced_stator_resonance_is_the_fe_one(motor_runs, tmp_path):
     assert reduction["resonances_near_drive_Hz"] == pytest.approx(fe_Hz, rel=1e-9)
 
 
-# values of this code on this stator (COARSE, 288 periods; the commands: the fixture's)
-PINNED = {"held_torque_N_m": 0.0198587421380227, "free_speed_rad_per_s": 9.102553515332486}
+# values of this code on this stator (COARSE, 288 periods; the commands: the fixture's). Re-pinned 2026-11-27 when
+# the reduced build moved to LDL^T and a block eigensolver (issue 27): the new basis is the old one with degenerate
+# fixed-interface pairs rotated and signs flipped - the same model (its eigenfrequencies agree to the digits
+# printed, 1e-12), another coordinate system. The free rotor's speed at 8 ms, a spin-up not yet steady, moved from
+# 9.1026 to 7.8207 rad/s (-14 %) and the held torque by less than 1 %: the free start amplifies round-off, so this
+# pin checks the code, not the physics (the steady statistics are checked in tests/test_motor_preloads.py and
+# BENCHMARKS.md).
+PINNED = {"held_torque_N_m": 0.0198587421380227, "free_speed_rad_per_s": 7.820670529702676}
