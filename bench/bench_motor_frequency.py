@@ -80,33 +80,6 @@ def lumped_sweep(case: Path, out: Path, sets: list[str], resonance_Hz: float, de
     return rows
 
 
-def plot(path: Path, rows: list[dict], title: str, lumped: list[dict] | None = None) -> None:
-    """Speed [rpm] and the contact's normal amplitude [um] against detuning [Hz], up and down sweeps."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (speed_ax, wave_ax) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
-    for direction, style in (("up", "o-"), ("down", "s--")):
-        mine = [r for r in rows if r["direction"] == direction]
-        d = [r["detuning_Hz"] for r in mine]
-        speed_ax.plot(d, [r["speed_rpm"] for r in mine], style, label=f"swept {direction}")
-        wave_ax.plot(d, [r["normal_amplitude_um"] for r in mine], style, label=f"swept {direction}")
-    if lumped:
-        d = [r["detuning_Hz"] for r in lumped]
-        speed_ax.plot(d, [r["speed_rpm"] for r in lumped], "k:", label="lumped tier (riding)")
-        wave_ax.plot(d, [r["normal_amplitude_um"] for r in lumped], "k:", label="lumped tier (riding)")
-    speed_ax.set(xlabel="drive frequency - model F(1,4) [Hz]", ylabel="rotor speed [rpm]")
-    wave_ax.set(xlabel="drive frequency - model F(1,4) [Hz]", ylabel="normal amplitude at the contact [um]")
-    for ax in (speed_ax, wave_ax):
-        ax.grid(True, alpha=0.3)
-        ax.legend()
-    fig.suptitle(title)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="/tmp/motor_frequency")
@@ -187,8 +160,11 @@ def main() -> None:
             writer = csv.DictWriter(f, fieldnames=("detuning_Hz", "speed_rpm", "normal_amplitude_um"))
             writer.writeheader()
             writer.writerows(lumped)
-    plot(out / "motor_frequency.png", rows, f"WW-USM, modal tier: frequency characteristic from {args.start}, "
-                                            f"bandwidth {bandwidth_Hz:.0f} Hz", lumped)
+    from bench.plot_motor_frequency import frequency_figure
+
+    branch = f"from {args.start}"
+    frequency_figure(out / "motor_frequency.png", [dict(r, branch=branch) for r in rows], lumped,
+                     f"WW-USM, modal tier: frequency characteristic from {args.start}, bandwidth {bandwidth_Hz:.0f} Hz")
     report = {"points": len(rows), "wall_s": time.perf_counter() - started, "bandwidth_Hz": bandwidth_Hz,
               "start": args.start, "sets": base}
     (out / "motor_frequency.json").write_text(json.dumps({"report": report, "rows": rows}, indent=1))

@@ -24,6 +24,52 @@ def read(path: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
+TITLE = "WW-USM at 0.98 N, no load, modal tier (case mesh): the frequency characteristic on both branches"
+
+
+def frequency_figure(path: Path, rows: list[dict], lumped: list[dict] | None = None, title: str = TITLE) -> None:
+    """Speed [rpm] and normal amplitude [um] against detuning [Hz]: a row of panels per branch in ``rows`` (each row a
+    sweep point with ``branch``, ``direction``, ``detuning_Hz``, ``speed_rpm``, ``normal_amplitude_um``), the lumped
+    tier's curve with the riding branch."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    branches = list(dict.fromkeys(r["branch"] for r in rows)) or ["riding"]
+    fig, axes = plt.subplots(len(branches), 2, figsize=(11, 3.5 * len(branches)), constrained_layout=True,
+                             sharex=True, squeeze=False)
+    for ax_row, branch in enumerate(branches):
+        colour = "C3" if branch == "riding" else f"C{ax_row}"
+        for direction, style in (("up", "o-"), ("down", "s--")):
+            mine = sorted((r for r in rows if r["branch"] == branch and r["direction"] == direction),
+                          key=lambda r: float(r["detuning_Hz"]))
+            if not mine:
+                continue
+            d = [float(r["detuning_Hz"]) for r in mine]
+            label = f"{branch}, swept {direction}"
+            axes[ax_row, 0].plot(d, [float(r["speed_rpm"]) for r in mine], style, color=colour, label=label)
+            axes[ax_row, 1].plot(d, [float(r["normal_amplitude_um"]) for r in mine], style, color=colour,
+                                 label=label)
+    if lumped:
+        d = [float(r["detuning_Hz"]) for r in lumped]
+        riding = branches.index("riding") if "riding" in branches else len(branches) - 1
+        axes[riding, 0].plot(d, [float(r["speed_rpm"]) for r in lumped], "k:", label="lumped tier (riding root)")
+        axes[riding, 1].plot(d, [float(r["normal_amplitude_um"]) for r in lumped], "k:",
+                             label="lumped tier (riding root)")
+    for row, branch in enumerate(branches):
+        axes[row, 0].set(ylabel=f"{branch}: rotor speed [rpm]")
+        axes[row, 1].set(ylabel=f"{branch}: normal amplitude at the contact [um]")
+    for ax in axes[-1]:
+        ax.set(xlabel="drive frequency - model F(1,4) [Hz]")
+    for ax in axes.flat:
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", required=True, help="path without suffix: writes OUT.csv and OUT.png")
@@ -43,40 +89,7 @@ def main() -> None:
         writer.writeheader()
         writer.writerows(rows)
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7), constrained_layout=True, sharex=True)
-    styles = {("wedged", "up"): ("C0", "o-"), ("wedged", "down"): ("C0", "s--"), ("riding", "up"): ("C3", "o-"),
-              ("riding", "down"): ("C3", "s--")}
-    for (branch, direction), (colour, style) in styles.items():
-        mine = sorted((r for r in rows if r["branch"] == branch and r["direction"] == direction),
-                      key=lambda r: float(r["detuning_Hz"]))
-        if not mine:
-            continue
-        d = [float(r["detuning_Hz"]) for r in mine]
-        label = f"{branch}, swept {direction}"
-        ax_row = 0 if branch == "wedged" else 1
-        axes[ax_row, 0].plot(d, [float(r["speed_rpm"]) for r in mine], style, color=colour, label=label)
-        axes[ax_row, 1].plot(d, [float(r["normal_amplitude_um"]) for r in mine], style, color=colour, label=label)
-    if args.lumped:
-        lumped = read(Path(args.lumped))
-        d = [float(r["detuning_Hz"]) for r in lumped]
-        axes[1, 0].plot(d, [float(r["speed_rpm"]) for r in lumped], "k:", label="lumped tier (riding root)")
-        axes[1, 1].plot(d, [float(r["normal_amplitude_um"]) for r in lumped], "k:", label="lumped tier (riding root)")
-    for row, branch in enumerate(("wedged", "riding")):
-        axes[row, 0].set(ylabel=f"{branch}: rotor speed [rpm]")
-        axes[row, 1].set(ylabel=f"{branch}: normal amplitude at the contact [um]")
-    for ax in axes[1]:
-        ax.set(xlabel="drive frequency - model F(1,4) [Hz]")
-    for ax in axes.flat:
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8)
-    fig.suptitle("WW-USM at 0.98 N, no load, modal tier (case mesh): the frequency characteristic on both branches")
-    fig.savefig(out.with_suffix(".png"), dpi=110)
-    plt.close(fig)
+    frequency_figure(out.with_suffix(".png"), rows, read(Path(args.lumped)) if args.lumped else None)
     print(f"wrote {out.with_suffix('.csv')} ({len(rows)} points) and {out.with_suffix('.png')}")
 
 
