@@ -1,0 +1,154 @@
+"""The motor's three tiers at the same loads: speed, torque and cost per point (FE, modal, lumped).
+
+The FE and modal points are result directories of `piezodyn run` (their summary.json: the tier, the load, the
+steady point's means over the last window, the cost); the lumped tier (the F(1,4) pair's modal data and the
+friction-drive law, docs/lumped-motor.md) is solved here, in this process, at every load those runs carry, on each
+of its branches, and timed (best of ``--repeat`` solves). A held rotor's load is its stall torque; the lumped
+tier's stall is the law's μ N r_c. Each point's error is taken against the FE point at that load where one
+exists, else against the modal tier's.
+
+    .venv/bin/python bench/bench_motor_tiers.py --lumped-case cases/wwusm-motor-lumped.toml \
+        --runs /work/runs/fe26/point RUN_DIR ... [--csv docs/figures/motor_tiers.csv]
+
+The cost of a point: the loop's wall time per simulated ms times the simulated time (a run killed and resumed
+reports the rate of its last part, applied to the whole), and the set-up (mesh, reduced stator or cache read,
+compilation) beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench_lumped_motor import lumped_at  # noqa: E402
+
+from app.case.schema import load_case  # noqa: E402
+from app.lumped import friction_drive as fd  # noqa: E402
+
+COLUMNS = ["tier", "load_mN_m", "held", "speed_rpm", "torque_mN_m", "normal_force_N", "wave_normal_um",
+           "speed_error_pct", "torque_error_pct", "reference", "periods", "steady", "half_mean_rpm", "half_min_rpm",
+           "half_max_rpm", "loop_wall_s", "setup_wall_s", "run"]
+
+
+def run_point(directory: Path) -> dict:
+    """One FE or modal run's steady point and cost (summary.json of ``directory``)."""
+    summary = json.loads((directory / "summary.json").read_text())
+    tr = summary["results"]["transient"]
+    motor = tr["statistics"]["motor"]
+    rotation = summary["case"]["transient"]["bodies"][0]["rotations"][0]
+    held = rotation["motion"] == "fixed"
+    steady = tr.get("steady_state") or {}
+    half = _last_half_rpm(steady) if not steady.get("steady") else (None, None, None)
+    return {
+        "tier": summary["case"]["tier"], "held": held,
+        "load_mN_m": 1e3 * (motor["friction_torque_N_m"] if held else motor["load_torque_N_m"]),
+        "speed_rpm": motor["speed_rpm"], "torque_mN_m": 1e3 * motor["friction_torque_N_m"],
+        "normal_force_N": motor["normal_force_N"],
+        "wave_normal_um": 1e6 * motor["contact_point_amplitude_m"]["normal"],
+        "periods": steady.get("cycles"), "steady": bool(steady.get("steady")),
+        "half_mean_rpm": half[0], "half_min_rpm": half[1], "half_max_rpm": half[2],
+        "loop_wall_s": tr["wall_s_per_simulated_ms"] * tr["simulated_time_s"] * 1e3,
+        "setup_wall_s": tr["setup_wall_s"], "run": str(directory),
+    }
+
+
+def _last_half_rpm(steady: dict) -> tuple:
+    """(mean, least, largest) period-mean speed [rpm] over the run's last half: the spread of a point that wanders
+    (the window rule not met; not reported for a steady point, whose last half may hold its approach) beside the
+    last window's mean; Nones for a held rotor (its watched value is torque)."""
+    means = steady.get("cycle_means") or []
+    if steady.get("watched") != "speed" or len(means) < 2:
+        return None, None, None
+    rpm = [v * 60.0 / (2.0 * math.pi) for v in means[len(means) // 2:]]
+    return sum(rpm) / len(rpm), min(rpm), max(rpm)
+
+
+def lumped_points(section, load_mN_m: float, held: bool, repeat: int) -> list[dict]:
+    """The lumped tier's roots at one load (held: the stall), each as a row."""
+    points, wall = lumped_at(section, None if held else load_mN_m * 1e-3, repeat)
+    p = fd.derive_parameters(section)
+    rows = []
+    for point in points:
+        torque = p.mu * p.normal_force_N * p.radius_m if held else load_mN_m * 1e-3
+        rows.append({"tier": "lumped", "held": held, "load_mN_m": torque * 1e3 if held else load_mN_m,
+                     "speed_rpm": point["speed_rpm"], "torque_mN_m": torque * 1e3,
+                     "normal_force_N": p.normal_force_N, "wave_normal_um": point["wave_amplitude_m"] * 1e6,
+                     "periods": None, "steady": True, "half_mean_rpm": None, "half_min_rpm": None,
+                     "half_max_rpm": None, "loop_wall_s": wall, "setup_wall_s": 0.0, "run": "lumped (this process)"})
+    return rows
+
+
+def with_errors(rows: list[dict]) -> list[dict]:
+    """Each row's error against the FE row at its load, else the modal row: the speed of a free point, the torque
+    of a held one."""
+    def reference(row):
+        for tier in ("fe", "modal"):
+            for other in rows:
+                if other["tier"] == tier and other is not row and other["held"] == row["held"] and (
+                        row["held"] or abs(other["load_mN_m"] - row["load_mN_m"]) <= 1e-6):
+                    return other
+        return None
+
+    for row in rows:
+        ref = reference(row) if row["tier"] != "fe" else None
+        row["reference"] = ref["tier"] if ref else ""
+        row["speed_error_pct"] = (100.0 * (row["speed_rpm"] / ref["speed_rpm"] - 1.0)
+                                  if ref and not row["held"] else None)
+        # a free point's torque is its load in every tier (steady state); the held rotor's is the stall torque
+        row["torque_error_pct"] = (100.0 * (row["torque_mN_m"] / ref["torque_mN_m"] - 1.0)
+                                   if ref and row["held"] else None)
+    return rows
+
+
+def fmt(value, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", nargs="+", required=True, help="FE and modal result directories (summary.json)")
+    ap.add_argument("--lumped-case", default=str(ROOT / "cases" / "wwusm-motor-lumped.toml"))
+    ap.add_argument("--repeat", type=int, default=3, help="lumped solves per load; the best is reported")
+    ap.add_argument("--csv", help="write the table here as well")
+    args = ap.parse_args()
+    runs = [run_point(Path(d)) for d in args.runs]
+    section = load_case(args.lumped_case).lumped
+    loads = sorted({(round(r["load_mN_m"], 6), r["held"]) for r in runs if not r["held"]}) + [(None, True)]
+    lumped = []
+    for load, held in loads:
+        lumped += lumped_points(section, load or 0.0, held, args.repeat)
+    order = {"fe": 0, "modal": 1, "lumped": 2}
+    rows = with_errors(sorted(runs + lumped, key=lambda r: (r["held"], round(r["load_mN_m"] if not r["held"] else 0, 6),
+                                                             order[r["tier"]])))
+    print("| tier | load [mN m] | speed [rpm] | last half: mean (range) [rpm] | torque [mN m] | N [N] | wave [µm] | "
+          "speed error | torque error | periods (steady) | loop wall [s] | set-up [s] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    def err(r, k):
+        return "-" if r[k] is None else f"{r[k]:+.1f} % ({r['reference']})"
+
+    for r in rows:
+        half = ("-" if r["half_mean_rpm"] is None else
+                f"{r['half_mean_rpm']:.2f} ({r['half_min_rpm']:.2f}–{r['half_max_rpm']:.2f})")
+        periods = "-" if r["periods"] is None else f"{r['periods']} ({'yes' if r['steady'] else 'no'})"
+        load = "held" if r["held"] else fmt(r["load_mN_m"], ".3f")
+        print(f"| {r['tier']} | {load} | {r['speed_rpm']:.2f} | {half} | "
+              f"{r['torque_mN_m']:.3f} | {r['normal_force_N']:.3f} | {r['wave_normal_um']:.3f} | "
+              f"{err(r, 'speed_error_pct')} | {err(r, 'torque_error_pct')} | {periods} | "
+              f"{r['loop_wall_s']:.4g} | {r['setup_wall_s']:.4g} |")
+    if args.csv:
+        with open(args.csv, "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=COLUMNS)
+            writer.writeheader()
+            writer.writerows({k: r.get(k) for k in COLUMNS} for r in rows)
+        print(f"table: {args.csv}")
+
+
+if __name__ == "__main__":
+    main()
