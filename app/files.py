@@ -131,10 +131,11 @@ class _LowLevel:
         """The low-level dataset of a numeric array (None for anything else: h5py's high level writes it)."""
         from h5py import h5d, h5s
 
-        arr = np.asarray(values)
+        arr = values if isinstance(values, np.ndarray) else np.asarray(values)
         if arr.dtype.kind not in "fiub" or arr.ndim == 0 or arr.size == 0:
             return None
-        arr = np.ascontiguousarray(arr)
+        if not arr.flags.c_contiguous:              # a frame's values are contiguous: no copy, no call
+            arr = np.ascontiguousarray(arr)
         space = self.spaces.get(arr.shape)
         if space is None:
             space = self.spaces[arr.shape] = h5s.create_simple(arr.shape)

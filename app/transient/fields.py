@@ -489,11 +489,24 @@ class FieldSeriesExport:
             self._merge(self.comm.bcast(peaks, root=0))
 
     def _merge(self, peaks: list) -> None:
+        """Merge frames' peaks into the series' (the largest of each region's values): per (region, key) over all
+        the frames at once, not frame by frame."""
         from app.fe.derived import merge_peaks
 
-        for frame_peaks in peaks or ():
-            if self.peaks is not None and frame_peaks is not None:
-                merge_peaks(self.peaks, frame_peaks)
+        frames = [p for p in peaks or () if p is not None]
+        if self.peaks is None or not frames:
+            return
+        try:
+            batch = {region: {key: max(frame[region][key] for frame in frames) for key in values}
+                     for region, values in frames[0].items()}
+            complete = all(frame.keys() == batch.keys() for frame in frames)
+        except KeyError:
+            complete = False
+        if not complete:                       # frames that differ in their regions or keys: one by one
+            batch = {}
+            for frame in frames:
+                merge_peaks(batch, frame)
+        merge_peaks(self.peaks, batch)
 
     def _submit(self, first: int, name: str, frames: list[_Frame]) -> None:
         """Hand a batch to the writer thread (rank 0): it expands, writes and names the batches in order while the
@@ -679,9 +692,10 @@ class BodySeriesExport:
     """The rigid bodies with their shapes alone, for a tier without an FE mesh (the lumped tier): the file
     ``path`` (``transient_bodies.xdmf``, the same grid as :class:`FieldSeriesExport`'s companion) with its data in
     ``<path stem>/``: ``bodies.h5`` once and one ``frames_<k>.h5`` per batch of frames (frame k's
-    ``bodies/displacement/step_<k>`` [m], the batch's ``time_s`` and ``step``). A frame at t = 0 and at the first output at or after each multiple of
-    ``interval_s``; ``write(t, z)``, ``flush()`` and ``close()`` as FieldSeriesExport's (``z``: the packed body
-    coordinates ``bodies`` displaces by). ``bodies``: a function returning the
+    ``bodies/displacement/step_<k>`` [m], the batch's ``time_s`` and ``step``). A frame at t = 0 and at the first
+    output at or after each multiple of ``interval_s``; ``write(t, z)``, ``flush()`` and ``close()`` as
+    FieldSeriesExport's (``z``: the packed body coordinates ``bodies`` displaces by). ``bodies``: a function
+    returning the
     :class:`app.transient.body_shapes.BodyMeshes` (called on rank 0). Kill-safe and resumable as
     FieldSeriesExport."""
 
