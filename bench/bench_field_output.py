@@ -57,7 +57,7 @@ def run(piezodyn: str, case: Path, sets: list[str], out: Path) -> dict:
     res = json.loads((out / "summary.json").read_text())["results"]["transient"]
     return {"process_s": wall, "loop_s": res["wall_time_s"], "field_s": res.get("field_output_wall_s", 0.0),
             "loop_cpu_s": res.get("cpu_time_s"), "field_cpu_s": res.get("field_output_cpu_s"),
-            "writer_s": res.get("field_writer_wall_s"),
+            "writer_s": res.get("field_writer_wall_s"), "writer_cpu_s": res.get("field_writer_cpu_s"),
             "frames": res.get("field_outputs", 0), "steps": res["steps"], "load": f"{before} -> {load()}",
             "from_cache": res.get("reduction", {}).get("from_cache")}
 
@@ -86,7 +86,7 @@ def main() -> None:
                     cpu = (f"  loop cpu {r['loop_cpu_s']:6.2f} s  fields cpu {r['field_cpu_s']:5.2f} s"
                            if r["loop_cpu_s"] is not None else "")
                     if r["writer_s"]:
-                        cpu += f"  writer thread {r['writer_s']:5.2f} s"
+                        cpu += f"  writer thread {r['writer_s']:5.2f} s (cpu {r['writer_cpu_s'] or 0:5.2f} s)"
                     print(f"{label:6s} {outputs:10s} process {r['process_s']:7.2f} s  loop {r['loop_s']:7.2f} s  "
                           f"fields {r['field_s']:6.2f} s{cpu}  frames {r['frames']:4d}  steps {r['steps']}  "
                           f"cache {r['from_cache']}  load {r['load']}", flush=True)

@@ -223,6 +223,54 @@ def test_killed_inside_a_batch_resumes_to_the_one_go_series(tmp_path, point, nam
         assert "step_000003" in json.loads(f.attrs[FRAME_PEAKS])
 
 
+def test_batch_file_layout_and_a_resumed_series_of_the_older_layout(tmp_path):
+    """A batch file (app/transient/fields.py): one group per field with frame k's values as ``step_<k>`` and the
+    units as the group's attribute, the frames' times and indices (``time_s``, ``step``) and their peaks
+    (``region_peaks_json``, by frame) once per file; and a series written in the layout before it (a group
+    ``step_<k>`` per frame, ``units``, ``time_s`` and the frame's peaks as attributes of its datasets), resumed
+    after frame 6: the resumed export's running peaks are those of frames 0-6, read from the older files."""
+    import re
+
+    import h5py
+
+    from app.fe.derived import merge_peaks
+
+    out = tmp_path / "series"
+    scenario(out, batch_frames=4, thread=True)
+    vertex = FakeBasis()
+    expected = [vertex._frame(vertex.basis @ coordinates(k))[3] for k in range(FRAMES)]
+    with h5py.File(out / "transient_fields" / "frames_000004.h5", "r") as f:
+        assert sorted(f) == ["displacement", "potential", "step", "time_s", "von_mises_Pa"]
+        assert f["step"][()].tolist() == [4, 5, 6, 7]
+        assert f["time_s"][()].tolist() == [k * PERIOD_S for k in range(4, 8)]
+        assert f["displacement"].attrs["units"] == "m" and f["potential"].attrs["units"] == "V"
+        assert sorted(f["displacement"]) == [f"step_{k:06d}" for k in range(4, 8)]
+        assert f["displacement/step_000005"].shape == (12, 3) and not f["displacement/step_000005"].attrs
+        assert json.loads(f.attrs[FRAME_PEAKS]) == {f"step_{k:06d}": expected[k] for k in range(4, 8)}
+    # the same series in the older layout: the files rewritten, the XML's paths with them
+    for path in sorted((out / "transient_fields").glob("frames_*.h5")):
+        with h5py.File(path, "r") as f:
+            frames = {int(k): float(t) for k, t in zip(f["step"][()], f["time_s"][()])}
+            values = {(name, k): f[f"{name}/step_{k:06d}"][()] for name in ("displacement", "potential",
+                                                                          "von_mises_Pa") for k in frames}
+            peaks = json.loads(f.attrs[FRAME_PEAKS])
+        with h5py.File(path, "w") as f:
+            for (name, k), v in values.items():
+                ds = f.create_dataset(f"step_{k:06d}/{name}", data=v)
+                if name == "displacement":
+                    ds.attrs.update({"units": "m", "time_s": frames[k],
+                                     FRAME_PEAKS: json.dumps(peaks[f"step_{k:06d}"])})
+    xml = out / "transient_fields.xdmf"
+    xml.write_text(re.sub(r":/(\w+)/(step_\d+)<", r":/\2/\1<", xml.read_text()))
+    assert len(read_frames(xml)) == FRAMES
+    resumed = FieldSeriesExport(xml, vertex, lambda: None, FrameSchedule(PERIOD_S, 1, interval_periods=1),
+                                resume_from_s=6 * PERIOD_S, batch_frames=4)
+    kept = {}
+    for k in range(7):
+        merge_peaks(kept, expected[k])
+    assert resumed.peaks == kept and resumed.written == 7
+
+
 def test_modal_expansion_of_a_batch_equals_frame_by_frame():
     """app/reduced/engine.py ReducedVertexFields: ``expand`` of a batch of coordinates (one product of each basis
     with all the columns, the derived fields and peaks of all the frames at once) against ``sample`` and

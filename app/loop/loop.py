@@ -273,7 +273,8 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
                "checkpoints_written": checkpoint.written, "checkpoint_wall_s": checkpoint_wall,
                "fields": fields.path.name if fields is not None else None,
                "field_outputs": fields.written if fields is not None else 0, "field_output_wall_s": field_wall,
-               "field_output_cpu_s": field_cpu + writer_cpu, "field_writer_wall_s": writer_wall}
+               "field_output_cpu_s": field_cpu + writer_cpu, "field_writer_wall_s": writer_wall,
+               "field_writer_cpu_s": writer_cpu}
     if getattr(fields, "peaks", None):      # peaks per region of the derived fields over the frames (app.fe.derived)
         results["field_peaks"] = fields.peaks
     if getattr(getattr(fields, "vertex", None), "region_names", None):    # tag -> name of the files' region tags
