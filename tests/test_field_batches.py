@@ -246,7 +246,12 @@ def test_batch_file_layout_and_a_resumed_series_of_the_older_layout(tmp_path):
         assert f["displacement"].attrs["units"] == "m" and f["potential"].attrs["units"] == "V"
         assert sorted(f["displacement"]) == [f"step_{k:06d}" for k in range(4, 8)]
         assert f["displacement/step_000005"].shape == (12, 3) and not f["displacement/step_000005"].attrs
-        assert json.loads(f.attrs[FRAME_PEAKS]) == {f"step_{k:06d}": expected[k] for k in range(4, 8)}
+        peaks = json.loads(f.attrs[FRAME_PEAKS])       # the batch's product against frame by frame: round-off
+        assert sorted(peaks) == [f"step_{k:06d}" for k in range(4, 8)]
+        for k in range(4, 8):
+            for region, values in expected[k].items():
+                assert peaks[f"step_{k:06d}"][region] == pytest.approx(values, rel=1e-13)
+    written = {}
     # the same series in the older layout: the files rewritten, the XML's paths with them
     for path in sorted((out / "transient_fields").glob("frames_*.h5")):
         with h5py.File(path, "r") as f:
@@ -254,6 +259,7 @@ def test_batch_file_layout_and_a_resumed_series_of_the_older_layout(tmp_path):
             values = {(name, k): f[f"{name}/step_{k:06d}"][()] for name in ("displacement", "potential",
                                                                           "von_mises_Pa") for k in frames}
             peaks = json.loads(f.attrs[FRAME_PEAKS])
+        written.update(peaks)
         with h5py.File(path, "w") as f:
             for (name, k), v in values.items():
                 ds = f.create_dataset(f"step_{k:06d}/{name}", data=v)
@@ -267,7 +273,7 @@ def test_batch_file_layout_and_a_resumed_series_of_the_older_layout(tmp_path):
                                 resume_from_s=6 * PERIOD_S, batch_frames=4)
     kept = {}
     for k in range(7):
-        merge_peaks(kept, expected[k])
+        merge_peaks(kept, written[f"step_{k:06d}"])
     assert resumed.peaks == kept and resumed.written == 7
 
 
