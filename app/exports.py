@@ -197,11 +197,11 @@ def data_item(parent, source: str, shape, number: str = "Float", precision: int 
     return item
 
 
-def mesh_grid(name: str, vertex: VertexFields, mesh_h5: str, fields_at: str, extra=()) -> ET.Element:
+def mesh_grid(name: str, vertex: VertexFields, mesh_h5: str, fields_at: str, extra=(), frame: str = "") -> ET.Element:
     """A uniform grid on the FE mesh with region tags (from ``mesh_h5``), displacement and potential
-    (``<fields_at>/displacement``, ``<fields_at>/potential``, e.g. ``fields_at = "step.h5:"``), and the
-    vertex fields ``extra``: (name, components) each at ``<fields_at>/<name>`` (derived fields, the contact
-    pressure)."""
+    (``<fields_at>/displacement<frame>``, ``<fields_at>/potential<frame>``, e.g. ``fields_at = "modes.h5:/mode_1"``
+    or, a transient frame's, ``fields_at = "frames_000064.h5:"``, ``frame = "/step_000070"``), and the vertex fields
+    ``extra``: (name, components) each at ``<fields_at>/<name><frame>`` (derived fields, the contact pressure)."""
     grid = ET.Element("Grid", Name=name, GridType="Uniform")
     cells = vertex.mesh_arrays["topology"]
     topo = ET.SubElement(grid, "Topology", TopologyType=vertex.topology_type, NumberOfElements=str(cells.shape[0]),
@@ -210,8 +210,8 @@ def mesh_grid(name: str, vertex: VertexFields, mesh_h5: str, fields_at: str, ext
     geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
     data_item(geo, f"{mesh_h5}:/mesh/geometry", (vertex.n_nodes, 3))
     for attr_name, kind, center, source, shape, number in (
-            ("displacement", "Vector", "Node", f"{fields_at}/displacement", (vertex.n_nodes, 3), "Float"),
-            ("potential", "Scalar", "Node", f"{fields_at}/potential", (vertex.n_nodes,), "Float"),
+            ("displacement", "Vector", "Node", f"{fields_at}/displacement{frame}", (vertex.n_nodes, 3), "Float"),
+            ("potential", "Scalar", "Node", f"{fields_at}/potential{frame}", (vertex.n_nodes,), "Float"),
             ("region", "Scalar", "Cell", f"{mesh_h5}:/mesh/region", (vertex.n_cells,), "Int")):
         attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
         data_item(attr, source, shape, number, 8 if number == "Float" else 4)
@@ -222,7 +222,7 @@ def mesh_grid(name: str, vertex: VertexFields, mesh_h5: str, fields_at: str, ext
         kind = {1: "Scalar", 3: "Vector"}.get(components, "Matrix")
         attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center="Node")
         shape = (vertex.n_nodes,) if components == 1 else (vertex.n_nodes, components)
-        data_item(attr, f"{fields_at}/{attr_name}", shape)
+        data_item(attr, f"{fields_at}/{attr_name}{frame}", shape)
     return grid
 
 

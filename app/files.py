@@ -56,40 +56,68 @@ def write_json_atomic(path: Path, data, sync: bool = False, indent: int = 2) -> 
 
 def write_h5_atomic(path: Path, datasets: dict[str, np.ndarray], attrs: dict[str, dict] | None = None) -> None:
     """An HDF5 file of ``datasets`` (name -> array; a name with slashes makes its groups) written under a temporary
-    name, closed, renamed. Numeric arrays and their float, int and str attributes go through h5py's low-level
-    API (the field output writes several small datasets per frame: h5py's high-level create_dataset and
-    attribute set cost about 4x more); the file reads back as h5py's own (same types, str as UTF-8 strings)."""
+    name, closed, renamed. ``attrs``: name -> {attribute: value} of a dataset, or of a group (``""`` or ``"/"``: the
+    file's root; a group no dataset makes is created). Numeric arrays and their float, int and str attributes go
+    through h5py's low-level API (the field output writes hundreds of small datasets per batch: h5py's high-level
+    create_dataset and attribute set cost about 4x more), the groups made once each; the file is built in memory
+    (h5py's core driver) and written to disk whole at its close, one write instead of one per dataset; it reads
+    back as h5py's own (same types, str as UTF-8 strings)."""
     import h5py
 
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
-    with h5py.File(tmp, "w") as f:
-        low = _LowLevel()
+    attrs = attrs or {}
+    size = sum(getattr(v, "nbytes", 0) for v in datasets.values())
+    # the memory image grows by block_size: about the data's size, so it is not copied again and again
+    with h5py.File(tmp, "w", driver="core", backing_store=True, block_size=max(2**16, size // 4)) as f:
+        low = _LowLevel(f)
         for name, values in datasets.items():
-            ds = low.dataset(f, name, values)
+            ds = low.dataset(name, values)
             if ds is None:
                 ds = f.create_dataset(name, data=values).id
-            for key, value in (attrs or {}).get(name, {}).items():
+            for key, value in attrs.get(name, {}).items():
                 low.attribute(ds, key, value)
+        for name, values in attrs.items():
+            if name not in datasets:
+                group = low.group(name.strip("/"))
+                for key, value in values.items():
+                    low.attribute(group, key, value)
     os.replace(tmp, path)
 
 
 class _LowLevel:
-    """Datasets and attributes through h5py's low-level API, the property list, types and dataspaces made once per
-    file (a batch of field frames writes hundreds of datasets of a few shapes)."""
+    """Datasets, groups and attributes of file ``f`` through h5py's low-level API, the property list, types,
+    dataspaces and groups made once per file (a batch of field frames writes hundreds of datasets of a few shapes
+    into a few groups)."""
 
-    def __init__(self):
+    def __init__(self, f):
         import h5py
         from h5py import h5p, h5s, h5t
 
+        self.f = f
         self.lcpl = h5p.create(h5p.LINK_CREATE)
-        self.lcpl.set_create_intermediate_group(True)
         self.lcpl.set_char_encoding(h5t.CSET_UTF8)
         self.types: dict = {}
         self.spaces: dict = {}
+        self.groups: dict = {"": f.id}
         self.str_dtype = h5py.string_dtype()
         self.str_type = h5t.py_create(self.str_dtype, logical=True)
         self.scalar = h5s.create(h5s.SCALAR)
+
+    def group(self, name: str):
+        """The group ``name`` (slashes: nested; "" the root), created with its parents unless it exists."""
+        gid = self.groups.get(name)
+        if gid is None:
+            from h5py import h5g
+
+            parent, _, base = name.rpartition("/")
+            pid = self.group(parent)
+            try:
+                gid = h5g.open(pid, base.encode())
+            except KeyError:
+                gid = h5g.create(pid, base.encode(), lcpl=self.lcpl)
+            self.groups[name] = gid
+        return gid
 
     def _type(self, dtype):
         tid = self.types.get(dtype.str)
@@ -99,25 +127,27 @@ class _LowLevel:
             tid = self.types[dtype.str] = h5t.py_create(dtype)
         return tid
 
-    def dataset(self, f, name: str, values):
+    def dataset(self, name: str, values):
         """The low-level dataset of a numeric array (None for anything else: h5py's high level writes it)."""
         from h5py import h5d, h5s
 
-        arr = np.asarray(values)
+        arr = values if isinstance(values, np.ndarray) else np.asarray(values)
         if arr.dtype.kind not in "fiub" or arr.ndim == 0 or arr.size == 0:
             return None
-        arr = np.ascontiguousarray(arr)
+        if not arr.flags.c_contiguous:              # a frame's values are contiguous: no copy, no call
+            arr = np.ascontiguousarray(arr)
         space = self.spaces.get(arr.shape)
         if space is None:
             space = self.spaces[arr.shape] = h5s.create_simple(arr.shape)
         tid = self._type(arr.dtype)
-        ds = h5d.create(f.id, name.encode(), tid, space, lcpl=self.lcpl)
+        parent, _, base = name.strip("/").rpartition("/")
+        ds = h5d.create(self.group(parent), base.encode(), tid, space, lcpl=self.lcpl)
         ds.write(h5s.ALL, h5s.ALL, arr, mtype=tid)       # the memory type is the file's: no lookup per write
         return ds
 
     def attribute(self, ds, key: str, value) -> None:
-        """A float, int or str attribute through the low-level API, anything else through h5py's
-        AttributeManager."""
+        """A float, int or str attribute of a dataset or group (its low-level id) through the low-level API,
+        anything else through h5py's AttributeManager."""
         import h5py
         from h5py import h5a
 
@@ -127,6 +157,6 @@ class _LowLevel:
             data = np.array(value)
             tid = mtype = self._type(data.dtype)
         else:
-            h5py.Dataset(ds).attrs[key] = value
+            (h5py.Group(ds) if isinstance(ds, h5py.h5g.GroupID) else h5py.Dataset(ds)).attrs[key] = value
             return
         h5a.create(ds, key.encode(), tid, self.scalar).write(data, mtype=mtype)

@@ -209,7 +209,7 @@ def measure(out: Path) -> dict:
     last = len(read_frames(out / "transient_fields.xdmf", ())) - 1
     with frame_group(out, last) as f:
         pressure = f["contact_pressure_Pa"][()]
-        units = f["contact_pressure_Pa"].attrs["units"]
+        units = f.units("contact_pressure_Pa")
     top = np.abs(x[:, 1]) < 1e-12
     r, p = x[top, 0], pressure[top]
     order = np.argsort(r)

@@ -41,7 +41,7 @@ def frames(out) -> list[tuple[float, np.ndarray, np.ndarray]]:
     for k, t in enumerate(times):
         with frame_group(out, k, "transient_contact_sites.xdmf") as f:
             pressure = f["contact_sites/contact_pressure_Pa"]
-            assert pressure.attrs["units"] == "Pa"
+            assert f.units("contact_sites/contact_pressure_Pa") == "Pa"
             out_frames.append((t, f["contact_sites/displacement"][:], pressure[:]))
     return out_frames
 

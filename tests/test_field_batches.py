@@ -78,17 +78,18 @@ def coordinates(k: int) -> np.ndarray:
 
 
 def scenario(out: Path, batch_frames: int, checkpoints=(), resume_from: int | None = None, expand: bool = True,
-             frames=range(FRAMES)) -> FieldSeriesExport:
+             frames=range(FRAMES), thread: bool = False) -> FieldSeriesExport:
     """Frames ``frames`` at t = k PERIOD_S of coordinates(k) and a 'checkpoint' after the frames in
     ``checkpoints`` as the run loop makes one (app/loop/loop.py: ``flush()`` unless the buffer rides in the
     checkpoint, then the export's ``checkpoint_record()``, saved as ``out/checkpoint.json`` and its arrays as
-    ``out/checkpoint.npz``); resumed after frame ``resume_from`` from that record; closed at the end."""
+    ``out/checkpoint.npz``); resumed after frame ``resume_from`` from that record; closed at the end. ``thread``:
+    the modal tier's batches written by the writer thread (FieldSeriesExport ``writer_thread``), as in a run."""
     state = {"q": None}
     vertex = FakeBasis(expand)
     export = FieldSeriesExport(out / "transient_fields.xdmf", vertex, lambda: state["q"],
                                FrameSchedule(PERIOD_S, 1, interval_periods=1),
                                resume_from_s=None if resume_from is None else resume_from * PERIOD_S,
-                               batch_frames=batch_frames)
+                               batch_frames=batch_frames, writer_thread=thread)
     if resume_from is not None:
         with np.load(out / "checkpoint.npz") as saved:
             export.resume(json.loads((out / "checkpoint.json").read_text()), dict(saved))
@@ -113,10 +114,11 @@ def test_batched_series_equals_the_per_frame_series(tmp_path):
     expected = [vertex._frame(vertex.basis @ coordinates(k)) for k in range(FRAMES)]
     scale = max(np.abs(e[0]).max() for e in expected)
     series = {}
-    for name, batch, expand, checkpoints in (("per_frame", 1, True, ()), ("batched", 4, True, (5,)),
-                                             ("fe_batched", 4, False, (5,))):
+    for name, batch, expand, checkpoints, thread in (("per_frame", 1, True, (), False),
+                                                     ("batched", 4, True, (5,), True),
+                                                     ("fe_batched", 4, False, (5,), False)):
         out = tmp_path / name
-        export = scenario(out, batch, checkpoints, expand=expand)
+        export = scenario(out, batch, checkpoints, expand=expand, thread=thread)
         frames = read_frames(out / "transient_fields.xdmf", ("displacement", "potential", "von_mises_Pa"))
         assert [t for t, _ in frames] == [k * PERIOD_S for k in range(FRAMES)]
         for (_, values), (u, phi, derived, _) in zip(frames, expected):
@@ -153,15 +155,19 @@ import sys
 from pathlib import Path
 sys.path.insert(0, {tests!r})
 import test_field_batches as t
-t.scenario(Path({out!r}), batch_frames={batch}, checkpoints=(4,), expand={expand})
+t.scenario(Path({out!r}), batch_frames={batch}, checkpoints=(4,), expand={expand}, thread={thread})
 """
 
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="drives a serial subprocess")
-@pytest.mark.parametrize("point, named, batch, resumed_batch, expand", [
-    ("fields_written:9", 6, 3, 3, True), ("fields_data:3", 6, 3, 3, True), ("fields_written:10", 8, 2, 3, True),
-    ("fields_written:9", 8, 3, 3, False), ("fields_data:3", 5, 3, 3, False)])
-def test_killed_inside_a_batch_resumes_to_the_one_go_series(tmp_path, point, named, batch, resumed_batch, expand):
+@pytest.mark.parametrize("point, named, batch, resumed_batch, expand, thread", [
+    ("fields_written:9", 6, 3, 3, True, False), ("fields_data:3", 6, 3, 3, True, False),
+    ("fields_written:10", 8, 2, 3, True, False), ("fields_written:9", 8, 3, 3, False, False),
+    ("fields_data:3", 5, 3, 3, False, False),
+    ("fields_written:9", 6, 3, 3, True, True), ("fields_data:3", 6, 3, 3, True, True),
+    ("fields_written:10", 8, 2, 3, True, True)])
+def test_killed_inside_a_batch_resumes_to_the_one_go_series(tmp_path, point, named, batch, resumed_batch, expand,
+                                                            thread):
     """A process SIGKILLed (app/killpoint.py) after the 'checkpoint' at frame 4. The modal tier's buffer rides in
     the checkpoint (frames 3 and 4 buffered there in batches of 3): killed with frames 6-8 buffered
     (``fields_written:9``: 0-5 on disk, frames 3-5 of the batch after the checkpoint too), or with the batch 6-8
@@ -171,18 +177,27 @@ def test_killed_inside_a_batch_resumes_to_the_one_go_series(tmp_path, point, nam
     XML names only complete files (``named`` frames); resumed from the checkpoint (its record) the series is the
     one-go series (values, times, peaks): bit for bit when the resumed run cuts its batches as the killed one
     did, else to round-off (another cut of the batches), and the folder holds exactly the files the XML names
-    (e.g. the killed run's frames_000003.h5, with frames after the checkpoint, removed)."""
-    one_go = scenario(tmp_path / "one_go", batch_frames=resumed_batch, checkpoints=(4,), expand=expand)
+    (e.g. the killed run's frames_000003.h5, with frames after the checkpoint, removed). ``thread``: the modal
+    tier's batches written by the writer thread, as in a run (killed and resumed so): the writer may lag behind
+    the frames taken, so at ``fields_written`` the XML names up to ``named`` frames, whole batches (the batches
+    it had not written at the checkpoint ride in it and are written again on resume); at ``fields_data`` (inside
+    the writer) exactly ``named``."""
+    one_go = scenario(tmp_path / "one_go", batch_frames=resumed_batch, checkpoints=(4,), expand=expand,
+                      thread=thread)
     out = tmp_path / "killed"
     env = {**os.environ, "PIEZODYN_KILL_AT": point}
-    script = KILL_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out), batch=batch, expand=expand)
+    script = KILL_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out), batch=batch, expand=expand,
+                                thread=thread)
     killed = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
                             cwd=Path(__file__).parents[1])
     assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
     left = read_frames(out / "transient_fields.xdmf")           # every file the XML names is complete
-    assert len(left) == named
+    if thread and point.startswith("fields_written"):
+        assert len(left) <= named and len(left) % batch == 0
+    else:
+        assert len(left) == named
     resumed = scenario(out, batch_frames=resumed_batch, checkpoints=(4,), resume_from=4, frames=range(5, FRAMES),
-                       expand=expand)
+                       expand=expand, thread=thread)
     names = ("displacement", "potential", "von_mises_Pa")
     a, b = read_frames(tmp_path / "one_go" / "transient_fields.xdmf", names), read_frames(
         out / "transient_fields.xdmf", names)
@@ -205,7 +220,61 @@ def test_killed_inside_a_batch_resumes_to_the_one_go_series(tmp_path, point, nam
     import h5py
 
     with h5py.File(out / "transient_fields" / resumed.data_files[1], "r") as f:
-        assert FRAME_PEAKS in f["step_000003/displacement"].attrs
+        assert "step_000003" in json.loads(f.attrs[FRAME_PEAKS])
+
+
+def test_batch_file_layout_and_a_resumed_series_of_the_older_layout(tmp_path):
+    """A batch file (app/transient/fields.py): one group per field with frame k's values as ``step_<k>`` and the
+    units as the group's attribute, the frames' times and indices (``time_s``, ``step``) and their peaks
+    (``region_peaks_json``, by frame) once per file; and a series written in the layout before it (a group
+    ``step_<k>`` per frame, ``units``, ``time_s`` and the frame's peaks as attributes of its datasets), resumed
+    after frame 6: the resumed export's running peaks are those of frames 0-6, read from the older files."""
+    import re
+
+    import h5py
+
+    from app.fe.derived import merge_peaks
+
+    out = tmp_path / "series"
+    scenario(out, batch_frames=4, thread=True)
+    vertex = FakeBasis()
+    expected = [vertex._frame(vertex.basis @ coordinates(k))[3] for k in range(FRAMES)]
+    with h5py.File(out / "transient_fields" / "frames_000004.h5", "r") as f:
+        assert sorted(f) == ["displacement", "potential", "step", "time_s", "von_mises_Pa"]
+        assert f["step"][()].tolist() == [4, 5, 6, 7]
+        assert f["time_s"][()].tolist() == [k * PERIOD_S for k in range(4, 8)]
+        assert f["displacement"].attrs["units"] == "m" and f["potential"].attrs["units"] == "V"
+        assert sorted(f["displacement"]) == [f"step_{k:06d}" for k in range(4, 8)]
+        assert f["displacement/step_000005"].shape == (12, 3) and not f["displacement/step_000005"].attrs
+        peaks = json.loads(f.attrs[FRAME_PEAKS])       # the batch's product against frame by frame: round-off
+        assert sorted(peaks) == [f"step_{k:06d}" for k in range(4, 8)]
+        for k in range(4, 8):
+            for region, values in expected[k].items():
+                assert peaks[f"step_{k:06d}"][region] == pytest.approx(values, rel=1e-13)
+    written = {}
+    # the same series in the older layout: the files rewritten, the XML's paths with them
+    for path in sorted((out / "transient_fields").glob("frames_*.h5")):
+        with h5py.File(path, "r") as f:
+            frames = {int(k): float(t) for k, t in zip(f["step"][()], f["time_s"][()])}
+            values = {(name, k): f[f"{name}/step_{k:06d}"][()] for name in ("displacement", "potential",
+                                                                          "von_mises_Pa") for k in frames}
+            peaks = json.loads(f.attrs[FRAME_PEAKS])
+        written.update(peaks)
+        with h5py.File(path, "w") as f:
+            for (name, k), v in values.items():
+                ds = f.create_dataset(f"step_{k:06d}/{name}", data=v)
+                if name == "displacement":
+                    ds.attrs.update({"units": "m", "time_s": frames[k],
+                                     FRAME_PEAKS: json.dumps(peaks[f"step_{k:06d}"])})
+    xml = out / "transient_fields.xdmf"
+    xml.write_text(re.sub(r":/(\w+)/(step_\d+)<", r":/\2/\1<", xml.read_text()))
+    assert len(read_frames(xml)) == FRAMES
+    resumed = FieldSeriesExport(xml, vertex, lambda: None, FrameSchedule(PERIOD_S, 1, interval_periods=1),
+                                resume_from_s=6 * PERIOD_S, batch_frames=4)
+    kept = {}
+    for k in range(7):
+        merge_peaks(kept, written[f"step_{k:06d}"])
+    assert resumed.peaks == kept and resumed.written == 7
 
 
 def test_modal_expansion_of_a_batch_equals_frame_by_frame():

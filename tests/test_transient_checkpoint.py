@@ -24,10 +24,39 @@ def read_series(path: Path) -> dict[str, np.ndarray]:
     return read_time_series(path)
 
 
+class FrameView:
+    """Frame k of a batch file (app/transient/fields.py): ``view[name]`` is the frame's dataset of field ``name``
+    (``<name>/step_<k>``, e.g. ``displacement``, ``bodies/displacement``), ``units(name)`` its field's units (the
+    group's attribute), ``time_s`` the frame's time (the file's ``time_s`` at its ``step``), ``names()`` the fields
+    it has."""
+
+    def __init__(self, f, step: str):
+        self.f, self.step = f, step
+
+    def __getitem__(self, name: str):
+        return self.f[f"{name}/{self.step}"]
+
+    def units(self, name: str) -> str:
+        return self.f[name].attrs["units"]
+
+    @property
+    def time_s(self) -> float:
+        (index,) = np.flatnonzero(self.f["step"][()] == int(self.step.split("_")[1]))
+        return float(self.f["time_s"][index])
+
+    def names(self) -> list[str]:
+        import h5py
+
+        found = []
+        self.f.visititems(lambda name, obj: found.append(name.rpartition("/")[0])
+                          if isinstance(obj, h5py.Dataset) and name.endswith("/" + self.step) else None)
+        return found
+
+
 @contextmanager
 def frame_group(out: Path, k: int, xdmf: str = "transient_fields.xdmf"):
-    """Frame k's HDF5 group (its displacement, potential, ...) where the XML's displacement DataItem points: a
-    group ``step_<k>`` of a batch file (app/transient/fields.py)."""
+    """Frame k where the XML's displacement DataItem points (``<file>:/<field>/step_<k>``): a :class:`FrameView`
+    of its batch file."""
     import xml.etree.ElementTree as ET
 
     import h5py
@@ -36,9 +65,8 @@ def frame_group(out: Path, k: int, xdmf: str = "transient_fields.xdmf"):
 
     step = ET.parse(out / xdmf).getroot().find("Domain/Grid").findall("Grid")[k]
     where, path = attribute_source(step, "displacement")
-    parts = path.strip("/").split("/")
     with h5py.File(out / where, "r") as f:
-        yield f["/" + parts[0] if len(parts) > 1 else "/"]       # the frame's group, step_<k>
+        yield FrameView(f, path.rsplit("/", 1)[-1])
 
 
 def frame_files(out: Path) -> set[str]:
@@ -308,7 +336,7 @@ def test_field_series_written_at_the_frame_times(one_go):
             assert f["displacement"].shape == (vertices, 3)       # P1: one value per vertex
             assert f["potential"].shape == (vertices,)
             amplitude = max(amplitude, np.abs(f["displacement"][:, 1]).max())
-            assert f["displacement"].attrs["time_s"] == times[k]
+            assert f.time_s == times[k] and f.units("displacement") == "m"
     assert 1e-6 < amplitude < 30e-6                     # the tip vibrates at ~15 um
     # the bodies with their shapes: the companion file, one grid of all bodies per output time
     text = (out / "transient_bodies.xdmf").read_text()

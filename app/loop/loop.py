@@ -236,10 +236,10 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
             for name, (units, table) in engine.take_tables().items():
                 series.append_table(name, table, units)
             if fields is not None:           # the frames the engine took; a frame at t when one is due
-                mark, mark_cpu = time.perf_counter(), time.process_time()
+                mark, mark_cpu = time.perf_counter(), time.thread_time()
                 fields.write(engine.t, engine.body_positions())
                 field_wall += time.perf_counter() - mark
-                field_cpu += time.process_time() - mark_cpu
+                field_cpu += time.thread_time() - mark_cpu
             progress.update(engine.t)
             if checkpoint.due(engine.steps) or steady:
                 field_wall, field_cpu = _flush(fields, field_wall, field_cpu, before_checkpoint=True)
@@ -257,9 +257,13 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
         progress.close()
         _write_rows(series, unwritten)          # a failed step: the rows of the steps before it
         series.close()
-        if fields is not None:
+        if fields is not None:           # waits for the field output's writer thread, if it has one
+            mark, mark_cpu = time.perf_counter(), time.thread_time()
             fields.close()
+            field_wall += time.perf_counter() - mark
+            field_cpu += time.thread_time() - mark_cpu
     wall, cpu = time.perf_counter() - start, time.process_time() - start_cpu
+    writer_cpu, writer_wall = getattr(fields, "writer_cpu_s", 0.0), getattr(fields, "writer_wall_s", 0.0)
     simulated = engine.t - t_start
     results = {"tier": engine.tier, "steps": engine.steps, "simulated_time_s": engine.t,
                "resumed_from_s": t_start if found is not None else None,
@@ -269,7 +273,8 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
                "checkpoints_written": checkpoint.written, "checkpoint_wall_s": checkpoint_wall,
                "fields": fields.path.name if fields is not None else None,
                "field_outputs": fields.written if fields is not None else 0, "field_output_wall_s": field_wall,
-               "field_output_cpu_s": field_cpu}
+               "field_output_cpu_s": field_cpu + writer_cpu, "field_writer_wall_s": writer_wall,
+               "field_writer_cpu_s": writer_cpu}
     if getattr(fields, "peaks", None):      # peaks per region of the derived fields over the frames (app.fe.derived)
         results["field_peaks"] = fields.peaks
     if getattr(getattr(fields, "vertex", None), "region_names", None):    # tag -> name of the files' region tags
@@ -305,9 +310,9 @@ def _flush(fields, wall: float, cpu: float, before_checkpoint: bool = False) -> 
     coordinates each); and at the end. Returns the field output's wall and CPU time [s] with this flush's."""
     if fields is None or (before_checkpoint and getattr(fields, "carries", False)):
         return wall, cpu
-    mark, mark_cpu = time.perf_counter(), time.process_time()
+    mark, mark_cpu = time.perf_counter(), time.thread_time()
     fields.flush()
-    return wall + time.perf_counter() - mark, cpu + time.process_time() - mark_cpu
+    return wall + time.perf_counter() - mark, cpu + time.thread_time() - mark_cpu
 
 
 def _checkpoint(engine, checkpoint: CheckpointWriter, series: TimeSeriesWriter, watch, fields=None) -> int:

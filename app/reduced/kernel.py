@@ -941,7 +941,7 @@ def _status(y, v, z, zd, wk, model, closed_sites, closed):
     return closure
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)     # the GIL released: the field output's writer thread works meanwhile
 def run(t_end, state, model, cache, out, track_energy, frames):
     """Advance ``state`` (in place) until ``t_end``, until the output buffers (``out`` or ``frames``) are full, until
     the first accepted step at or after ``state.fstate[F_STOP]``, or until the last of ``frames.times`` is taken.

@@ -4,14 +4,17 @@ animation shows the vibration, not one phase of it).
 
 Layout: ``<stem>.xdmf`` (the XML, ours) and ``<stem>/mesh.h5`` (vertices, cells, region tags) plus
 ``<stem>/frames_<k>.h5``, one HDF5 file per batch of frames named by its first frame k, with frame k's
-displacement [m] and potential [V] at the vertices (see :class:`app.exports.VertexFields`) in its group
-``step_<k>``. Each output time is one uniform grid of the FE mesh (``fe_body``:
+displacement [m] and potential [V] at the vertices (see :class:`app.exports.VertexFields`) as the datasets
+``displacement/step_<k>`` and ``potential/step_<k>`` (one group per field, its units the group's attribute
+``units``; the batch's times in ``time_s``, their frame indices in ``step``, the frames' peaks in the root attribute
+``region_peaks_json``: a few HDF5 objects per frame, not a group and attributes each, since their number was
+what writing a batch cost). Each output time is one uniform grid of the FE mesh (``fe_body``:
 displacement, potential, region) in a temporal collection, the layout meshio's TimeSeriesReader and
 ParaView's XDMF readers both read. The rigid bodies, drawn with their shapes
 (:mod:`app.transient.body_shapes`), are the companion file ``transient_bodies.xdmf`` written at the same
 times: one triangle grid of all bodies (``rigid_bodies``: cell values ``body``, the index into the
 ``names`` attribute of ``<stem>/bodies.h5``, and ``sector``, stripes that show a spin) at their start,
-with each vertex's displacement [m] in the frame's group (``step_<k>/bodies/displacement``). Both files are
+with each vertex's displacement [m] in the frame's dataset ``bodies/displacement/step_<k>``. Both files are
 written in the reference configuration with their displacement, so one Warp By Vector (scale 1) on each puts
 the transducer and the bodies where they are; meshio reads the points once and the displacement per time.
 The modal tier's contact sites with ``output.contact_pressure`` are a second companion,
@@ -28,7 +31,10 @@ temporary name and renamed), and the XML is replaced atomically after the batch 
 kill at any moment the XML and every file it names are complete.
 
 The modal tier's compiled loop takes the frames itself (``engine_frames``: app/reduced/kernel.py Frames, given
-:meth:`FrameSchedule.upcoming`), at the steps the loop would, so the loop does not stop it at every frame time.
+:meth:`FrameSchedule.upcoming`), at the steps the loop would, so the loop does not stop it at every frame time; and
+its batches are expanded and written by a writer thread on rank 0 while the compiled loop, which releases the GIL,
+steps on (``writer_thread``): the run waits for the field output only at its end. A batch the thread has not
+finished rides in a checkpoint as the buffered frames do.
 
 Checkpoints (app/loop/loop.py): a frame at or before a checkpoint's time is either on disk when the checkpoint is
 written or in the checkpoint itself. The FE tier's buffered frames (sampled fields, large) are written before every
@@ -47,6 +53,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -189,20 +196,22 @@ class _Frame:
 
 
 class _StepTemplate:
-    """A frame's serialised XML element with two placeholders, the time value and the frame's data path
-    (``<folder>/<file>:/<group>``); ``fill(t, data_at)`` returns the frame's bytes."""
+    """A frame's serialised XML element with three placeholders, the time value, the frame's batch file
+    (``<folder>/<file>``) and its dataset name in each field's group (``step_<k>``); ``fill(t, data_file, step)``
+    returns the frame's bytes."""
 
     TIME = "@time@"
-    DATA = "@data@:"             # with a colon: data_item then writes an HDF5 DataItem
+    FILE = "@file@"
+    STEP = "@step@"
 
     def __init__(self, text: bytes):
-        self.parts = [part.split(self.DATA.encode()) for part in text.split(self.TIME.encode())]
-        if len(self.parts) != 2:
+        if text.count(self.TIME.encode()) != 1:
             raise ValueError("a frame template holds one time value")
+        self.text = text
 
-    def fill(self, t: str, data_at: str) -> bytes:
-        at = data_at.encode()
-        return t.encode().join(at.join(part) for part in self.parts)
+    def fill(self, t: str, data_file: str, step: str) -> bytes:
+        return (self.text.replace(self.TIME.encode(), t.encode()).replace(self.FILE.encode(), data_file.encode())
+                .replace(self.STEP.encode(), step.encode()))
 
 
 def _time_text(t: float | str) -> str:
@@ -223,11 +232,13 @@ class FieldSeriesExport:
     rank 0). ``resume_from_s``: continue the existing series after that time (later steps are dropped).
     ``scalars``: a callable returning further vertex fields of the current state, {name: (values at the vertices
     on rank 0 (None elsewhere), units)}, e.g. ``contact_pressure_Pa`` (collective). ``sites``: None, or the
-    :class:`ContactSiteCloud` written as the companion ``<stem minus _fields>_contact_sites.xdmf``."""
+    :class:`ContactSiteCloud` written as the companion ``<stem minus _fields>_contact_sites.xdmf``.
+    ``writer_thread``: a series whose buffer rides in the checkpoint (``carries``) writes its batches on a thread
+    of rank 0 while the engine steps on (:meth:`_submit`); False: at the flush, as the others."""
 
     def __init__(self, path: Path, vertex, solution, schedule: FrameSchedule, bodies=None,
                  resume_from_s: float | None = None, scalars=None, sites: ContactSiteCloud | None = None,
-                 batch_frames: int = FRAMES_PER_FILE):
+                 batch_frames: int = FRAMES_PER_FILE, writer_thread: bool = True):
         self.path = Path(path)
         self.dir = self.path.with_suffix("")
         self.bodies_path = self.path.with_name(self.path.stem.replace("_fields", "") + "_bodies.xdmf")
@@ -309,6 +320,14 @@ class FieldSeriesExport:
         # frames an engine takes at its own steps (the modal kernel: app/reduced/kernel.py Frames), a function
         # returning [(t, q, z)] taken since its last call; the loop then does not stop the engine at frame times
         self.engine_frames: Callable | None = None
+        # the writer thread of a carrying series (rank 0, made at its first batch: _submit), its batches not yet
+        # known to be written [(future, frames)], the peaks of those written, and its CPU and busy wall time [s]
+        self.writer_thread = writer_thread
+        self._writer = None
+        self._jobs: list[tuple] = []
+        self._written_peaks: list = []
+        self.writer_cpu_s = 0.0
+        self.writer_wall_s = 0.0
         self.due_s = 1e-9 * self.interval_s                # a frame is due at the first step at or after next_s - due_s
         self.after_s = 1e-9 * self.schedule.spacing_s      # a frame at t: the next is after t + after_s (next_after)
 
@@ -338,13 +357,18 @@ class FieldSeriesExport:
         buffered frames' times; the arrays (rank 0's, stored with the engine's state, bit for bit): their
         coordinates q (``fields_buffered_q``: frames x coordinates) and body coordinates z
         (``fields_buffered_z``). Without ``carries`` the run loop flushes before the checkpoint."""
-        times, arrays = [], {}
-        if self.carries and self.rank0 and self.pending:
-            times = [f.t for f in self.pending]
-            arrays["fields_buffered_q"] = np.array([f.state for f in self.pending])
-            if self.pending[0].z is not None:
-                arrays["fields_buffered_z"] = np.array([f.z for f in self.pending])
-        return {"on_disk": self.written - len(self.pending), "buffered_s": times}, arrays
+        times, arrays, buffered = [], {}, self.pending
+        if self.carries and self.rank0:
+            # the batches the writer thread has not finished ride along: a kill before it names them in the XML
+            # loses nothing (a batch it finishes after the checkpoint is cut on resume and written again, the same)
+            self._reap()
+            buffered = [frame for _, frames in self._jobs for frame in frames] + self.pending
+            if buffered:
+                times = [f.t for f in buffered]
+                arrays["fields_buffered_q"] = np.array([f.state for f in buffered])
+                if buffered[0].z is not None:
+                    arrays["fields_buffered_z"] = np.array([f.z for f in buffered])
+        return {"on_disk": self.written - len(buffered), "buffered_s": times}, arrays
 
     def resume(self, record: dict | None, arrays: dict | None = None) -> None:
         """Continue from a checkpoint's :meth:`checkpoint_record` (collective; ``arrays``: the checkpoint's state
@@ -378,6 +402,9 @@ class FieldSeriesExport:
             self.pending.append(_Frame(float(t), state=None if q is None else np.asarray(q, dtype=float),
                                        z=None if z is None else np.asarray(z, dtype=float), scalars={}))
             self.written += 1
+        # batches that were full but not yet written at the checkpoint: written again, cut where the run cut them
+        while len(self.pending) >= self.batch_frames:
+            self._flush_batch()
 
     def files(self) -> list[str]:
         """Names of the files of the series, relative to the output directory (after ``close()``)."""
@@ -441,61 +468,133 @@ class FieldSeriesExport:
             self.flush()
 
     def flush(self) -> None:
-        """Write the buffered frames: one HDF5 file (under a temporary name, renamed), then the XMLs naming them.
-        Collective (the modal tier's peaks are computed on rank 0 and broadcast)."""
-        if not self.pending:
-            return
-        frames, self.pending = self.pending, []
-        first = self.written - len(frames)
-        name = f"frames_{first:06d}.h5"
-        if self.expands:
-            expanded = self.vertex.expand(np.column_stack([f.state for f in frames])) if self.rank0 else None
-            peaks = self.comm.bcast([e[3] for e in expanded] if self.rank0 else None, root=0)
-            for k, frame in enumerate(frames):
-                frame.peaks = peaks[k]
-                if self.peaks is not None and frame.peaks is not None:
-                    from app.fe.derived import merge_peaks
+        """Write the buffered frames, in batches of at most ``batch_frames``: each one HDF5 file (under a temporary
+        name, renamed), then the XMLs naming them. Collective (the modal tier's peaks are computed on rank 0 and
+        broadcast). A series whose buffer rides in the checkpoint (``carries``: the modal tier) hands its batches to
+        a writer thread on rank 0 (:meth:`_submit`) and goes on; :meth:`close` waits for them."""
+        while self.pending:
+            self._flush_batch()
 
-                    merge_peaks(self.peaks, frame.peaks)
-                if self.rank0:
-                    u, phi, derived, _ = expanded[k]
-                    frame.fields = {"displacement": (u, "m"), "potential": (phi, "V"),
-                                    **{key: (v, None) for key, v in derived.items()}}
-                    frame.state = None
-        if self.rank0:
-            datasets, attrs = {}, {}
-            for k, frame in enumerate(frames, start=first):
-                group, t = f"step_{k:06d}", frame.t
-                for key, (values, units) in {**frame.fields, **frame.scalars}.items():
-                    datasets[f"{group}/{key}"] = values
-                    attrs[f"{group}/{key}"] = {"units": units, "time_s": t} if units is not None else {}
-                if frame.peaks is not None:
-                    attrs[f"{group}/displacement"][FRAME_PEAKS] = json.dumps(frame.peaks)
-                if self.bodies is not None and frame.z is not None:
-                    frame.bodies = self.bodies.displacement(frame.z)
-                if frame.bodies is not None:
-                    datasets[f"{group}/bodies/displacement"] = frame.bodies
-                    attrs[f"{group}/bodies/displacement"] = {"units": "m", "time_s": t}
-                if frame.sites is not None:
-                    (datasets[f"{group}/contact_sites/displacement"],
-                     datasets[f"{group}/contact_sites/{CONTACT_PRESSURE}"]) = frame.sites
-                    attrs[f"{group}/contact_sites/displacement"] = {"units": "m", "time_s": t}
-                    attrs[f"{group}/contact_sites/{CONTACT_PRESSURE}"] = {"units": "Pa", "time_s": t}
-            write_h5_atomic(self.dir / name, datasets, attrs)
-            kill_point("fields_data")                   # the batch file exists, the XML does not name it yet
-            at = f"{self.dir.name}/{name}:"
-            for k, frame in enumerate(frames, start=first):
-                data_at, t = f"{at}/step_{k:06d}", repr(float(frame.t))
-                extra = extra_fields({**{key: v for key, (v, _) in frame.fields.items()
-                                         if key not in ("displacement", "potential")},
-                                      **{key: v for key, (v, _) in frame.scalars.items()}})
-                self.steps.append(self._template("fe", tuple(extra)).fill(t, data_at))
-                if self.bodies is not None:
-                    self.body_steps.append(self._template("bodies").fill(t, data_at))
-                if self.sites is not None:
-                    self.site_steps.append(self._template("sites").fill(t, data_at))
-            self._replace_documents()
+    def _flush_batch(self) -> None:
+        frames, self.pending = self.pending[:self.batch_frames], self.pending[self.batch_frames:]
+        first = self.written - len(self.pending) - len(frames)
+        name = f"frames_{first:06d}.h5"
         self.data_files.append(name)
+        if self.carries and self.writer_thread:
+            if self.rank0:
+                self._submit(first, name, frames)
+            return
+        peaks = self._write_batch(first, name, frames) if self.rank0 else None
+        if self.expands:
+            self._merge(self.comm.bcast(peaks, root=0))
+
+    def _merge(self, peaks: list) -> None:
+        """Merge frames' peaks into the series' (the largest of each region's values): per (region, key) over all
+        the frames at once, not frame by frame."""
+        from app.fe.derived import merge_peaks
+
+        frames = [p for p in peaks or () if p is not None]
+        if self.peaks is None or not frames:
+            return
+        try:
+            batch = {region: {key: max(frame[region][key] for frame in frames) for key in values}
+                     for region, values in frames[0].items()}
+            complete = all(frame.keys() == batch.keys() for frame in frames)
+        except KeyError:
+            complete = False
+        if not complete:                       # frames that differ in their regions or keys: one by one
+            batch = {}
+            for frame in frames:
+                merge_peaks(batch, frame)
+        merge_peaks(self.peaks, batch)
+
+    def _submit(self, first: int, name: str, frames: list[_Frame]) -> None:
+        """Hand a batch to the writer thread (rank 0): it expands, writes and names the batches in order while the
+        engine steps on (the modal kernel releases the GIL: app/reduced/kernel.py run). Until it is written, the
+        batch's frames stay in :attr:`_jobs` and ride in a checkpoint (:meth:`checkpoint_record`)."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._reap()
+        if self._writer is None:
+            self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="field-writer")
+        self._jobs.append((self._writer.submit(self._timed_batch, first, name, frames), frames))
+
+    def _timed_batch(self, first: int, name: str, frames: list[_Frame]) -> list:
+        cpu, wall = time.thread_time(), time.perf_counter()
+        try:
+            return self._write_batch(first, name, frames)
+        finally:
+            self.writer_cpu_s += time.thread_time() - cpu
+            self.writer_wall_s += time.perf_counter() - wall
+
+    def _reap(self) -> None:
+        """Take the written batches off :attr:`_jobs` (their peaks kept for :meth:`_collect`); a batch that failed
+        raises here, at the next batch or checkpoint (rank 0)."""
+        while self._jobs and self._jobs[0][0].done():
+            job, _ = self._jobs.pop(0)
+            self._written_peaks.extend(job.result() or ())
+
+    def _collect(self) -> None:
+        """Wait for the writer thread's batches and merge their peaks on every rank (collective)."""
+        peaks = None
+        if self.rank0:
+            for job, _ in self._jobs:
+                job.result()
+            self._reap()
+            peaks, self._written_peaks = self._written_peaks, []
+        if self.carries and self.expands:
+            self._merge(self.comm.bcast(peaks, root=0))
+
+    def _write_batch(self, first: int, name: str, frames: list[_Frame]) -> list | None:
+        """Write a batch (rank 0): the modal tier's frames expanded (one product of each basis with all their
+        coordinates), the bodies displaced, one HDF5 file, then the XMLs. The frames are not changed (a batch in
+        the writer thread rides in a checkpoint meanwhile). Returns the frames' peaks when they are computed here
+        (the modal tier's), else None."""
+        fields = [frame.fields for frame in frames]
+        peaks = [frame.peaks for frame in frames]
+        if self.expands:
+            expanded = self.vertex.expand(np.column_stack([f.state for f in frames]))
+            peaks = [e[3] for e in expanded]
+            fields = [{"displacement": (u, "m"), "potential": (phi, "V"),
+                       **{key: (v, None) for key, v in derived.items()}} for u, phi, derived, _ in expanded]
+        datasets, attrs = batch_index(first, [frame.t for frame in frames])
+        frame_peaks = {}
+        for k, (frame, values_of, peaks_k) in enumerate(zip(frames, fields, peaks), start=first):
+            step = f"step_{k:06d}"
+            for key, (values, units) in {**values_of, **frame.scalars}.items():
+                datasets[f"{key}/{step}"] = values
+                if units is not None:
+                    attrs[key] = {"units": units}
+            if peaks_k is not None:
+                frame_peaks[step] = peaks_k
+            bodies = frame.bodies
+            if self.bodies is not None and frame.z is not None:
+                bodies = self.bodies.displacement(frame.z)
+            if bodies is not None:
+                datasets[f"bodies/displacement/{step}"] = bodies
+                attrs["bodies/displacement"] = {"units": "m"}
+            if frame.sites is not None:
+                (datasets[f"contact_sites/displacement/{step}"],
+                 datasets[f"contact_sites/{CONTACT_PRESSURE}/{step}"]) = frame.sites
+                attrs["contact_sites/displacement"] = {"units": "m"}
+                attrs[f"contact_sites/{CONTACT_PRESSURE}"] = {"units": "Pa"}
+        if frame_peaks:
+            attrs["/"] = {FRAME_PEAKS: json.dumps(frame_peaks)}
+        write_h5_atomic(self.dir / name, datasets, attrs)
+        kill_point("fields_data")                   # the batch file exists, the XML does not name it yet
+        data_file = f"{self.dir.name}/{name}"
+        for k, (frame, values_of) in enumerate(zip(frames, fields), start=first):
+            step, t = f"step_{k:06d}", repr(float(frame.t))
+            extra = extra_fields({**{key: v for key, (v, _) in values_of.items()
+                                     if key not in ("displacement", "potential")},
+                                  **{key: v for key, (v, _) in frame.scalars.items()}})
+            self.steps.append(self._template("fe", tuple(extra)).fill(t, data_file, step))
+            if self.bodies is not None:
+                self.body_steps.append(self._template("bodies").fill(t, data_file, step))
+            if self.sites is not None:
+                self.site_steps.append(self._template("sites").fill(t, data_file, step))
+        self._replace_documents()
+        return peaks if self.expands else None
 
     def _template(self, grid: str, extra: tuple = ()) -> _StepTemplate:
         """A frame's XML element of ``grid`` ("fe" with the vertex fields ``extra``, "bodies", "sites") as bytes
@@ -503,21 +602,23 @@ class FieldSeriesExport:
         frame (the elements of a series differ only there)."""
         key = (grid, extra)
         if key not in self._templates:
-            t, at = _StepTemplate.TIME, _StepTemplate.DATA
+            t, data_file, name = _StepTemplate.TIME, _StepTemplate.FILE, _StepTemplate.STEP
             if grid == "fe":
-                step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", at, list(extra))
+                step = mesh_grid(FE_GRID, self.vertex, f"{self.dir.name}/mesh.h5", f"{data_file}:", list(extra),
+                                 frame=f"/{name}")
                 step.insert(0, ET.Element("Time", Value=t))
             elif grid == "bodies":
-                step = body_grid(self.bodies, t, self.dir.name, at)
+                step = body_grid(self.bodies, t, self.dir.name, data_file, name)
             else:
-                step = self._site_grid(t, at)
+                step = self._site_grid(t, data_file, name)
             self._templates[key] = _StepTemplate(step_bytes(step))
         return self._templates[key]
 
-    def _site_grid(self, t: float | str, data_at: str) -> ET.Element:
+    def _site_grid(self, t: float | str, data_file: str, step: str) -> ET.Element:
         """One output of the contact sites: the points at their reference position, one vertex cell each, the
-        displacement and pressure at ``data_at`` (``<folder>/<file>:/<group>``), the static area and contact
-        index."""
+        displacement and pressure of frame ``step`` in ``data_file`` (``<folder>/<file>``: its datasets
+        ``contact_sites/displacement/<step>``, ``contact_sites/contact_pressure_Pa/<step>``), the static area and
+        contact index."""
         n, where = len(self.sites.points), f"{self.dir.name}/contact_sites.h5"
         grid = ET.Element("Grid", Name=SITE_GRID, GridType="Uniform")
         ET.SubElement(grid, "Time", Value=_time_text(t))
@@ -526,8 +627,8 @@ class FieldSeriesExport:
         geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
         data_item(geo, f"{where}:/points", (n, 3))
         for attr_name, kind, source, shape, number in (
-                ("displacement", "Vector", f"{data_at}/contact_sites/displacement", (n, 3), "Float"),
-                (CONTACT_PRESSURE, "Scalar", f"{data_at}/contact_sites/{CONTACT_PRESSURE}", (n,), "Float"),
+                ("displacement", "Vector", f"{data_file}:/contact_sites/displacement/{step}", (n, 3), "Float"),
+                (CONTACT_PRESSURE, "Scalar", f"{data_file}:/contact_sites/{CONTACT_PRESSURE}/{step}", (n,), "Float"),
                 ("site_area_m2", "Scalar", f"{where}:/site_area_m2", (n,), "Float"),
                 ("contact", "Scalar", f"{where}:/contact", (n,), "Int")):
             attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center="Node")
@@ -547,8 +648,15 @@ class FieldSeriesExport:
         return fields or {}, peaks
 
     def close(self) -> None:
-        """Write the buffered frames (collective); nothing stays open between outputs."""
-        self.flush()
+        """Write the buffered frames and wait for the writer thread (collective); nothing stays open between
+        outputs."""
+        try:
+            self.flush()
+        finally:
+            self._collect()
+            if self._writer is not None:
+                self._writer.shutdown()
+                self._writer = None
 
 
 def write_bodies_h5(path: Path, bodies) -> None:
@@ -560,9 +668,9 @@ def write_bodies_h5(path: Path, bodies) -> None:
                      "sector": {"meaning": "alternating stripes round a body of revolution (its spin)"}})
 
 
-def body_grid(bodies, t: float | str, folder: str, data_at: str) -> ET.Element:
-    """One output of the bodies: their triangles at the start (``<folder>/bodies.h5``) and the displacement at
-    ``data_at`` (``<folder>/<file>:/<group>``, its dataset ``bodies/displacement``)."""
+def body_grid(bodies, t: float | str, folder: str, data_file: str, step: str) -> ET.Element:
+    """One output of the bodies: their triangles at the start (``<folder>/bodies.h5``) and the displacement of
+    frame ``step`` in ``data_file`` (``<folder>/<file>``, its dataset ``bodies/displacement/<step>``)."""
     b, where = bodies, f"{folder}/bodies.h5"
     grid = ET.Element("Grid", Name=BODY_GRID, GridType="Uniform")
     ET.SubElement(grid, "Time", Value=_time_text(t))
@@ -572,7 +680,7 @@ def body_grid(bodies, t: float | str, folder: str, data_at: str) -> ET.Element:
     geo = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
     data_item(geo, f"{where}:/points", b.points.shape)
     for attr_name, kind, center, source, shape, number in (
-            ("displacement", "Vector", "Node", f"{data_at}/bodies/displacement", b.points.shape, "Float"),
+            ("displacement", "Vector", "Node", f"{data_file}:/bodies/displacement/{step}", b.points.shape, "Float"),
             ("body", "Scalar", "Cell", f"{where}:/body", b.body.shape, "Int"),
             ("sector", "Scalar", "Cell", f"{where}:/sector", b.sector.shape, "Int")):
         attr = ET.SubElement(grid, "Attribute", Name=attr_name, AttributeType=kind, Center=center)
@@ -584,9 +692,10 @@ class BodySeriesExport:
     """The rigid bodies with their shapes alone, for a tier without an FE mesh (the lumped tier): the file
     ``path`` (``transient_bodies.xdmf``, the same grid as :class:`FieldSeriesExport`'s companion) with its data in
     ``<path stem>/``: ``bodies.h5`` once and one ``frames_<k>.h5`` per batch of frames (frame k's
-    ``step_<k>/bodies/displacement`` [m]). A frame at t = 0 and at the first output at or after each multiple of
-    ``interval_s``; ``write(t, z)``, ``flush()`` and ``close()`` as FieldSeriesExport's (``z``: the packed body
-    coordinates ``bodies`` displaces by). ``bodies``: a function returning the
+    ``bodies/displacement/step_<k>`` [m], the batch's ``time_s`` and ``step``). A frame at t = 0 and at the first
+    output at or after each multiple of ``interval_s``; ``write(t, z)``, ``flush()`` and ``close()`` as
+    FieldSeriesExport's (``z``: the packed body coordinates ``bodies`` displaces by). ``bodies``: a function
+    returning the
     :class:`app.transient.body_shapes.BodyMeshes` (called on rank 0). Kill-safe and resumable as
     FieldSeriesExport."""
 
@@ -638,20 +747,31 @@ class BodySeriesExport:
         first = self.written - len(frames)
         name = f"frames_{first:06d}.h5"
         if self.comm.rank == 0:
-            groups = [f"step_{k:06d}" for k in range(first, first + len(frames))]
-            write_h5_atomic(self.dir / name,
-                            {f"{g}/bodies/displacement": u for g, (_, u) in zip(groups, frames)},
-                            {f"{g}/bodies/displacement": {"units": "m", "time_s": t}
-                             for g, (t, _) in zip(groups, frames)})
+            steps = [f"step_{k:06d}" for k in range(first, first + len(frames))]
+            datasets, attrs = batch_index(first, [t for t, _ in frames])
+            datasets.update({f"bodies/displacement/{step}": u for step, (_, u) in zip(steps, frames)})
+            attrs["bodies/displacement"] = {"units": "m"}
+            write_h5_atomic(self.dir / name, datasets, attrs)
             kill_point("fields_data")
-            self.steps += [step_bytes(body_grid(self.bodies, t, self.dir.name, f"{self.dir.name}/{name}:/{g}"))
-                           for g, (t, _) in zip(groups, frames)]
+            self.steps += [step_bytes(body_grid(self.bodies, t, self.dir.name, f"{self.dir.name}/{name}", step))
+                           for step, (t, _) in zip(steps, frames)]
             replace_file(self.path, xdmf_document(self.steps, self.path.stem))
         self.data_files.append(name)
 
     def close(self) -> None:
         """Write the buffered frames; nothing stays open between outputs."""
         self.flush()
+
+
+def batch_index(first: int, times) -> tuple[dict, dict]:
+    """The datasets and attributes that index a batch file (frames ``first``, ``first + 1``, ...at ``times`` [s]):
+    ``time_s`` and ``step`` (frame k's values are the datasets ``<field>/step_<k>``), as write_h5_atomic takes
+    them."""
+    n = len(times)
+    return ({"time_s": np.asarray(times, dtype=float), "step": np.arange(first, first + n, dtype=np.int64)},
+            {"time_s": {"units": "s"},
+             "step": {"meaning": "frame index k of each time: the frame's values are <field>/step_<k> (k in 6 "
+                                 "digits)"}})
 
 
 def _data_files(steps: list[ET.Element], folder: str) -> list[str]:
@@ -674,17 +794,25 @@ def _kept_peaks(out_dir: Path, steps: list[ET.Element]) -> dict:
     from app.fe.derived import merge_peaks
 
     peaks: dict = {}
+    batches: dict[str, dict] = {}         # a batch file's peaks by frame (its root attribute), read once
     for step in steps:
         source = attribute_source(step, "displacement")
         if source is None:
             continue
+        frame = None
         try:
-            with h5py.File(out_dir / source[0], "r") as f:
-                frame = f[source[1]].attrs.get(FRAME_PEAKS)
+            if source[0] not in batches:
+                with h5py.File(out_dir / source[0], "r") as f:
+                    batches[source[0]] = json.loads(f.attrs.get(FRAME_PEAKS, "{}"))
+            frame = batches[source[0]].get(source[1].rsplit("/", 1)[-1])
+            if frame is None:             # an older layout: the frame's group step_<k>, peaks on its displacement
+                with h5py.File(out_dir / source[0], "r") as f:
+                    older = f[source[1]].attrs.get(FRAME_PEAKS)
+                frame = json.loads(older) if older is not None else None
         except (OSError, KeyError):
             frame = None
         if frame is not None:
-            merge_peaks(peaks, json.loads(frame))
+            merge_peaks(peaks, frame)
     return peaks
 
 
