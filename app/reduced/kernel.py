@@ -266,7 +266,7 @@ def sparse_rows(rows, columns):
     return SparseRows(index, value, count)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _row_dot(rows, r, x):
     value = 0.0
     for j in range(rows.count[r]):
@@ -287,7 +287,7 @@ def dense_compliance(H: np.ndarray) -> Compliance:
     return compliance_of(H, H.T, np.eye(H.shape[0]))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _respond(compliance, active, n_active, gdim, x, out):
     """out = G x (nf) for site forces ``x`` (n_sites, 3) on the active sites (the rest carry none); H x = R_F out."""
     GT = compliance.GT
@@ -304,7 +304,7 @@ def _respond(compliance, active, n_active, gdim, x, out):
                     out[j] += row[j] * xk
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _ramp(t, ramp_s):
     if ramp_s <= 0.0 or t >= ramp_s:
         return 1.0
@@ -313,7 +313,7 @@ def _ramp(t, ramp_s):
     return 0.5 * (1.0 - math.cos(math.pi * t / ramp_s))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def input_values(t, inputs, out):
     """Values of the prescribed coordinates at time t."""
     for p in range(inputs.kind.size):
@@ -364,6 +364,12 @@ class StepWork(NamedTuple):
     z1: np.ndarray
     zd1: np.ndarray
     zdd1: np.ndarray
+    fxa: np.ndarray           # (3,) work: f x a of a rotation
+    link_work: np.ndarray     # (5, 3) link_force's work
+    link_D: np.ndarray        # (m,) a link's d delta / d coordinates
+    link_v: np.ndarray        # (3, 3) its dF/dN, slip, relative velocity
+    link_M: np.ndarray        # (3, 3, 3) its dF/ds, the tangential projector, their product
+    link_dF: np.ndarray       # (3, m) its dF / d coordinates
 
 
 @njit(cache=True)
@@ -374,10 +380,11 @@ def step_work(ns, gdim, m, kmax, n_links):
                     np.zeros(ns * gdim), np.zeros(ns * gdim), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
                     np.zeros(m), np.zeros((m, m)), np.zeros(3), np.zeros(3), site_work(kmax), np.zeros(3),
                     np.zeros((3, max(m, 1))), np.zeros(max(n_links, 1)), np.zeros(max(ns, 1), np.int64), np.zeros(m),
-                    np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m))
+                    np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(3), np.zeros((5, 3)), np.zeros(m),
+                    np.zeros((3, 3)), np.zeros((3, 3, 3)), np.zeros((3, max(m, 1))))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _body_kinematics(xi, state, dt, model, wk):
     """End-of-step and mid-point body coordinates (into ``wk``) for corrections ``xi`` of the free coordinates to
     their predictors (held coordinates move at their rate)."""
@@ -400,7 +407,7 @@ def _body_kinematics(xi, state, dt, model, wk):
         zd_mid[j] = (1.0 - af) * zd1[j] + af * zd0[j]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _evaluate(dd, xi, wk, cp, state, dt, model, want):
     """Site forces at the iterate (site increments ``dd``, body corrections ``xi``), the site residuals
     R = dd - dw - H f (``cp``: the step's :class:`Compliance`; cp.u gets G f), the body residuals rz, and
@@ -473,7 +480,7 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
             for q in range(n_rot):
                 j = s0 + gdim + q
                 _cross(bodies.axis[j], sw.lever, axl)
-                fxa = np.zeros(3)
+                fxa = wk.fxa
                 _cross(sw.f, bodies.axis[j], fxa)
                 for kk in range(nb):
                     value = axl[0] * sw.Fz[0, kk] + axl[1] * sw.Fz[1, kk] + axl[2] * sw.Fz[2, kk]
@@ -486,7 +493,7 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
         slo, nlo = _body_rotations(bodies, lo)
         sup, nup = _body_rotations(bodies, up)
         f, delta, rate, kf, cf, T, dT_ds, dT_dfn, reg, speed = link_force(l, z_mid, zd_mid, bodies, links, wk.lf,
-                                                                          wk.lP, want)
+                                                                          wk.lP, want, wk.link_work)
         wk.link_fn[l] = f
         if f <= 0.0:
             continue
@@ -505,15 +512,23 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
                     wk.Q[j] += value
         if want:
             # dF/dq = (n + dF/dN) (k + c c_vel) w_f D + c_vel w_f dF/ds P, D = d delta / d coordinates
-            D = np.zeros(m)
+            D = wk.link_D
+            for j in range(m):
+                D[j] = 0.0
             for k in range(gdim):
                 D[slo + k] += n[k]
                 D[sup + k] -= n[k]
-            dFdN = np.zeros(3)
-            dFds = np.zeros((3, 3))
+            dFdN = wk.link_v[0]
+            dFds = wk.link_M[0]
+            for r in range(3):
+                dFdN[r] = 0.0
+                for k in range(3):
+                    dFds[r, k] = 0.0
             if links.mu[l] > 0.0:
-                s = np.zeros(3)
-                vrel = np.zeros(3)
+                s = wk.link_v[1]
+                vrel = wk.link_v[2]
+                for k in range(3):
+                    vrel[k] = 0.0
                 for k in range(3):
                     for j in range(m):
                         vrel[k] += wk.lP[k, j] * zd_mid[j]
@@ -522,12 +537,19 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
                     s[k] = vrel[k] - vn * n[k]
                 friction_tangent(T, dT_dfn, dT_ds, s, reg, speed, dFds, dFdN)
                 # the slip is the tangential part: d s / d v = I - n n
-                tang = np.zeros((3, 3))
+                tang = wk.link_M[1]
                 for r in range(3):
                     for k in range(3):
                         tang[r, k] = (1.0 if r == k else 0.0) - n[r] * n[k]
-                dFds = dFds @ tang
-            dF = np.zeros((3, m))
+                product = wk.link_M[2]
+                for r in range(3):
+                    for k in range(3):
+                        value = 0.0
+                        for j in range(3):
+                            value += dFds[r, j] * tang[j, k]
+                        product[r, k] = value
+                dFds = product
+            dF = wk.link_dF
             for r in range(3):
                 for j in range(m):
                     dF[r, j] = (n[r] + dFdN[r]) * (kf + cf * c_vel) * w_f * D[j]
@@ -915,7 +937,7 @@ def _snap(level, dt):
     return level / 2.0 ** k
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _status(y, v, z, zd, wk, model, closed_sites, closed):
     """Contact status at an end-of-step state (site displacements ``y`` (ns, 3), velocities ``v``): closed per
     contact and link (into ``closed``) and per site, and the earliest predicted closure [s] (inf if none)."""
@@ -934,7 +956,8 @@ def _status(y, v, z, zd, wk, model, closed_sites, closed):
         elif rate < 0.0:
             closure = min(closure, gap / -rate)
     for l in range(links.lower.size):
-        _, delta, rate, _, _, _, _, _, _, _ = link_force(l, z, zd, bodies, links, wk.lf, wk.lP, False)
+        _, delta, rate, _, _, _, _, _, _, _ = link_force(l, z, zd, bodies, links, wk.lf, wk.lP, False,
+                                                        wk.link_work)
         closed[n_c + l] = delta > 0.0
         if delta <= 0.0 and rate > 0.0:
             closure = min(closure, -delta / rate)
