@@ -478,7 +478,7 @@ class SiteAccumulators(NamedTuple):
     phase: np.ndarray
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def accumulate_site(i, site, clock, acc):
     """Adds one step of site i (``site``: :class:`SiteSample`; ``clock``: :class:`DriveClock`) to the per-site
     diagnostics ``acc`` (:class:`SiteAccumulators`, app/contact/tables.py), the one rule of every tier.

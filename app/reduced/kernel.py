@@ -34,7 +34,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.np.linalg import _LAPACK
 
 from app.contact.law import (
     CONE,
@@ -94,6 +95,10 @@ SITE_RTOL = 1e-9
 WOODBURY_FACTOR = 1.5
 FORCE_RTOL = 1e-10
 EPS = 2.220446049250313e-16
+#: LAPACK's dgesv as numba's np.linalg.solve calls it (numba's binding of SciPy's LAPACK; a symbol, so the compiled
+#: functions that call it stay cacheable)
+_xgesv = _LAPACK().numba_xgesv(types.float64)
+_XGESV_KIND = ord("d")
 
 
 class Structure(NamedTuple):
@@ -582,25 +587,33 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
     return n_active
 
 
-@njit(cache=True)
-def _scales(dd, xi, wk, bodies, dt, scheme):
-    """Per-unknown scales of the monotonicity test."""
+@njit(cache=True, _nrt=False)
+def _scales(bodies, dt, scheme, out):
+    """Per-unknown scales of the monotonicity test of the body coordinates (into ``out``, m)."""
     c_vel = scheme[1] / (scheme[0] * dt)
-    out = np.empty(xi.size)
     gdim = bodies.gdim
-    for j in range(xi.size):
+    for j in range(out.size):
         translation = True
         for b in range(bodies.start.size):
             if j >= bodies.start[b] + gdim and (b + 1 == bodies.start.size or j < bodies.start[b + 1]):
                 translation = False
         out[j] = LENGTH_SCALE_M if translation else RATE_SCALE_RAD_PER_S / c_vel
-    return out
 
 
 @njit(cache=True)
 def _newton_matrix(n_active, wk, cp, model, free_body, dt, site_block=True):
     """J and -R of the Newton system on the active sites' increments and the free body corrections. Without
     ``site_block``, J holds the body rows only (nfb x N: what :func:`_woodbury` needs besides the compliance)."""
+    N = n_active * model.bodies.gdim + free_body.size
+    J = np.empty((N - (0 if site_block else n_active * model.bodies.gdim), N))
+    rhs = np.empty(N)
+    _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, site_block, J, rhs, np.empty(wk.xi.size, np.int64))
+    return J, rhs
+
+
+@njit(cache=True, _nrt=False)
+def _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, site_block, J, rhs, body_pos):
+    """:func:`_newton_matrix` into ``J`` ((N or nfb) x N), ``rhs`` (N) and the work ``body_pos`` (m, int64)."""
     bodies, contacts, sites = model.bodies, model.contacts, model.sites
     gdim = bodies.gdim
     beta, gamma, am, af = model.scheme
@@ -611,13 +624,17 @@ def _newton_matrix(n_active, wk, cp, model, free_body, dt, site_block=True):
     nfb = free_body.size
     N = n_active * gdim + nfb
     row0 = 0 if site_block else n_active * gdim
-    J = np.zeros((N - row0, N))
-    rhs = np.zeros(N)
-    body_pos = np.full(wk.xi.size, -1, np.int64)
+    for r in range(N - row0):
+        for c in range(N):
+            J[r, c] = 0.0
+    for r in range(N):
+        rhs[r] = 0.0
+    for j in range(body_pos.size):
+        body_pos[j] = -1
     for q in range(nfb):
         body_pos[free_body[q]] = n_active * gdim + q
-    axl = np.zeros(3)
-    fxa = np.zeros(3)
+    axl = wk.work.axl
+    fxa = wk.fxa
     for a in range(n_active):
         i = wk.active[a]
         for r in range(gdim):
@@ -676,7 +693,6 @@ def _newton_matrix(n_active, wk, cp, model, free_body, dt, site_block=True):
         J[row - row0, row] += bodies.mass[j] * (1.0 - am) * c_acc + bodies.brake[j] * w_f * c_vel
         for q2 in range(nfb):
             J[row - row0, n_active * gdim + q2] -= wk.dQ[j, free_body[q2]]
-    return J, rhs
 
 
 @njit(cache=True)
@@ -771,27 +787,125 @@ def _woodbury_solve(S_inv, D, active, n_active, gdim, cp, body_rows, rhs):
     return x
 
 
+class NewtonWork(NamedTuple):
+    """The Newton iteration's arrays (allocated once per call): its system in the contact space (at most ``size``
+    unknowns: the active sites' increments and the free body corrections; C order in the first N^2 entries of
+    ``J``), its copy in Fortran order for LAPACK's gesv, the corrections, and the Woodbury system of many active
+    sites (:func:`_woodbury`; empty where it cannot be taken)."""
+
+    J: np.ndarray             # (size * size,)
+    LU: np.ndarray            # (size * size,)
+    ipiv: np.ndarray          # (size,) int32 (LAPACK's integer)
+    rhs: np.ndarray           # (nr + m,) -R of the active sites and the free body coordinates
+    dy: np.ndarray            # (nr + m,) the Newton correction
+    trial: np.ndarray         # (nr + m,) -R at the trial point, then the simplified correction
+    scale: np.ndarray         # (nr + m,) the unknowns' scales
+    scale_b: np.ndarray       # (m,) the body coordinates' scales
+    body_pos: np.ndarray      # (m,) int64
+    active: np.ndarray        # (ns,) int64 the active sites of the iteration's matrix
+    du: np.ndarray            # (nr,) every site's correction
+    df: np.ndarray            # (ns, 3) the active sites' force corrections
+    dxi: np.ndarray           # (m,) the body corrections
+    S_inv: np.ndarray         # (k * k,) the Woodbury matrix's inverse, k = nf + m (0: no Woodbury)
+    D: np.ndarray             # (ns, 3, 3) the active sites' derivatives for it
+    body_rows: np.ndarray     # (m * (nr + m),) the body rows of J for it
+
+
 @njit(cache=True)
-def _newton(wk, cp, state, dt, model, free_body):
+def newton_work(ns, gdim, m, nf):
+    """:class:`NewtonWork` of ``ns`` sites, ``m`` body coordinates and ``nf`` free structure coordinates."""
+    nr = ns * gdim
+    size = min(nr, int(WOODBURY_FACTOR * nf)) + m
+    woodbury = nr > WOODBURY_FACTOR * nf
+    k = nf + m if woodbury else 0
+    return NewtonWork(np.zeros(size * size), np.zeros(size * size), np.zeros(size, np.int32), np.zeros(nr + m),
+                      np.zeros(nr + m), np.zeros(nr + m), np.zeros(nr + m), np.zeros(m), np.zeros(m, np.int64),
+                      np.zeros(max(ns, 1), np.int64), np.zeros(nr), np.zeros((ns, 3)), np.zeros(m),
+                      np.zeros(k * k), np.zeros((ns if woodbury else 0, 3, 3)),
+                      np.zeros(m * (nr + m) if woodbury else 0))
+
+
+@njit(cache=True, _nrt=False)
+def _lu_solve(N, J, LU, ipiv, x):
+    """x (N, holding the right side) <- J^-1 x by LAPACK's gesv: the routine np.linalg.solve calls, on the same
+    Fortran-order copy of J (kept), so the same result to the bit, without its three allocations per call."""
+    for r in range(N):
+        for c in range(N):
+            value = J[r, c]
+            if not math.isfinite(value):
+                raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
+            LU[c * N + r] = value
+    for r in range(N):
+        if not math.isfinite(x[r]):
+            raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
+    if N == 0:
+        return
+    info = _xgesv(_XGESV_KIND, N, 1, LU.ctypes, N, ipiv.ctypes, x.ctypes, N)
+    if info != 0:
+        raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
+
+
+@njit(cache=True)
+def _woodbury_factor(n_active, wk, nw, cp, model, free_body, dt):
+    """The Woodbury system of this iteration (:func:`_woodbury`) into ``nw``: its body rows, S^-1 and D, and -R
+    into nw.rhs (allocates: taken only when many sites are active)."""
+    body_rows, rhs = _newton_matrix(n_active, wk, cp, model, free_body, dt, False)
+    S_inv, D = _woodbury(n_active, wk, cp, model, free_body, body_rows)
+    k = S_inv.shape[0]
+    for r in range(k):
+        for c in range(k):
+            nw.S_inv[r * k + c] = S_inv[r, c]
+    for a in range(n_active):
+        for r in range(3):
+            for c in range(3):
+                nw.D[a, r, c] = D[a, r, c]
+    N = rhs.size
+    for q in range(body_rows.shape[0]):
+        for c in range(N):
+            nw.body_rows[q * N + c] = body_rows[q, c]
+    for r in range(N):
+        nw.rhs[r] = rhs[r]
+
+
+@njit(cache=True)
+def _woodbury_apply(n_active, gdim, nw, cp, rhs, out):
+    """out = J^-1 rhs through the Woodbury system :func:`_woodbury_factor` left in ``nw``."""
+    N = rhs.size
+    nfb = N - n_active * gdim
+    k = cp.GT.shape[1] + nfb
+    S_inv = nw.S_inv[:k * k].reshape((k, k))
+    body_rows = nw.body_rows[:nfb * N].reshape((nfb, N))
+    x = _woodbury_solve(S_inv, nw.D[:n_active], nw.active, n_active, gdim, cp, body_rows, rhs)
+    for r in range(N):
+        out[r] = x[r]
+
+
+@njit(cache=True)
+def _newton(wk, nw, cp, state, dt, model, free_body):
     """Newton on the condensed step; True when converged (wk.dd, wk.xi hold the solution). Returns
-    (converged, iterations)."""
+    (converged, iterations). Compiled without reference counts (as the evaluation): its arrays are the work
+    records' (``nw``: :class:`NewtonWork`)."""
     bodies, sites, contacts = model.bodies, model.sites, model.contacts
     scheme = model.scheme
     zdd0, zd_mid = state.zdd, wk.zd_mid
     gdim = bodies.gdim
     nr = wk.dd.size
     m = wk.xi.size
+    nfb = free_body.size
     tol_site = SITE_TOL_M
     for r in range(nr):
         tol_site = max(tol_site, SITE_RTOL * abs(wk.dw[r]))
     n_active = _evaluate(wk.dd, wk.xi, wk, cp, state, dt, model, True)
-    scale_b = _scales(wk.dd, wk.xi, wk, bodies, dt, scheme)
+    scale_b = nw.scale_b
+    _scales(bodies, dt, scheme, scale_b)
+    active_rows = nw.active
+    du, df, dxi = nw.du, nw.df, nw.dxi
     its = 0
     for its in range(1, MAX_NEWTON + 1):
         res = 0.0
         for r in range(nr):
             res = max(res, abs(wk.R[r]) / tol_site)
-        for q in range(free_body.size):
+        for q in range(nfb):
             j = free_body[q]
             scale = abs(bodies.load[j]) + abs(bodies.mass[j] * zdd0[j]) + abs(wk.Q[j]) \
                 + abs(bodies.brake[j] * zd_mid[j])
@@ -801,19 +915,27 @@ def _newton(wk, cp, state, dt, model, free_body):
             return True, its
         # many active sites (a rotor lying on the ring): the system in the structure's coordinates is smaller
         woodbury = n_active * gdim > WOODBURY_FACTOR * cp.GT.shape[1]
-        active_rows = wk.active[:n_active].copy()
-        J, rhs = _newton_matrix(n_active, wk, cp, model, free_body, dt, not woodbury)
-        N = rhs.size
+        for a in range(n_active):
+            active_rows[a] = wk.active[a]
+        N = n_active * gdim + nfb
+        dy = nw.dy[:N]
+        J = nw.J[:N * N].reshape((N, N))
         if woodbury:
-            S_inv, D = _woodbury(n_active, wk, cp, model, free_body, J)
-            dy = _woodbury_solve(S_inv, D, active_rows, n_active, gdim, cp, J, rhs)
+            _woodbury_factor(n_active, wk, nw, cp, model, free_body, dt)
+            _woodbury_apply(n_active, gdim, nw, cp, nw.rhs[:N], dy)
         else:
-            S_inv, D = np.zeros((0, 0)), np.zeros((0, 3, 3))
-            dy = np.linalg.solve(J, rhs)
+            rhs = nw.rhs[:N]
+            _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, True, J, rhs, nw.body_pos)
+            for r in range(N):
+                dy[r] = rhs[r]
+            _lu_solve(N, J, nw.LU, nw.ipiv, dy)
         # the correction of every site: active ones from dy; a separated one follows from the others
         # (its force is zero): du_I = -R_I + H_IA (Fd_A du_A + Fz_A dxi)
-        du = -wk.R.copy()
-        df = np.zeros((nr // gdim, 3))
+        for r in range(nr):
+            du[r] = -wk.R[r]
+        for i in range(df.shape[0]):
+            for r in range(3):
+                df[i, r] = 0.0
         for a in range(n_active):
             k = wk.active[a]
             c = sites.contact[k]
@@ -824,7 +946,7 @@ def _newton(wk, cp, state, dt, model, free_body):
                 for cc in range(gdim):
                     value += wk.Fd[k, r, cc] * dy[a * gdim + cc]
                 for kk in range(gdim + n_rot):
-                    for q in range(free_body.size):
+                    for q in range(nfb):
                         if free_body[q] == s0 + kk:
                             value += wk.Fz[k, r, kk] * dy[n_active * gdim + q]
                 df[k, r] = value
@@ -835,37 +957,38 @@ def _newton(wk, cp, state, dt, model, free_body):
             k = wk.active[a]
             for r in range(gdim):
                 du[k * gdim + r] = dy[a * gdim + r]
-        dxi = np.zeros(m)
-        for q in range(free_body.size):
+        for j in range(m):
+            dxi[j] = 0.0
+        for q in range(nfb):
             dxi[free_body[q]] = dy[n_active * gdim + q]
         # damped Newton, natural monotonicity test (Deuflhard): the simplified correction at the trial point,
         # J^-1 R(trial) with this iteration's J, must be shorter than the Newton correction (scaled unknowns)
-        scale = np.empty(N)
+        scale = nw.scale
         for r in range(n_active * gdim):
             scale[r] = LENGTH_SCALE_M
-        for q in range(free_body.size):
+        for q in range(nfb):
             scale[n_active * gdim + q] = scale_b[free_body[q]]
-        size0 = np.sqrt(np.sum((dy / scale) ** 2))
+        size0 = _scaled_norm(dy, scale, N)
         lam = 1.0
         n_trial = n_active
+        trial = nw.trial[:N]
         for _ in range(14):
             for r in range(nr):
                 wk.dd_try[r] = wk.dd[r] + lam * du[r]
             for j in range(m):
                 wk.xi_try[j] = wk.xi[j] + lam * dxi[j]
             n_trial = _evaluate(wk.dd_try, wk.xi_try, wk, cp, state, dt, model, True)
-            r_trial = np.zeros(N)
             for a in range(n_active):
                 i = active_rows[a]
                 for r in range(gdim):
-                    r_trial[a * gdim + r] = -wk.R[i * gdim + r]
-            for q in range(free_body.size):
-                r_trial[n_active * gdim + q] = -wk.rz[free_body[q]]
+                    trial[a * gdim + r] = -wk.R[i * gdim + r]
+            for q in range(nfb):
+                trial[n_active * gdim + q] = -wk.rz[free_body[q]]
             if woodbury:
-                simplified = _woodbury_solve(S_inv, D, active_rows, n_active, gdim, cp, J, r_trial)
+                _woodbury_apply(n_active, gdim, nw, cp, trial, trial)
             else:
-                simplified = np.linalg.solve(J, r_trial)
-            if np.sqrt(np.sum((simplified / scale) ** 2)) <= (1.0 - 0.5 * lam) * size0 + 1e-300:
+                _lu_solve(N, J, nw.LU, nw.ipiv, trial)
+            if _scaled_norm(trial, scale, N) <= (1.0 - 0.5 * lam) * size0 + 1e-300:
                 break
             lam *= 0.5
         for r in range(nr):
@@ -876,6 +999,16 @@ def _newton(wk, cp, state, dt, model, free_body):
         if lam < 1e-3 and res < ROUND_OFF_FACTOR:
             return True, its          # no descent left within a few of the tolerances: round-off floor
     return False, its
+
+
+@njit(cache=True, _nrt=False)
+def _scaled_norm(x, scale, N):
+    """sqrt(sum((x / scale)^2)) over the first N entries, summed in order (as np.sum)."""
+    total = 0.0
+    for r in range(N):
+        value = x[r] / scale[r]
+        total += value * value
+    return math.sqrt(total)
 
 
 # ------------------------------------------------------------------ the loop
@@ -987,6 +1120,7 @@ def run(t_end, state, model, cache, out, track_energy, frames):
         s0, n_rot = _body_rotations(bodies, b)
         kmax = max(kmax, gdim + n_rot)
     wk = step_work(ns, gdim, m, kmax, n_l)
+    nw = newton_work(ns, gdim, m, nf)
     free_count = 0
     for j in range(m):
         if bodies.free[j]:
@@ -1003,12 +1137,28 @@ def run(t_end, state, model, cache, out, track_energy, frames):
     free_rows = sparse_rows(rows_R, free)
     u = np.zeros(nf)
     u_work = np.zeros(nf)
+    # the structure's step: increments, end-of-step rates and coordinates, the generalized mid-point arguments of
+    # M, C and K and their products, the free residual and its contact-free correction (filled index by index, in
+    # the order of the array expressions they replace, so the same numbers; no array allocated per step)
+    n = q.size
+    dq = np.zeros(n)
+    a1 = np.zeros(n)
+    v1 = np.zeros(n)
+    q1 = np.zeros(n)
+    x_mid = np.zeros(n)
+    r_M = np.zeros(n)
+    r_C = np.zeros(n)
+    r_K = np.zeros(n)
+    r0F = np.zeros(nf)
+    w = np.zeros(nf)
     y_end = np.zeros((ns, 3))
     v_end = np.zeros((ns, 3))
     closed_sites = np.zeros(ns, np.bool_)
     closed_new_sites = np.zeros(ns, np.bool_)
     closed = np.zeros(n_c + n_l, np.bool_)
     closed_new = np.zeros(n_c + n_l, np.bool_)
+    record_power = np.zeros(n_c + n_l)
+    record_seen = np.zeros(n_c, np.bool_)
     # the status of the current state
     for i in range(ns):
         for k in range(gdim):
@@ -1042,25 +1192,40 @@ def run(t_end, state, model, cache, out, track_energy, frames):
             dt_try = dt if remainder >= dt * (1.0 - 1e-9) else remainder
             istate[I_ATTEMPTS] += 1
             t1 = t + dt_try
-            slot = _effective(structure, rows_R, dt_try, scheme, cache)
+            slot = -1
+            for c in range(cache.dt.size):
+                if cache.dt[c] > 0 and abs(cache.dt[c] - dt_try) <= 1e-12 * dt_try:
+                    slot = c
+                    break
+            if slot < 0:
+                slot = _effective(structure, rows_R, dt_try, scheme, cache)
             A_inv = cache.inv[slot]
             cp = Compliance(cache.H[slot], cache.GT[slot], free_rows, u, u_work)
             c_acc = 1.0 / (beta * dt_try * dt_try)
             input_values(t1, inputs, pq)
-            # contact-free increments: predictor, the prescribed inputs at t1, w = -K_eff^-1 r0
-            dq = dt_try * v + 0.5 * dt_try * dt_try * a
+            # contact-free increments: predictor, the prescribed inputs at t1, w = -K_eff^-1 r0,
+            # r0 = M ((1 - am) a1 + am a) + C ((1 - af) v1 + af v) + K (q + (1 - af) dq) - load
+            for i in range(n):
+                dq[i] = dt_try * v[i] + 0.5 * dt_try * dt_try * a[i]
             for p in range(P.size):
                 dq[P[p]] = pq[p] - q[P[p]]
-            a1 = (dq - dt_try * v) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a
-            v1 = v + dt_try * ((1.0 - gamma) * a + gamma * a1)
-            r0 = structure.M @ ((1.0 - am) * a1 + am * a) + structure.C @ ((1.0 - af) * v1 + af * v) \
-                + structure.K @ (q + (1.0 - af) * dq) - structure.load
-            r0F = np.empty(nf)
+            for i in range(n):
+                a1[i] = (dq[i] - dt_try * v[i]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[i]
+                v1[i] = v[i] + dt_try * ((1.0 - gamma) * a[i] + gamma * a1[i])
+                x_mid[i] = (1.0 - am) * a1[i] + am * a[i]
+            np.dot(structure.M, x_mid, r_M)
+            for i in range(n):
+                x_mid[i] = (1.0 - af) * v1[i] + af * v[i]
+            np.dot(structure.C, x_mid, r_C)
+            for i in range(n):
+                x_mid[i] = q[i] + (1.0 - af) * dq[i]
+            np.dot(structure.K, x_mid, r_K)
             for i in range(nf):
-                r0F[i] = r0[free[i]]
-            w = -(A_inv @ r0F)
+                j = free[i]
+                r0F[i] = r_M[j] + r_C[j] + r_K[j] - structure.load[j]
+            np.dot(A_inv, r0F, w)
             for i in range(nf):
-                dq[free[i]] += w[i]
+                dq[free[i]] += -w[i]
             # the sites' start values and contact-free increments
             for i in range(ns):
                 for k in range(gdim):
@@ -1080,7 +1245,7 @@ def run(t_end, state, model, cache, out, track_energy, frames):
                 wk.dd[r] = wk.dw[r] + (_row_dot(free_rows, r, u_work) if n_loaded else 0.0)
             for j in range(m):
                 wk.xi[j] = 0.0
-            converged, its = _newton(wk, cp, state, dt_try, model, free_body)
+            converged, its = _newton(wk, nw, cp, state, dt_try, model, free_body)
             istate[I_NEWTON] += max(its, 1)
             if not converged:
                 istate[I_CUTBACKS] += 1
@@ -1094,9 +1259,10 @@ def run(t_end, state, model, cache, out, track_energy, frames):
             # evaluated the forces last at its solution)
             for i in range(nf):
                 dq[free[i]] += u[i]
-            a1 = (dq - dt_try * v) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a
-            v1 = v + dt_try * ((1.0 - gamma) * a + gamma * a1)
-            q1 = q + dq
+            for i in range(n):
+                a1[i] = (dq[i] - dt_try * v[i]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[i]
+                v1[i] = v[i] + dt_try * ((1.0 - gamma) * a[i] + gamma * a1[i])
+                q1[i] = q[i] + dq[i]
             for i in range(ns):
                 for k in range(gdim):
                     y_end[i, k] = wk.y0[i, k] + wk.dd[i * gdim + k]
@@ -1111,7 +1277,8 @@ def run(t_end, state, model, cache, out, track_energy, frames):
                 continue
             break
         # accepted: the step's forces (at its mid-point) were evaluated last by the Newton iteration
-        _record(rows, t1, dt_try, q1, v1, pq, wk, state, model, out, closed_new, y_end, track_energy)
+        _record(rows, t1, dt_try, q1, v1, pq, wk, state, model, out, closed_new, y_end, track_energy, record_power,
+                record_seen)
         rows += 1
         q[:] = q1
         v[:] = v1
@@ -1155,8 +1322,9 @@ def run(t_end, state, model, cache, out, track_energy, frames):
 
 
 @njit(cache=True)
-def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track_energy):
-    """One output row, the dissipated energies and the per-site diagnostics of an accepted step."""
+def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track_energy, power, seen):
+    """One output row, the dissipated energies and the per-site diagnostics of an accepted step (``power``
+    (n_contacts + n_links,) and ``seen`` (n_contacts,) bool: work)."""
     structure, sites, contacts, bodies, links, sample_rows = (model.structure, model.sites, model.contacts,
                                                               model.bodies, model.links, model.sample_rows)
     sums, v0, z1, zd1 = state.sums, state.v, wk.z1, wk.zd1
@@ -1164,7 +1332,7 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
     n_l = links.lower.size
     out.time[row] = t1
     out.dt[row] = dt
-    out.samples[row, :] = sample_rows @ q1
+    np.dot(sample_rows, q1, out.samples[row])
     out.inputs[row, :] = pq
     out.z[row, :] = z1
     out.zd[row, :] = zd1
@@ -1178,9 +1346,10 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
         out.normal[row, c] = 0.0
         out.area[row, c] = 0.0
         out.peak[row, c] = 0.0
-    power = np.zeros(n_c + n_l)
-    tq = np.zeros(3)
-    fneg = np.zeros(3)
+    for c in range(n_c + n_l):
+        power[c] = 0.0
+    tq = wk.fxa
+    fneg = wk.link_work[0]
     # diagnostics: the forces act at the generalized mid-point t1 - alpha_f dt, the displacements y_end at t1
     diagnose = out.site_sums.shape[0] == sites.contact.size
     acc = SiteAccumulators(out.site_sums, out.site_bins, out.site_group, out.site_phase)
@@ -1264,7 +1433,8 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
     for c in range(n_c):
         for k in range(3):
             out.probe[row, c, k] = 0.0
-    seen = np.zeros(n_c, np.bool_)
+    for c in range(n_c):
+        seen[c] = False
     for i in range(sites.contact.size):
         c = sites.contact[i]
         if seen[c]:
