@@ -98,7 +98,15 @@ EPS = 2.220446049250313e-16
 #: LAPACK's dgesv as numba's np.linalg.solve calls it (numba's binding of SciPy's LAPACK; a symbol, so the compiled
 #: functions that call it stay cacheable)
 _xgesv = _LAPACK().numba_xgesv(types.float64)
+_xgetrf = _LAPACK().numba_xxgetrf(types.float64)
+_xgetri = _LAPACK().numba_ez_xxgetri(types.float64)
+#: BLAS's gemv as numba's np.dot(matrix, vector) calls it (np.dot returns its output: not in a function compiled
+#: without reference counts)
+_xgemv = types.ExternalFunction("numba_xxgemv", types.intc(
+    types.char, types.char, types.intp, types.intp, types.CPointer(types.float64), types.CPointer(types.float64),
+    types.intp, types.CPointer(types.float64), types.CPointer(types.float64), types.CPointer(types.float64)))
 _XGESV_KIND = ord("d")
+_TRANSPOSED, _NOT_TRANSPOSED = ord("t"), ord("n")
 
 
 class Structure(NamedTuple):
@@ -703,19 +711,37 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows):
     [[I - R_A^T D G_A^T, -R_A^T E], [P G_A^T, Q]] [y, x_b] = [R_A^T D rhs_A, rhs_b - P rhs_A]
     (``body_rows`` = [P, Q]), of size nf + nfb instead of gdim n_active + nfb. Returns that matrix's inverse
     and the active sites' D (the next evaluation overwrites wk.Fd)."""
+    nf = cp.GT.shape[1]
+    k = nf + free_body.size
+    S = np.empty((k, k))
+    D = np.empty((n_active, 3, 3))
+    _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, S, D, np.empty(wk.xi.size, np.int64),
+                   np.empty((3, nf)))
+    return np.linalg.inv(S), D
+
+
+@njit(cache=True, _nrt=False)
+def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, S, D, pos, FG):
+    """:func:`_woodbury`'s matrix into ``S`` (k x k) and the sites' derivatives into ``D`` (n_active, 3, 3); ``pos``
+    (m,) int64 and ``FG`` (3, nf) work."""
     bodies, contacts, sites = model.bodies, model.contacts, model.sites
     gdim = bodies.gdim
     GT, RF = cp.GT, cp.RF
     nf = GT.shape[1]
     nfb = free_body.size
-    S = np.zeros((nf + nfb, nf + nfb))
+    for r in range(nf + nfb):
+        for c in range(nf + nfb):
+            S[r, c] = 0.0
     for j in range(nf):
         S[j, j] = 1.0
-    pos = np.full(wk.xi.size, -1, np.int64)
+    for j in range(pos.size):
+        pos[j] = -1
     for q in range(nfb):
         pos[free_body[q]] = q
-    FG = np.zeros((3, nf))
-    D = np.zeros((n_active, 3, 3))
+    for a in range(n_active):
+        for r in range(3):
+            for c in range(3):
+                D[a, r, c] = 0.0
     for a in range(n_active):
         k = wk.active[a]
         s0, n_rot = _body_rotations(bodies, contacts.body[sites.contact[k]])
@@ -747,17 +773,48 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows):
     for q in range(nfb):
         for q2 in range(nfb):
             S[nf + q, nf + q2] = body_rows[q, n_active * gdim + q2]
-    return np.linalg.inv(S), D
+
+
+@njit(cache=True, _nrt=False)
+def _invert(k, S, LU, ipiv, S_inv):
+    """S_inv (k x k, C order) <- S^-1 by LAPACK's getrf and getri on a Fortran-order copy ``LU`` (k * k): the
+    routines and the copy np.linalg.inv uses, so the same numbers, without its allocations."""
+    for r in range(k):
+        for c in range(k):
+            value = S[r, c]
+            if not math.isfinite(value):
+                raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
+            LU[c * k + r] = value
+    if k > 0:
+        if _xgetrf(_XGESV_KIND, k, k, LU.ctypes, k, ipiv.ctypes) != 0:
+            raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
+        if _xgetri(_XGESV_KIND, k, LU.ctypes, k, ipiv.ctypes) != 0:
+            raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
+    for r in range(k):
+        for c in range(k):
+            S_inv[r, c] = LU[c * k + r]
 
 
 @njit(cache=True)
 def _woodbury_solve(S_inv, D, active, n_active, gdim, cp, body_rows, rhs):
     """x of J x = rhs through :func:`_woodbury`'s matrix (its inverse ``S_inv``, the sites' ``D``)."""
+    k = S_inv.shape[0]
+    x = np.empty(rhs.size)
+    _woodbury_solve_into(S_inv, D, active, n_active, gdim, cp, body_rows, rhs, x, np.empty(k), np.empty(k),
+                         np.empty(2))
+    return x
+
+
+@njit(cache=True, _nrt=False)
+def _woodbury_solve_into(S_inv, D, active, n_active, gdim, cp, body_rows, rhs, x, small, sol, scalars):
+    """:func:`_woodbury_solve` into ``x`` (may be ``rhs``), ``small`` and ``sol`` (nf + nfb) and ``scalars`` (2)
+    work."""
     GT, RF = cp.GT, cp.RF
     nf = GT.shape[1]
     na = n_active * gdim
     nfb = rhs.size - na
-    small = np.zeros(nf + nfb)
+    for j in range(nf + nfb):
+        small[j] = 0.0
     for a in range(n_active):
         k = active[a]
         for r in range(gdim):
@@ -772,8 +829,7 @@ def _woodbury_solve(S_inv, D, active, n_active, gdim, cp, body_rows, rhs):
         for col in range(na):
             value -= body_rows[q, col] * rhs[col]
         small[nf + q] = value
-    sol = S_inv @ small
-    x = np.empty(rhs.size)
+    _matvec(S_inv, small, sol, scalars)
     for a in range(n_active):
         k = active[a]
         for r in range(gdim):
@@ -784,7 +840,6 @@ def _woodbury_solve(S_inv, D, active, n_active, gdim, cp, body_rows, rhs):
             x[a * gdim + r] = value
     for q in range(nfb):
         x[na + q] = sol[nf + q]
-    return x
 
 
 class NewtonWork(NamedTuple):
@@ -806,7 +861,14 @@ class NewtonWork(NamedTuple):
     du: np.ndarray            # (nr,) every site's correction
     df: np.ndarray            # (ns, 3) the active sites' force corrections
     dxi: np.ndarray           # (m,) the body corrections
-    S_inv: np.ndarray         # (k * k,) the Woodbury matrix's inverse, k = nf + m (0: no Woodbury)
+    S: np.ndarray             # (k * k,) the Woodbury matrix, k = nf + m (0: no Woodbury)
+    S_LU: np.ndarray          # (k * k,) its Fortran-order copy, factored
+    S_inv: np.ndarray         # (k * k,) its inverse
+    S_ipiv: np.ndarray        # (k,) int32
+    FG: np.ndarray            # (3, nf) work
+    small: np.ndarray         # (k,) work
+    sol: np.ndarray           # (k,) work
+    scalars: np.ndarray       # (2,) work: gemv's alpha and beta
     D: np.ndarray             # (ns, 3, 3) the active sites' derivatives for it
     body_rows: np.ndarray     # (m * (nr + m),) the body rows of J for it
 
@@ -821,8 +883,27 @@ def newton_work(ns, gdim, m, nf):
     return NewtonWork(np.zeros(size * size), np.zeros(size * size), np.zeros(size, np.int32), np.zeros(nr + m),
                       np.zeros(nr + m), np.zeros(nr + m), np.zeros(nr + m), np.zeros(m), np.zeros(m, np.int64),
                       np.zeros(max(ns, 1), np.int64), np.zeros(nr), np.zeros((ns, 3)), np.zeros(m),
-                      np.zeros(k * k), np.zeros((ns if woodbury else 0, 3, 3)),
-                      np.zeros(m * (nr + m) if woodbury else 0))
+                      np.zeros(k * k), np.zeros(k * k), np.zeros(k * k), np.zeros(k, np.int32),
+                      np.zeros((3, nf if woodbury else 0)), np.zeros(k), np.zeros(k), np.zeros(2),
+                      np.zeros((ns if woodbury else 0, 3, 3)), np.zeros(m * (nr + m) if woodbury else 0))
+
+
+@njit(cache=True, _nrt=False)
+def _matvec(A, x, y, scalars):
+    """y = A x (A C- or Fortran-ordered) by BLAS's gemv as np.dot(A, x, y) calls it (the same numbers);
+    ``scalars`` (2) work."""
+    scalars[0] = 1.0
+    scalars[1] = 0.0
+    if A.shape[1] == 0:
+        for i in range(y.size):
+            y[i] = 0.0
+        return
+    if A.strides[0] >= A.strides[1]:        # C order: the transposed product of the Fortran view
+        _xgemv(_XGESV_KIND, _TRANSPOSED, A.shape[1], A.shape[0], scalars[0:].ctypes, A.ctypes, A.shape[1], x.ctypes,
+               scalars[1:].ctypes, y.ctypes)
+    else:
+        _xgemv(_XGESV_KIND, _NOT_TRANSPOSED, A.shape[0], A.shape[1], scalars[0:].ctypes, A.ctypes, A.shape[0], x.ctypes,
+               scalars[1:].ctypes, y.ctypes)
 
 
 @njit(cache=True, _nrt=False)
@@ -845,42 +926,7 @@ def _lu_solve(N, J, LU, ipiv, x):
         raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
 
 
-@njit(cache=True)
-def _woodbury_factor(n_active, wk, nw, cp, model, free_body, dt):
-    """The Woodbury system of this iteration (:func:`_woodbury`) into ``nw``: its body rows, S^-1 and D, and -R
-    into nw.rhs (allocates: taken only when many sites are active)."""
-    body_rows, rhs = _newton_matrix(n_active, wk, cp, model, free_body, dt, False)
-    S_inv, D = _woodbury(n_active, wk, cp, model, free_body, body_rows)
-    k = S_inv.shape[0]
-    for r in range(k):
-        for c in range(k):
-            nw.S_inv[r * k + c] = S_inv[r, c]
-    for a in range(n_active):
-        for r in range(3):
-            for c in range(3):
-                nw.D[a, r, c] = D[a, r, c]
-    N = rhs.size
-    for q in range(body_rows.shape[0]):
-        for c in range(N):
-            nw.body_rows[q * N + c] = body_rows[q, c]
-    for r in range(N):
-        nw.rhs[r] = rhs[r]
-
-
-@njit(cache=True)
-def _woodbury_apply(n_active, gdim, nw, cp, rhs, out):
-    """out = J^-1 rhs through the Woodbury system :func:`_woodbury_factor` left in ``nw``."""
-    N = rhs.size
-    nfb = N - n_active * gdim
-    k = cp.GT.shape[1] + nfb
-    S_inv = nw.S_inv[:k * k].reshape((k, k))
-    body_rows = nw.body_rows[:nfb * N].reshape((nfb, N))
-    x = _woodbury_solve(S_inv, nw.D[:n_active], nw.active, n_active, gdim, cp, body_rows, rhs)
-    for r in range(N):
-        out[r] = x[r]
-
-
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _newton(wk, nw, cp, state, dt, model, free_body):
     """Newton on the condensed step; True when converged (wk.dd, wk.xi hold the solution). Returns
     (converged, iterations). Compiled without reference counts (as the evaluation): its arrays are the work
@@ -920,9 +966,19 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
         N = n_active * gdim + nfb
         dy = nw.dy[:N]
         J = nw.J[:N * N].reshape((N, N))
+        # the Woodbury system's views (empty when it is not taken: its buffers may be)
+        k = cp.GT.shape[1] + nfb if woodbury else 0
+        S_inv = nw.S_inv[:k * k].reshape((k, k))
+        D = nw.D[:n_active if woodbury else 0]
+        body_rows = nw.body_rows[:nfb * N if woodbury else 0].reshape((nfb if woodbury else 0, N))
         if woodbury:
-            _woodbury_factor(n_active, wk, nw, cp, model, free_body, dt)
-            _woodbury_apply(n_active, gdim, nw, cp, nw.rhs[:N], dy)
+            rhs = nw.rhs[:N]
+            _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, False, body_rows, rhs, nw.body_pos)
+            _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, nw.S[:k * k].reshape((k, k)), D,
+                           nw.body_pos, nw.FG)
+            _invert(k, nw.S[:k * k].reshape((k, k)), nw.S_LU, nw.S_ipiv, S_inv)
+            _woodbury_solve_into(S_inv, D, active_rows, n_active, gdim, cp, body_rows, rhs, dy, nw.small, nw.sol,
+                                 nw.scalars)
         else:
             rhs = nw.rhs[:N]
             _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, True, J, rhs, nw.body_pos)
@@ -985,7 +1041,8 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
             for q in range(nfb):
                 trial[n_active * gdim + q] = -wk.rz[free_body[q]]
             if woodbury:
-                _woodbury_apply(n_active, gdim, nw, cp, trial, trial)
+                _woodbury_solve_into(S_inv, D, active_rows, n_active, gdim, cp, body_rows, trial, trial, nw.small,
+                                     nw.sol, nw.scalars)
             else:
                 _lu_solve(N, J, nw.LU, nw.ipiv, trial)
             if _scaled_norm(trial, scale, N) <= (1.0 - 0.5 * lam) * size0 + 1e-300:
