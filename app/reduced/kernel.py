@@ -1334,8 +1334,10 @@ def run(t_end, state, model, cache, out, track_energy, frames):
                 continue
             break
         # accepted: the step's forces (at its mid-point) were evaluated last by the Newton iteration
-        _record(rows, t1, dt_try, q1, v1, pq, wk, state, model, out, closed_new, y_end, track_energy, record_power,
-                record_seen)
+        _record(rows, t1, dt_try, q1, pq, wk, state, model, out, closed_new, y_end, record_power, record_seen,
+                nw.scalars)
+        if track_energy:
+            _record_energy(rows, dt_try, q1, v1, v, structure, bodies, model.sites, model.contacts, wk, sums, out)
         rows += 1
         q[:] = q1
         v[:] = v1
@@ -1378,21 +1380,24 @@ def run(t_end, state, model, cache, out, track_energy, frames):
     return DONE, rows
 
 
-@njit(cache=True)
-def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track_energy, power, seen):
+@njit(cache=True, _nrt=False)
+def _record(row, t1, dt, q1, pq, wk, state, model, out, closed, y_end, power, seen, scalars):
     """One output row, the dissipated energies and the per-site diagnostics of an accepted step (``power``
-    (n_contacts + n_links,) and ``seen`` (n_contacts,) bool: work)."""
+    (n_contacts + n_links,), ``seen`` (n_contacts,) bool and ``scalars`` (2): work); the energy columns are
+    :func:`_record_energy`'s."""
     structure, sites, contacts, bodies, links, sample_rows = (model.structure, model.sites, model.contacts,
                                                               model.bodies, model.links, model.sample_rows)
-    sums, v0, z1, zd1 = state.sums, state.v, wk.z1, wk.zd1
+    sums, z1, zd1 = state.sums, wk.z1, wk.zd1
     n_c = contacts.kind.size
     n_l = links.lower.size
     out.time[row] = t1
     out.dt[row] = dt
-    np.dot(sample_rows, q1, out.samples[row])
-    out.inputs[row, :] = pq
-    out.z[row, :] = z1
-    out.zd[row, :] = zd1
+    _matvec(sample_rows, q1, out.samples[row], scalars)
+    for p in range(pq.size):
+        out.inputs[row, p] = pq[p]
+    for j in range(z1.size):
+        out.z[row, j] = z1[j]
+        out.zd[row, j] = zd1[j]
     for c in range(n_c + n_l):
         for k in range(3):
             out.force[row, c, k] = 0.0
@@ -1464,28 +1469,6 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
         sums.dissipated[c] += 0.5 * dt * (previous + power[c])
         sums.power[c] = power[c]
         out.dissipated[row, c] = sums.dissipated[c]
-    if track_energy:
-        vm = 0.5 * (v0 + v1)
-        p_damp = vm @ (structure.C @ vm)
-        sums.damping[0] += dt * p_damp
-        sums.damping[1] = p_damp
-        out.energy[row, 0] = 0.5 * (v1 @ (structure.M @ v1))
-        out.energy[row, 1] = 0.5 * (q1 @ (structure.K @ q1))
-        kin = 0.0
-        for j in range(z1.size):
-            kin += 0.5 * bodies.mass[j] * zd1[j] * zd1[j]
-        out.energy[row, 2] = kin
-        pen = 0.0
-        for i in range(sites.contact.size):
-            c = sites.contact[i]
-            if wk.gap[i] < 0.0:
-                if contacts.kind[c] == NODE:
-                    e = contacts.exponent[c]
-                    pen += contacts.stiffness[c] * (-wk.gap[i]) ** (e + 1.0) / (e + 1.0)
-                else:
-                    pen += sites.weight[i] * _penalty_energy(wk.gap[i], contacts.stiffness[c], contacts.rounding[c])
-        out.energy[row, 3] = pen
-        out.energy[row, 4] = sums.damping[0]
     # each contact's first site: its displacement in its frame (the contact point's path)
     for c in range(n_c):
         for k in range(3):
@@ -1499,6 +1482,33 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
         seen[c] = True
         for r in range(3):
             out.probe[row, c, r] = _dot3(sites.frame[i, r], y_end[i])
+
+
+@njit(cache=True)
+def _record_energy(row, dt, q1, v1, v0, structure, bodies, sites, contacts, wk, sums, out):
+    """The energy columns of an output row and the structural damping loss (output.energies: allocates)."""
+    z1, zd1 = wk.z1, wk.zd1
+    vm = 0.5 * (v0 + v1)
+    p_damp = vm @ (structure.C @ vm)
+    sums.damping[0] += dt * p_damp
+    sums.damping[1] = p_damp
+    out.energy[row, 0] = 0.5 * (v1 @ (structure.M @ v1))
+    out.energy[row, 1] = 0.5 * (q1 @ (structure.K @ q1))
+    kin = 0.0
+    for j in range(z1.size):
+        kin += 0.5 * bodies.mass[j] * zd1[j] * zd1[j]
+    out.energy[row, 2] = kin
+    pen = 0.0
+    for i in range(sites.contact.size):
+        c = sites.contact[i]
+        if wk.gap[i] < 0.0:
+            if contacts.kind[c] == NODE:
+                e = contacts.exponent[c]
+                pen += contacts.stiffness[c] * (-wk.gap[i]) ** (e + 1.0) / (e + 1.0)
+            else:
+                pen += sites.weight[i] * _penalty_energy(wk.gap[i], contacts.stiffness[c], contacts.rounding[c])
+    out.energy[row, 3] = pen
+    out.energy[row, 4] = sums.damping[0]
 
 
 @njit(cache=True)
