@@ -26,6 +26,15 @@ approach to a predicted closure) as the FE tier (app/transient/control.py).
 Every argument travels as a structured record (NamedTuple of arrays, :func:`make_records`); the state
 arrays (q, v, a, z, zd, zdd, istate, fstate, sums, site_force) hold everything the next call needs, so where a
 run is split into calls (checkpoints, field outputs) does not change it.
+
+Cost (issue 27, BENCHMARKS.md): numba reference-counts every array a compiled function receives, member by member
+of each record, with an atomic operation on entry and exit, and every array it allocates. With records of ~150
+arrays passed to the per-step functions, that was ~70 % of a drill step. So the functions below the loop are
+compiled without reference counting (``_nrt=False``: they may neither allocate nor return arrays; numba refuses
+to compile one that does), their work arrays allocated once per call (:class:`StepWork`, :class:`NewtonWork`),
+and the loop fills its vectors index by index in the order of the array expressions they replace and calls the
+LAPACK and BLAS routines numba's np.linalg.solve, np.linalg.inv and np.dot call (numba's bindings of SciPy's),
+so the numbers are the same to the bit.
 """
 
 from __future__ import annotations
