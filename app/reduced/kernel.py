@@ -785,9 +785,10 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, S, D, pos, FG)
 
 
 @njit(cache=True, _nrt=False)
-def _invert(k, S, LU, ipiv, S_inv):
-    """S_inv (k x k, C order) <- S^-1 by LAPACK's getrf and getri on a Fortran-order copy ``LU`` (k * k): the
-    routines and the copy np.linalg.inv uses, so the same numbers, without its allocations."""
+def _invert(k, S, LU, ipiv):
+    """LU (k * k) <- S^-1 in Fortran order (``LU[:k * k].reshape((k, k)).T`` is S^-1) by LAPACK's getrf and getri
+    on a Fortran-order copy of S: the routines, the copy and the order of np.linalg.inv's result (so a product
+    with it takes the same BLAS path), without its allocations."""
     for r in range(k):
         for c in range(k):
             value = S[r, c]
@@ -799,9 +800,6 @@ def _invert(k, S, LU, ipiv, S_inv):
             raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
         if _xgetri(_XGESV_KIND, k, LU.ctypes, k, ipiv.ctypes) != 0:
             raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
-    for r in range(k):
-        for c in range(k):
-            S_inv[r, c] = LU[c * k + r]
 
 
 @njit(cache=True)
@@ -871,8 +869,7 @@ class NewtonWork(NamedTuple):
     df: np.ndarray            # (ns, 3) the active sites' force corrections
     dxi: np.ndarray           # (m,) the body corrections
     S: np.ndarray             # (k * k,) the Woodbury matrix, k = nf + m (0: no Woodbury)
-    S_LU: np.ndarray          # (k * k,) its Fortran-order copy, factored
-    S_inv: np.ndarray         # (k * k,) its inverse
+    S_LU: np.ndarray          # (k * k,) its inverse in Fortran order (getrf and getri in place)
     S_ipiv: np.ndarray        # (k,) int32
     FG: np.ndarray            # (3, nf) work
     small: np.ndarray         # (k,) work
@@ -892,7 +889,7 @@ def newton_work(ns, gdim, m, nf):
     return NewtonWork(np.zeros(size * size), np.zeros(size * size), np.zeros(size, np.int32), np.zeros(nr + m),
                       np.zeros(nr + m), np.zeros(nr + m), np.zeros(nr + m), np.zeros(m), np.zeros(m, np.int64),
                       np.zeros(max(ns, 1), np.int64), np.zeros(nr), np.zeros((ns, 3)), np.zeros(m),
-                      np.zeros(k * k), np.zeros(k * k), np.zeros(k * k), np.zeros(k, np.int32),
+                      np.zeros(k * k), np.zeros(k * k), np.zeros(k, np.int32),
                       np.zeros((3, nf if woodbury else 0)), np.zeros(k), np.zeros(k), np.zeros(2),
                       np.zeros((ns if woodbury else 0, 3, 3)), np.zeros(m * (nr + m) if woodbury else 0))
 
@@ -974,10 +971,11 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
             active_rows[a] = wk.active[a]
         N = n_active * gdim + nfb
         dy = nw.dy[:N]
-        J = nw.J[:N * N].reshape((N, N))
+        NJ = 0 if woodbury else N          # the contact-space matrix (its buffer holds no larger one)
+        J = nw.J[:NJ * NJ].reshape((NJ, NJ))
         # the Woodbury system's views (empty when it is not taken: its buffers may be)
         k = cp.GT.shape[1] + nfb if woodbury else 0
-        S_inv = nw.S_inv[:k * k].reshape((k, k))
+        S_inv = nw.S_LU[:k * k].reshape((k, k)).T         # Fortran order, as np.linalg.inv returns it
         D = nw.D[:n_active if woodbury else 0]
         body_rows = nw.body_rows[:nfb * N if woodbury else 0].reshape((nfb if woodbury else 0, N))
         if woodbury:
@@ -985,7 +983,7 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
             _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, False, body_rows, rhs, nw.body_pos)
             _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, nw.S[:k * k].reshape((k, k)), D,
                            nw.body_pos, nw.FG)
-            _invert(k, nw.S[:k * k].reshape((k, k)), nw.S_LU, nw.S_ipiv, S_inv)
+            _invert(k, nw.S[:k * k].reshape((k, k)), nw.S_LU, nw.S_ipiv)
             _woodbury_solve_into(S_inv, D, active_rows, n_active, gdim, cp, body_rows, rhs, dy, nw.small, nw.sol,
                                  nw.scalars)
         else:
