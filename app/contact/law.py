@@ -7,6 +7,9 @@ cone; a node contact: a sphere along a fixed normal) with the penalty law of for
 twins of the FE tier's UFL) and regularised Coulomb friction, the body's spin in the slip. Rigid-rigid links
 (Kelvin-Voigt, optional friction) act between bodies. Records (NamedTuples of arrays) carry the data:
 :class:`Bodies`, :class:`Sites`, :class:`Contacts`, :class:`Links` (built from a case by app/contact/records.py).
+
+The functions a time step calls are compiled without reference counting (``_nrt=False``, why: the cost note in
+app/reduced/kernel.py): they neither allocate nor return arrays, their work arrays come from the caller.
 """
 
 from __future__ import annotations

@@ -1392,8 +1392,7 @@ def _record(row, t1, dt, q1, pq, wk, state, model, out, closed, y_end, power, se
     """One output row, the dissipated energies and the per-site diagnostics of an accepted step (``power``
     (n_contacts + n_links,), ``seen`` (n_contacts,) bool and ``scalars`` (2): work); the energy columns are
     :func:`_record_energy`'s."""
-    structure, sites, contacts, bodies, links, sample_rows = (model.structure, model.sites, model.contacts,
-                                                              model.bodies, model.links, model.sample_rows)
+    sites, contacts, links, sample_rows = model.sites, model.contacts, model.links, model.sample_rows
     sums, z1, zd1 = state.sums, wk.z1, wk.zd1
     n_c = contacts.kind.size
     n_l = links.lower.size
