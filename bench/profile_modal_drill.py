@@ -8,7 +8,8 @@ less. A profile of the compiled code:
 
     NUMBA_CACHE_DIR=$(mktemp -d) perf record -F 4000 -g -o perf.data .venv/bin/python bench/profile_modal_drill.py \
         --addresses addresses.json
-    perf script -i perf.data -F ip      # then map the sampled addresses to the functions in addresses.json
+    perf script -i perf.data -F time,ip,sym,dso > samples.txt
+    .venv/bin/python bench/perf_by_function.py samples.txt addresses.json     # samples by function
 
 (a fresh numba cache compiles the loop in the process, so its functions' addresses are known; NRT_incref and
 NRT_decref are numba's reference counts).

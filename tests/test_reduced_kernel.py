@@ -238,3 +238,22 @@ def test_newton_matrix_equals_differences_of_the_residual():
     scale = np.concatenate([np.full(n_active * gdim, np.abs(reference[:n_active * gdim]).max()),
                             np.abs(reference[n_active * gdim:])])
     assert np.max(np.abs(x - reference) / scale) < 1e-9
+
+    # The whole Newton iteration (app/reduced/kernel.py:_newton, compiled without reference counts, its arrays in a
+    # NewtonWork) with every site pressed in: on the sparse compliance it takes the Woodbury path (3 x 6 active
+    # rows > 1.5 x 10 free coordinates), on the same H given densely (the sites as 18 free coordinates) the
+    # contact-space LU. The same equations, so the same solution to the iteration's tolerances (1e-14 m or 1e-9 of
+    # a site increment, 1e-10 of the body's force scale); 1e-6 catches a wrong or stale system (order one).
+    wk.y0[:] = -3e-8 * normals
+    solutions = []
+    for compliance_ in (sparse, kr.dense_compliance(GT @ RF.T)):
+        nw = kr.newton_work(n_sites, gdim, m, compliance_.GT.shape[1])
+        wk.dd[:] = wk.dw
+        wk.xi[:] = 0.0
+        converged, its = kr._newton(wk, nw, compliance_, state, dt, model, free_body)
+        assert converged and its > 1
+        solutions.append((wk.dd.copy(), wk.xi.copy(), bool(np.any(nw.S_LU != 0.0))))
+    (dd_w, xi_w, woodbury), (dd_c, xi_c, contact_space_woodbury) = solutions
+    assert woodbury and not contact_space_woodbury
+    np.testing.assert_allclose(dd_w, dd_c, rtol=1e-6, atol=1e-13)
+    np.testing.assert_allclose(xi_w, xi_c, rtol=1e-6, atol=1e-16)

@@ -7,6 +7,9 @@ cone; a node contact: a sphere along a fixed normal) with the penalty law of for
 twins of the FE tier's UFL) and regularised Coulomb friction, the body's spin in the slip. Rigid-rigid links
 (Kelvin-Voigt, optional friction) act between bodies. Records (NamedTuples of arrays) carry the data:
 :class:`Bodies`, :class:`Sites`, :class:`Contacts`, :class:`Links` (built from a case by app/contact/records.py).
+
+The functions a time step calls are compiled without reference counting (``_nrt=False``, why: the cost note in
+app/reduced/kernel.py): they neither allocate nor return arrays, their work arrays come from the caller.
 """
 
 from __future__ import annotations
@@ -93,20 +96,20 @@ class Links(NamedTuple):
 
 
 # ------------------------------------------------------------------ small vector helpers
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _cross(a, b, out):
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _dot3(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 # ------------------------------------------------------------------ obstacle shapes
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def shape_gap(shape, vector, radius, half_angle, d, n, Dn):
     """Gap [m] of a point at ``d`` (3-vector relative to the obstacle's reference point; for a sphere with a
     pole, relative to centre + R pole) and the obstacle's outward unit normal ``n`` there; ``Dn`` = dn/dd.
@@ -158,7 +161,7 @@ def shape_gap(shape, vector, radius, half_angle, d, n, Dn):
 
 
 # ------------------------------------------------------------------ one site's force
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def friction_tangent(T, dT_dfn, dT_dspeed, s, reg, speed, A, b):
     """Derivatives of the regularised friction force f_t = -T(fn, |s|) s / reg(|s|) (forms/contact_law.py) at the
     slip ``s`` [m/s]: ``A`` = d f_t / d s (3 x 3), ``b`` = d f_t / d fn (3), written in place. ``T`` is the shear
@@ -171,7 +174,7 @@ def friction_tangent(T, dT_dfn, dT_dspeed, s, reg, speed, A, b):
                 - s[r] / reg * dT_dspeed * s[k] / speed
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def site_force(i, y, v_site, z_mid, zd_mid, sites, contacts, bodies, c_vel, w_f, want, out):
     """Force of site i on the structure (``out.f``, 3) at the mid-point state: the site's displacement ``y`` and
     velocity ``v_site`` (3-vectors), the bodies' mid-point coordinates and rates. With ``want``, the
@@ -360,17 +363,18 @@ def site_work(max_body_coordinates):
 
 
 # ------------------------------------------------------------------ rigid-rigid links
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _body_rotations(bodies, b):
     s0 = bodies.start[b]
     end = bodies.start[b + 1] if b + 1 < bodies.start.size else bodies.mass.size
     return s0, end - s0 - bodies.gdim
 
 
-@njit(cache=True)
-def link_force(l, z_mid, zd_mid, bodies, links, F, P, want):
+@njit(cache=True, _nrt=False)
+def link_force(l, z_mid, zd_mid, bodies, links, F, P, want, work):
     """Force of link l on its upper body (``F``, 3) at the mid-point state; ``P`` (3 x m) gets the map from
-    all body coordinate rates to the slip velocity of the contact point (upper's over lower's). Returns
+    all body coordinate rates to the slip velocity of the contact point (upper's over lower's); ``work`` (5, 3)
+    scratch. Returns
     (normal force, penetration, rate, dF/d delta [N/m], dF/d rate [N s/m], regularised friction terms as
     (T, dT/dspeed, dT/dfn, reg, speed) or zeros)."""
     gdim = bodies.gdim
@@ -397,13 +401,15 @@ def link_force(l, z_mid, zd_mid, bodies, links, F, P, want):
     if links.mu[l] <= 0.0 and nlo + nup == 0:
         return f, delta, rate, links.stiffness[l], links.damping[l], 0.0, 0.0, 0.0, 1.0, 0.0
     # slip map: translations, then omega x r of each body's lever arm (upper: -offset n; lower: to that point)
-    r_up = np.zeros(3)
-    r_lo = np.zeros(3)
+    r_up = work[0]
+    r_lo = work[1]
+    for k in range(3):
+        r_lo[k] = 0.0
     for k in range(3):
         r_up[k] = -links.offset[l] * n[k]
     for k in range(gdim):
         r_lo[k] = (z_mid[sup + k] - z_mid[slo + k]) + r_up[k]
-    axr = np.zeros(3)
+    axr = work[2]
     for k in range(gdim):
         P[k, sup + k] += 1.0
         P[k, slo + k] -= 1.0
@@ -419,12 +425,13 @@ def link_force(l, z_mid, zd_mid, bodies, links, F, P, want):
             P[k, j] -= axr[k]
     if links.mu[l] <= 0.0:
         return f, delta, rate, links.stiffness[l], links.damping[l], 0.0, 0.0, 0.0, 1.0, 0.0
-    vrel = np.zeros(3)
+    vrel = work[3]
     for k in range(3):
+        vrel[k] = 0.0
         for j in range(P.shape[1]):
             vrel[k] += P[k, j] * zd_mid[j]
     vn = _dot3(vrel, n)
-    s = np.zeros(3)
+    s = work[4]
     for k in range(3):
         s[k] = vrel[k] - vn * n[k]
     speed2 = _dot3(s, s)
@@ -474,7 +481,7 @@ class SiteAccumulators(NamedTuple):
     phase: np.ndarray
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def accumulate_site(i, site, clock, acc):
     """Adds one step of site i (``site``: :class:`SiteSample`; ``clock``: :class:`DriveClock`) to the per-site
     diagnostics ``acc`` (:class:`SiteAccumulators`, app/contact/tables.py), the one rule of every tier.

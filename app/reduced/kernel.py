@@ -26,6 +26,15 @@ approach to a predicted closure) as the FE tier (app/transient/control.py).
 Every argument travels as a structured record (NamedTuple of arrays, :func:`make_records`); the state
 arrays (q, v, a, z, zd, zdd, istate, fstate, sums, site_force) hold everything the next call needs, so where a
 run is split into calls (checkpoints, field outputs) does not change it.
+
+Cost (issue 27, BENCHMARKS.md): numba reference-counts every array a compiled function receives, member by member
+of each record, with an atomic operation on entry and exit, and every array it allocates. With records of ~150
+arrays passed to the per-step functions, that was ~70 % of a drill step. So the functions below the loop are
+compiled without reference counting (``_nrt=False``: they may neither allocate nor return arrays; numba refuses
+to compile one that does), their work arrays allocated once per call (:class:`StepWork`, :class:`NewtonWork`),
+and the loop fills its vectors index by index in the order of the array expressions they replace and calls the
+LAPACK and BLAS routines numba's np.linalg.solve, np.linalg.inv and np.dot call (numba's bindings of SciPy's),
+so the numbers are the same to the bit.
 """
 
 from __future__ import annotations
@@ -34,7 +43,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.np.linalg import _LAPACK
 
 from app.contact.law import (
     CONE,
@@ -94,6 +104,18 @@ SITE_RTOL = 1e-9
 WOODBURY_FACTOR = 1.5
 FORCE_RTOL = 1e-10
 EPS = 2.220446049250313e-16
+#: LAPACK's dgesv as numba's np.linalg.solve calls it (numba's binding of SciPy's LAPACK; a symbol, so the compiled
+#: functions that call it stay cacheable)
+_xgesv = _LAPACK().numba_xgesv(types.float64)
+_xgetrf = _LAPACK().numba_xxgetrf(types.float64)
+_xgetri = _LAPACK().numba_ez_xxgetri(types.float64)
+#: BLAS's gemv as numba's np.dot(matrix, vector) calls it (np.dot returns its output: not in a function compiled
+#: without reference counts)
+_xgemv = types.ExternalFunction("numba_xxgemv", types.intc(
+    types.char, types.char, types.intp, types.intp, types.CPointer(types.float64), types.CPointer(types.float64),
+    types.intp, types.CPointer(types.float64), types.CPointer(types.float64), types.CPointer(types.float64)))
+_XGESV_KIND = ord("d")
+_TRANSPOSED, _NOT_TRANSPOSED = ord("t"), ord("n")
 
 
 class Structure(NamedTuple):
@@ -266,7 +288,7 @@ def sparse_rows(rows, columns):
     return SparseRows(index, value, count)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _row_dot(rows, r, x):
     value = 0.0
     for j in range(rows.count[r]):
@@ -287,7 +309,7 @@ def dense_compliance(H: np.ndarray) -> Compliance:
     return compliance_of(H, H.T, np.eye(H.shape[0]))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _respond(compliance, active, n_active, gdim, x, out):
     """out = G x (nf) for site forces ``x`` (n_sites, 3) on the active sites (the rest carry none); H x = R_F out."""
     GT = compliance.GT
@@ -304,7 +326,7 @@ def _respond(compliance, active, n_active, gdim, x, out):
                     out[j] += row[j] * xk
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _ramp(t, ramp_s):
     if ramp_s <= 0.0 or t >= ramp_s:
         return 1.0
@@ -313,7 +335,7 @@ def _ramp(t, ramp_s):
     return 0.5 * (1.0 - math.cos(math.pi * t / ramp_s))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def input_values(t, inputs, out):
     """Values of the prescribed coordinates at time t."""
     for p in range(inputs.kind.size):
@@ -364,6 +386,12 @@ class StepWork(NamedTuple):
     z1: np.ndarray
     zd1: np.ndarray
     zdd1: np.ndarray
+    fxa: np.ndarray           # (3,) work: f x a of a rotation
+    link_work: np.ndarray     # (5, 3) link_force's work
+    link_D: np.ndarray        # (m,) a link's d delta / d coordinates
+    link_v: np.ndarray        # (3, 3) its dF/dN, slip, relative velocity
+    link_M: np.ndarray        # (3, 3, 3) its dF/ds, the tangential projector, their product
+    link_dF: np.ndarray       # (3, m) its dF / d coordinates
 
 
 @njit(cache=True)
@@ -374,10 +402,11 @@ def step_work(ns, gdim, m, kmax, n_links):
                     np.zeros(ns * gdim), np.zeros(ns * gdim), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
                     np.zeros(m), np.zeros((m, m)), np.zeros(3), np.zeros(3), site_work(kmax), np.zeros(3),
                     np.zeros((3, max(m, 1))), np.zeros(max(n_links, 1)), np.zeros(max(ns, 1), np.int64), np.zeros(m),
-                    np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m))
+                    np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(3), np.zeros((5, 3)), np.zeros(m),
+                    np.zeros((3, 3)), np.zeros((3, 3, 3)), np.zeros((3, max(m, 1))))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _body_kinematics(xi, state, dt, model, wk):
     """End-of-step and mid-point body coordinates (into ``wk``) for corrections ``xi`` of the free coordinates to
     their predictors (held coordinates move at their rate)."""
@@ -400,7 +429,7 @@ def _body_kinematics(xi, state, dt, model, wk):
         zd_mid[j] = (1.0 - af) * zd1[j] + af * zd0[j]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _evaluate(dd, xi, wk, cp, state, dt, model, want):
     """Site forces at the iterate (site increments ``dd``, body corrections ``xi``), the site residuals
     R = dd - dw - H f (``cp``: the step's :class:`Compliance`; cp.u gets G f), the body residuals rz, and
@@ -473,7 +502,7 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
             for q in range(n_rot):
                 j = s0 + gdim + q
                 _cross(bodies.axis[j], sw.lever, axl)
-                fxa = np.zeros(3)
+                fxa = wk.fxa
                 _cross(sw.f, bodies.axis[j], fxa)
                 for kk in range(nb):
                     value = axl[0] * sw.Fz[0, kk] + axl[1] * sw.Fz[1, kk] + axl[2] * sw.Fz[2, kk]
@@ -486,7 +515,7 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
         slo, nlo = _body_rotations(bodies, lo)
         sup, nup = _body_rotations(bodies, up)
         f, delta, rate, kf, cf, T, dT_ds, dT_dfn, reg, speed = link_force(l, z_mid, zd_mid, bodies, links, wk.lf,
-                                                                          wk.lP, want)
+                                                                          wk.lP, want, wk.link_work)
         wk.link_fn[l] = f
         if f <= 0.0:
             continue
@@ -505,15 +534,23 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
                     wk.Q[j] += value
         if want:
             # dF/dq = (n + dF/dN) (k + c c_vel) w_f D + c_vel w_f dF/ds P, D = d delta / d coordinates
-            D = np.zeros(m)
+            D = wk.link_D
+            for j in range(m):
+                D[j] = 0.0
             for k in range(gdim):
                 D[slo + k] += n[k]
                 D[sup + k] -= n[k]
-            dFdN = np.zeros(3)
-            dFds = np.zeros((3, 3))
+            dFdN = wk.link_v[0]
+            dFds = wk.link_M[0]
+            for r in range(3):
+                dFdN[r] = 0.0
+                for k in range(3):
+                    dFds[r, k] = 0.0
             if links.mu[l] > 0.0:
-                s = np.zeros(3)
-                vrel = np.zeros(3)
+                s = wk.link_v[1]
+                vrel = wk.link_v[2]
+                for k in range(3):
+                    vrel[k] = 0.0
                 for k in range(3):
                     for j in range(m):
                         vrel[k] += wk.lP[k, j] * zd_mid[j]
@@ -522,12 +559,19 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
                     s[k] = vrel[k] - vn * n[k]
                 friction_tangent(T, dT_dfn, dT_ds, s, reg, speed, dFds, dFdN)
                 # the slip is the tangential part: d s / d v = I - n n
-                tang = np.zeros((3, 3))
+                tang = wk.link_M[1]
                 for r in range(3):
                     for k in range(3):
                         tang[r, k] = (1.0 if r == k else 0.0) - n[r] * n[k]
-                dFds = dFds @ tang
-            dF = np.zeros((3, m))
+                product = wk.link_M[2]
+                for r in range(3):
+                    for k in range(3):
+                        value = 0.0
+                        for j in range(3):
+                            value += dFds[r, j] * tang[j, k]
+                        product[r, k] = value
+                dFds = product
+            dF = wk.link_dF
             for r in range(3):
                 for j in range(m):
                     dF[r, j] = (n[r] + dFdN[r]) * (kf + cf * c_vel) * w_f * D[j]
@@ -560,25 +604,33 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
     return n_active
 
 
-@njit(cache=True)
-def _scales(dd, xi, wk, bodies, dt, scheme):
-    """Per-unknown scales of the monotonicity test."""
+@njit(cache=True, _nrt=False)
+def _scales(bodies, dt, scheme, out):
+    """Per-unknown scales of the monotonicity test of the body coordinates (into ``out``, m)."""
     c_vel = scheme[1] / (scheme[0] * dt)
-    out = np.empty(xi.size)
     gdim = bodies.gdim
-    for j in range(xi.size):
+    for j in range(out.size):
         translation = True
         for b in range(bodies.start.size):
             if j >= bodies.start[b] + gdim and (b + 1 == bodies.start.size or j < bodies.start[b + 1]):
                 translation = False
         out[j] = LENGTH_SCALE_M if translation else RATE_SCALE_RAD_PER_S / c_vel
-    return out
 
 
 @njit(cache=True)
 def _newton_matrix(n_active, wk, cp, model, free_body, dt, site_block=True):
     """J and -R of the Newton system on the active sites' increments and the free body corrections. Without
     ``site_block``, J holds the body rows only (nfb x N: what :func:`_woodbury` needs besides the compliance)."""
+    N = n_active * model.bodies.gdim + free_body.size
+    J = np.empty((N - (0 if site_block else n_active * model.bodies.gdim), N))
+    rhs = np.empty(N)
+    _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, site_block, J, rhs, np.empty(wk.xi.size, np.int64))
+    return J, rhs
+
+
+@njit(cache=True, _nrt=False)
+def _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, site_block, J, rhs, body_pos):
+    """:func:`_newton_matrix` into ``J`` ((N or nfb) x N), ``rhs`` (N) and the work ``body_pos`` (m, int64)."""
     bodies, contacts, sites = model.bodies, model.contacts, model.sites
     gdim = bodies.gdim
     beta, gamma, am, af = model.scheme
@@ -589,13 +641,17 @@ def _newton_matrix(n_active, wk, cp, model, free_body, dt, site_block=True):
     nfb = free_body.size
     N = n_active * gdim + nfb
     row0 = 0 if site_block else n_active * gdim
-    J = np.zeros((N - row0, N))
-    rhs = np.zeros(N)
-    body_pos = np.full(wk.xi.size, -1, np.int64)
+    for r in range(N - row0):
+        for c in range(N):
+            J[r, c] = 0.0
+    for r in range(N):
+        rhs[r] = 0.0
+    for j in range(body_pos.size):
+        body_pos[j] = -1
     for q in range(nfb):
         body_pos[free_body[q]] = n_active * gdim + q
-    axl = np.zeros(3)
-    fxa = np.zeros(3)
+    axl = wk.work.axl
+    fxa = wk.fxa
     for a in range(n_active):
         i = wk.active[a]
         for r in range(gdim):
@@ -654,7 +710,6 @@ def _newton_matrix(n_active, wk, cp, model, free_body, dt, site_block=True):
         J[row - row0, row] += bodies.mass[j] * (1.0 - am) * c_acc + bodies.brake[j] * w_f * c_vel
         for q2 in range(nfb):
             J[row - row0, n_active * gdim + q2] -= wk.dQ[j, free_body[q2]]
-    return J, rhs
 
 
 @njit(cache=True)
@@ -665,19 +720,37 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows):
     [[I - R_A^T D G_A^T, -R_A^T E], [P G_A^T, Q]] [y, x_b] = [R_A^T D rhs_A, rhs_b - P rhs_A]
     (``body_rows`` = [P, Q]), of size nf + nfb instead of gdim n_active + nfb. Returns that matrix's inverse
     and the active sites' D (the next evaluation overwrites wk.Fd)."""
+    nf = cp.GT.shape[1]
+    k = nf + free_body.size
+    S = np.empty((k, k))
+    D = np.empty((n_active, 3, 3))
+    _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, S, D, np.empty(wk.xi.size, np.int64),
+                   np.empty((3, nf)))
+    return np.linalg.inv(S), D
+
+
+@njit(cache=True, _nrt=False)
+def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, S, D, pos, FG):
+    """:func:`_woodbury`'s matrix into ``S`` (k x k) and the sites' derivatives into ``D`` (n_active, 3, 3); ``pos``
+    (m,) int64 and ``FG`` (3, nf) work."""
     bodies, contacts, sites = model.bodies, model.contacts, model.sites
     gdim = bodies.gdim
     GT, RF = cp.GT, cp.RF
     nf = GT.shape[1]
     nfb = free_body.size
-    S = np.zeros((nf + nfb, nf + nfb))
+    for r in range(nf + nfb):
+        for c in range(nf + nfb):
+            S[r, c] = 0.0
     for j in range(nf):
         S[j, j] = 1.0
-    pos = np.full(wk.xi.size, -1, np.int64)
+    for j in range(pos.size):
+        pos[j] = -1
     for q in range(nfb):
         pos[free_body[q]] = q
-    FG = np.zeros((3, nf))
-    D = np.zeros((n_active, 3, 3))
+    for a in range(n_active):
+        for r in range(3):
+            for c in range(3):
+                D[a, r, c] = 0.0
     for a in range(n_active):
         k = wk.active[a]
         s0, n_rot = _body_rotations(bodies, contacts.body[sites.contact[k]])
@@ -709,17 +782,46 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows):
     for q in range(nfb):
         for q2 in range(nfb):
             S[nf + q, nf + q2] = body_rows[q, n_active * gdim + q2]
-    return np.linalg.inv(S), D
+
+
+@njit(cache=True, _nrt=False)
+def _invert(k, S, LU, ipiv):
+    """LU (k * k) <- S^-1 in Fortran order (``LU[:k * k].reshape((k, k)).T`` is S^-1) by LAPACK's getrf and getri
+    on a Fortran-order copy of S: the routines, the copy and the order of np.linalg.inv's result (so a product
+    with it takes the same BLAS path), without its allocations."""
+    for r in range(k):
+        for c in range(k):
+            value = S[r, c]
+            if not math.isfinite(value):
+                raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
+            LU[c * k + r] = value
+    if k > 0:
+        if _xgetrf(_XGESV_KIND, k, k, LU.ctypes, k, ipiv.ctypes) != 0:
+            raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
+        if _xgetri(_XGESV_KIND, k, LU.ctypes, k, ipiv.ctypes) != 0:
+            raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
 
 
 @njit(cache=True)
 def _woodbury_solve(S_inv, D, active, n_active, gdim, cp, body_rows, rhs):
     """x of J x = rhs through :func:`_woodbury`'s matrix (its inverse ``S_inv``, the sites' ``D``)."""
+    k = S_inv.shape[0]
+    x = np.empty(rhs.size)
+    _woodbury_solve_into(S_inv, D, active, n_active, gdim, cp, body_rows, rhs, x, np.empty(k), np.empty(k),
+                         np.empty(2))
+    return x
+
+
+@njit(cache=True, _nrt=False)
+def _woodbury_solve_into(S_inv, D, active, n_active, gdim, cp, body_rows, rhs, x, small, sol, scalars):
+    """:func:`_woodbury_solve` into ``x`` (may be ``rhs``), ``small`` and ``sol`` (nf + nfb) and ``scalars`` (2)
+    work."""
     GT, RF = cp.GT, cp.RF
     nf = GT.shape[1]
     na = n_active * gdim
     nfb = rhs.size - na
-    small = np.zeros(nf + nfb)
+    for j in range(nf + nfb):
+        small[j] = 0.0
     for a in range(n_active):
         k = active[a]
         for r in range(gdim):
@@ -734,8 +836,7 @@ def _woodbury_solve(S_inv, D, active, n_active, gdim, cp, body_rows, rhs):
         for col in range(na):
             value -= body_rows[q, col] * rhs[col]
         small[nf + q] = value
-    sol = S_inv @ small
-    x = np.empty(rhs.size)
+    _matvec(S_inv, small, sol, scalars)
     for a in range(n_active):
         k = active[a]
         for r in range(gdim):
@@ -746,30 +847,117 @@ def _woodbury_solve(S_inv, D, active, n_active, gdim, cp, body_rows, rhs):
             x[a * gdim + r] = value
     for q in range(nfb):
         x[na + q] = sol[nf + q]
-    return x
+
+
+class NewtonWork(NamedTuple):
+    """The Newton iteration's arrays (allocated once per call): its system in the contact space (at most ``size``
+    unknowns: the active sites' increments and the free body corrections; C order in the first N^2 entries of
+    ``J``), its copy in Fortran order for LAPACK's gesv, the corrections, and the Woodbury system of many active
+    sites (:func:`_woodbury`; empty where it cannot be taken)."""
+
+    J: np.ndarray             # (size * size,)
+    LU: np.ndarray            # (size * size,)
+    ipiv: np.ndarray          # (size,) int32 (LAPACK's integer)
+    rhs: np.ndarray           # (nr + m,) -R of the active sites and the free body coordinates
+    dy: np.ndarray            # (nr + m,) the Newton correction
+    trial: np.ndarray         # (nr + m,) -R at the trial point, then the simplified correction
+    scale: np.ndarray         # (nr + m,) the unknowns' scales
+    scale_b: np.ndarray       # (m,) the body coordinates' scales
+    body_pos: np.ndarray      # (m,) int64
+    active: np.ndarray        # (ns,) int64 the active sites of the iteration's matrix
+    du: np.ndarray            # (nr,) every site's correction
+    df: np.ndarray            # (ns, 3) the active sites' force corrections
+    dxi: np.ndarray           # (m,) the body corrections
+    S: np.ndarray             # (k * k,) the Woodbury matrix, k = nf + m (0: no Woodbury)
+    S_LU: np.ndarray          # (k * k,) its inverse in Fortran order (getrf and getri in place)
+    S_ipiv: np.ndarray        # (k,) int32
+    FG: np.ndarray            # (3, nf) work
+    small: np.ndarray         # (k,) work
+    sol: np.ndarray           # (k,) work
+    scalars: np.ndarray       # (2,) work: gemv's alpha and beta
+    D: np.ndarray             # (ns, 3, 3) the active sites' derivatives for it
+    body_rows: np.ndarray     # (m * (nr + m),) the body rows of J for it
 
 
 @njit(cache=True)
-def _newton(wk, cp, state, dt, model, free_body):
+def newton_work(ns, gdim, m, nf):
+    """:class:`NewtonWork` of ``ns`` sites, ``m`` body coordinates and ``nf`` free structure coordinates."""
+    nr = ns * gdim
+    size = min(nr, int(WOODBURY_FACTOR * nf)) + m
+    woodbury = nr > WOODBURY_FACTOR * nf
+    k = nf + m if woodbury else 0
+    return NewtonWork(np.zeros(size * size), np.zeros(size * size), np.zeros(size, np.int32), np.zeros(nr + m),
+                      np.zeros(nr + m), np.zeros(nr + m), np.zeros(nr + m), np.zeros(m), np.zeros(m, np.int64),
+                      np.zeros(max(ns, 1), np.int64), np.zeros(nr), np.zeros((ns, 3)), np.zeros(m),
+                      np.zeros(k * k), np.zeros(k * k), np.zeros(k, np.int32),
+                      np.zeros((3, nf if woodbury else 0)), np.zeros(k), np.zeros(k), np.zeros(2),
+                      np.zeros((ns if woodbury else 0, 3, 3)), np.zeros(m * (nr + m) if woodbury else 0))
+
+
+@njit(cache=True, _nrt=False)
+def _matvec(A, x, y, scalars):
+    """y = A x (A C- or Fortran-ordered) by BLAS's gemv as np.dot(A, x, y) calls it (the same numbers);
+    ``scalars`` (2) work."""
+    scalars[0] = 1.0
+    scalars[1] = 0.0
+    if A.shape[1] == 0:
+        for i in range(y.size):
+            y[i] = 0.0
+        return
+    if A.strides[0] >= A.strides[1]:        # C order: the transposed product of the Fortran view
+        _xgemv(_XGESV_KIND, _TRANSPOSED, A.shape[1], A.shape[0], scalars[0:].ctypes, A.ctypes, A.shape[1], x.ctypes,
+               scalars[1:].ctypes, y.ctypes)
+    else:
+        _xgemv(_XGESV_KIND, _NOT_TRANSPOSED, A.shape[0], A.shape[1], scalars[0:].ctypes, A.ctypes, A.shape[0], x.ctypes,
+               scalars[1:].ctypes, y.ctypes)
+
+
+@njit(cache=True, _nrt=False)
+def _lu_solve(N, J, LU, ipiv, x):
+    """x (N, holding the right side) <- J^-1 x by LAPACK's gesv: the routine np.linalg.solve calls, on the same
+    Fortran-order copy of J (kept), so the same result to the bit, without its three allocations per call."""
+    for r in range(N):
+        for c in range(N):
+            value = J[r, c]
+            if not math.isfinite(value):
+                raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
+            LU[c * N + r] = value
+    for r in range(N):
+        if not math.isfinite(x[r]):
+            raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
+    if N == 0:
+        return
+    info = _xgesv(_XGESV_KIND, N, 1, LU.ctypes, N, ipiv.ctypes, x.ctypes, N)
+    if info != 0:
+        raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
+
+
+@njit(cache=True, _nrt=False)
+def _newton(wk, nw, cp, state, dt, model, free_body):
     """Newton on the condensed step; True when converged (wk.dd, wk.xi hold the solution). Returns
-    (converged, iterations)."""
+    (converged, iterations). Compiled without reference counts (as the evaluation): its arrays are the work
+    records' (``nw``: :class:`NewtonWork`)."""
     bodies, sites, contacts = model.bodies, model.sites, model.contacts
     scheme = model.scheme
     zdd0, zd_mid = state.zdd, wk.zd_mid
     gdim = bodies.gdim
     nr = wk.dd.size
     m = wk.xi.size
+    nfb = free_body.size
     tol_site = SITE_TOL_M
     for r in range(nr):
         tol_site = max(tol_site, SITE_RTOL * abs(wk.dw[r]))
     n_active = _evaluate(wk.dd, wk.xi, wk, cp, state, dt, model, True)
-    scale_b = _scales(wk.dd, wk.xi, wk, bodies, dt, scheme)
+    scale_b = nw.scale_b
+    _scales(bodies, dt, scheme, scale_b)
+    active_rows = nw.active
+    du, df, dxi = nw.du, nw.df, nw.dxi
     its = 0
     for its in range(1, MAX_NEWTON + 1):
         res = 0.0
         for r in range(nr):
             res = max(res, abs(wk.R[r]) / tol_site)
-        for q in range(free_body.size):
+        for q in range(nfb):
             j = free_body[q]
             scale = abs(bodies.load[j]) + abs(bodies.mass[j] * zdd0[j]) + abs(wk.Q[j]) \
                 + abs(bodies.brake[j] * zd_mid[j])
@@ -779,19 +967,38 @@ def _newton(wk, cp, state, dt, model, free_body):
             return True, its
         # many active sites (a rotor lying on the ring): the system in the structure's coordinates is smaller
         woodbury = n_active * gdim > WOODBURY_FACTOR * cp.GT.shape[1]
-        active_rows = wk.active[:n_active].copy()
-        J, rhs = _newton_matrix(n_active, wk, cp, model, free_body, dt, not woodbury)
-        N = rhs.size
+        for a in range(n_active):
+            active_rows[a] = wk.active[a]
+        N = n_active * gdim + nfb
+        dy = nw.dy[:N]
+        NJ = 0 if woodbury else N          # the contact-space matrix (its buffer holds no larger one)
+        J = nw.J[:NJ * NJ].reshape((NJ, NJ))
+        # the Woodbury system's views (empty when it is not taken: its buffers may be)
+        k = cp.GT.shape[1] + nfb if woodbury else 0
+        S_inv = nw.S_LU[:k * k].reshape((k, k)).T         # Fortran order, as np.linalg.inv returns it
+        D = nw.D[:n_active if woodbury else 0]
+        body_rows = nw.body_rows[:nfb * N if woodbury else 0].reshape((nfb if woodbury else 0, N))
         if woodbury:
-            S_inv, D = _woodbury(n_active, wk, cp, model, free_body, J)
-            dy = _woodbury_solve(S_inv, D, active_rows, n_active, gdim, cp, J, rhs)
+            rhs = nw.rhs[:N]
+            _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, False, body_rows, rhs, nw.body_pos)
+            _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, nw.S[:k * k].reshape((k, k)), D,
+                           nw.body_pos, nw.FG)
+            _invert(k, nw.S[:k * k].reshape((k, k)), nw.S_LU, nw.S_ipiv)
+            _woodbury_solve_into(S_inv, D, active_rows, n_active, gdim, cp, body_rows, rhs, dy, nw.small, nw.sol,
+                                 nw.scalars)
         else:
-            S_inv, D = np.zeros((0, 0)), np.zeros((0, 3, 3))
-            dy = np.linalg.solve(J, rhs)
+            rhs = nw.rhs[:N]
+            _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, True, J, rhs, nw.body_pos)
+            for r in range(N):
+                dy[r] = rhs[r]
+            _lu_solve(N, J, nw.LU, nw.ipiv, dy)
         # the correction of every site: active ones from dy; a separated one follows from the others
         # (its force is zero): du_I = -R_I + H_IA (Fd_A du_A + Fz_A dxi)
-        du = -wk.R.copy()
-        df = np.zeros((nr // gdim, 3))
+        for r in range(nr):
+            du[r] = -wk.R[r]
+        for i in range(df.shape[0]):
+            for r in range(3):
+                df[i, r] = 0.0
         for a in range(n_active):
             k = wk.active[a]
             c = sites.contact[k]
@@ -802,7 +1009,7 @@ def _newton(wk, cp, state, dt, model, free_body):
                 for cc in range(gdim):
                     value += wk.Fd[k, r, cc] * dy[a * gdim + cc]
                 for kk in range(gdim + n_rot):
-                    for q in range(free_body.size):
+                    for q in range(nfb):
                         if free_body[q] == s0 + kk:
                             value += wk.Fz[k, r, kk] * dy[n_active * gdim + q]
                 df[k, r] = value
@@ -813,37 +1020,39 @@ def _newton(wk, cp, state, dt, model, free_body):
             k = wk.active[a]
             for r in range(gdim):
                 du[k * gdim + r] = dy[a * gdim + r]
-        dxi = np.zeros(m)
-        for q in range(free_body.size):
+        for j in range(m):
+            dxi[j] = 0.0
+        for q in range(nfb):
             dxi[free_body[q]] = dy[n_active * gdim + q]
         # damped Newton, natural monotonicity test (Deuflhard): the simplified correction at the trial point,
         # J^-1 R(trial) with this iteration's J, must be shorter than the Newton correction (scaled unknowns)
-        scale = np.empty(N)
+        scale = nw.scale
         for r in range(n_active * gdim):
             scale[r] = LENGTH_SCALE_M
-        for q in range(free_body.size):
+        for q in range(nfb):
             scale[n_active * gdim + q] = scale_b[free_body[q]]
-        size0 = np.sqrt(np.sum((dy / scale) ** 2))
+        size0 = _scaled_norm(dy, scale, N)
         lam = 1.0
         n_trial = n_active
+        trial = nw.trial[:N]
         for _ in range(14):
             for r in range(nr):
                 wk.dd_try[r] = wk.dd[r] + lam * du[r]
             for j in range(m):
                 wk.xi_try[j] = wk.xi[j] + lam * dxi[j]
             n_trial = _evaluate(wk.dd_try, wk.xi_try, wk, cp, state, dt, model, True)
-            r_trial = np.zeros(N)
             for a in range(n_active):
                 i = active_rows[a]
                 for r in range(gdim):
-                    r_trial[a * gdim + r] = -wk.R[i * gdim + r]
-            for q in range(free_body.size):
-                r_trial[n_active * gdim + q] = -wk.rz[free_body[q]]
+                    trial[a * gdim + r] = -wk.R[i * gdim + r]
+            for q in range(nfb):
+                trial[n_active * gdim + q] = -wk.rz[free_body[q]]
             if woodbury:
-                simplified = _woodbury_solve(S_inv, D, active_rows, n_active, gdim, cp, J, r_trial)
+                _woodbury_solve_into(S_inv, D, active_rows, n_active, gdim, cp, body_rows, trial, trial, nw.small,
+                                     nw.sol, nw.scalars)
             else:
-                simplified = np.linalg.solve(J, r_trial)
-            if np.sqrt(np.sum((simplified / scale) ** 2)) <= (1.0 - 0.5 * lam) * size0 + 1e-300:
+                _lu_solve(N, J, nw.LU, nw.ipiv, trial)
+            if _scaled_norm(trial, scale, N) <= (1.0 - 0.5 * lam) * size0 + 1e-300:
                 break
             lam *= 0.5
         for r in range(nr):
@@ -854,6 +1063,16 @@ def _newton(wk, cp, state, dt, model, free_body):
         if lam < 1e-3 and res < ROUND_OFF_FACTOR:
             return True, its          # no descent left within a few of the tolerances: round-off floor
     return False, its
+
+
+@njit(cache=True, _nrt=False)
+def _scaled_norm(x, scale, N):
+    """sqrt(sum((x / scale)^2)) over the first N entries, summed in order (as np.sum)."""
+    total = 0.0
+    for r in range(N):
+        value = x[r] / scale[r]
+        total += value * value
+    return math.sqrt(total)
 
 
 # ------------------------------------------------------------------ the loop
@@ -915,7 +1134,7 @@ def _snap(level, dt):
     return level / 2.0 ** k
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _status(y, v, z, zd, wk, model, closed_sites, closed):
     """Contact status at an end-of-step state (site displacements ``y`` (ns, 3), velocities ``v``): closed per
     contact and link (into ``closed``) and per site, and the earliest predicted closure [s] (inf if none)."""
@@ -934,7 +1153,8 @@ def _status(y, v, z, zd, wk, model, closed_sites, closed):
         elif rate < 0.0:
             closure = min(closure, gap / -rate)
     for l in range(links.lower.size):
-        _, delta, rate, _, _, _, _, _, _, _ = link_force(l, z, zd, bodies, links, wk.lf, wk.lP, False)
+        _, delta, rate, _, _, _, _, _, _, _ = link_force(l, z, zd, bodies, links, wk.lf, wk.lP, False,
+                                                        wk.link_work)
         closed[n_c + l] = delta > 0.0
         if delta <= 0.0 and rate > 0.0:
             closure = min(closure, -delta / rate)
@@ -964,6 +1184,7 @@ def run(t_end, state, model, cache, out, track_energy, frames):
         s0, n_rot = _body_rotations(bodies, b)
         kmax = max(kmax, gdim + n_rot)
     wk = step_work(ns, gdim, m, kmax, n_l)
+    nw = newton_work(ns, gdim, m, nf)
     free_count = 0
     for j in range(m):
         if bodies.free[j]:
@@ -980,12 +1201,28 @@ def run(t_end, state, model, cache, out, track_energy, frames):
     free_rows = sparse_rows(rows_R, free)
     u = np.zeros(nf)
     u_work = np.zeros(nf)
+    # the structure's step: increments, end-of-step rates and coordinates, the generalized mid-point arguments of
+    # M, C and K and their products, the free residual and its contact-free correction (filled index by index, in
+    # the order of the array expressions they replace, so the same numbers; no array allocated per step)
+    n = q.size
+    dq = np.zeros(n)
+    a1 = np.zeros(n)
+    v1 = np.zeros(n)
+    q1 = np.zeros(n)
+    x_mid = np.zeros(n)
+    r_M = np.zeros(n)
+    r_C = np.zeros(n)
+    r_K = np.zeros(n)
+    r0F = np.zeros(nf)
+    w = np.zeros(nf)
     y_end = np.zeros((ns, 3))
     v_end = np.zeros((ns, 3))
     closed_sites = np.zeros(ns, np.bool_)
     closed_new_sites = np.zeros(ns, np.bool_)
     closed = np.zeros(n_c + n_l, np.bool_)
     closed_new = np.zeros(n_c + n_l, np.bool_)
+    record_power = np.zeros(n_c + n_l)
+    record_seen = np.zeros(n_c, np.bool_)
     # the status of the current state
     for i in range(ns):
         for k in range(gdim):
@@ -1019,25 +1256,40 @@ def run(t_end, state, model, cache, out, track_energy, frames):
             dt_try = dt if remainder >= dt * (1.0 - 1e-9) else remainder
             istate[I_ATTEMPTS] += 1
             t1 = t + dt_try
-            slot = _effective(structure, rows_R, dt_try, scheme, cache)
+            slot = -1
+            for c in range(cache.dt.size):
+                if cache.dt[c] > 0 and abs(cache.dt[c] - dt_try) <= 1e-12 * dt_try:
+                    slot = c
+                    break
+            if slot < 0:
+                slot = _effective(structure, rows_R, dt_try, scheme, cache)
             A_inv = cache.inv[slot]
             cp = Compliance(cache.H[slot], cache.GT[slot], free_rows, u, u_work)
             c_acc = 1.0 / (beta * dt_try * dt_try)
             input_values(t1, inputs, pq)
-            # contact-free increments: predictor, the prescribed inputs at t1, w = -K_eff^-1 r0
-            dq = dt_try * v + 0.5 * dt_try * dt_try * a
+            # contact-free increments: predictor, the prescribed inputs at t1, w = -K_eff^-1 r0,
+            # r0 = M ((1 - am) a1 + am a) + C ((1 - af) v1 + af v) + K (q + (1 - af) dq) - load
+            for i in range(n):
+                dq[i] = dt_try * v[i] + 0.5 * dt_try * dt_try * a[i]
             for p in range(P.size):
                 dq[P[p]] = pq[p] - q[P[p]]
-            a1 = (dq - dt_try * v) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a
-            v1 = v + dt_try * ((1.0 - gamma) * a + gamma * a1)
-            r0 = structure.M @ ((1.0 - am) * a1 + am * a) + structure.C @ ((1.0 - af) * v1 + af * v) \
-                + structure.K @ (q + (1.0 - af) * dq) - structure.load
-            r0F = np.empty(nf)
+            for i in range(n):
+                a1[i] = (dq[i] - dt_try * v[i]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[i]
+                v1[i] = v[i] + dt_try * ((1.0 - gamma) * a[i] + gamma * a1[i])
+                x_mid[i] = (1.0 - am) * a1[i] + am * a[i]
+            np.dot(structure.M, x_mid, r_M)
+            for i in range(n):
+                x_mid[i] = (1.0 - af) * v1[i] + af * v[i]
+            np.dot(structure.C, x_mid, r_C)
+            for i in range(n):
+                x_mid[i] = q[i] + (1.0 - af) * dq[i]
+            np.dot(structure.K, x_mid, r_K)
             for i in range(nf):
-                r0F[i] = r0[free[i]]
-            w = -(A_inv @ r0F)
+                j = free[i]
+                r0F[i] = r_M[j] + r_C[j] + r_K[j] - structure.load[j]
+            np.dot(A_inv, r0F, w)
             for i in range(nf):
-                dq[free[i]] += w[i]
+                dq[free[i]] += -w[i]
             # the sites' start values and contact-free increments
             for i in range(ns):
                 for k in range(gdim):
@@ -1057,7 +1309,7 @@ def run(t_end, state, model, cache, out, track_energy, frames):
                 wk.dd[r] = wk.dw[r] + (_row_dot(free_rows, r, u_work) if n_loaded else 0.0)
             for j in range(m):
                 wk.xi[j] = 0.0
-            converged, its = _newton(wk, cp, state, dt_try, model, free_body)
+            converged, its = _newton(wk, nw, cp, state, dt_try, model, free_body)
             istate[I_NEWTON] += max(its, 1)
             if not converged:
                 istate[I_CUTBACKS] += 1
@@ -1071,9 +1323,10 @@ def run(t_end, state, model, cache, out, track_energy, frames):
             # evaluated the forces last at its solution)
             for i in range(nf):
                 dq[free[i]] += u[i]
-            a1 = (dq - dt_try * v) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a
-            v1 = v + dt_try * ((1.0 - gamma) * a + gamma * a1)
-            q1 = q + dq
+            for i in range(n):
+                a1[i] = (dq[i] - dt_try * v[i]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[i]
+                v1[i] = v[i] + dt_try * ((1.0 - gamma) * a[i] + gamma * a1[i])
+                q1[i] = q[i] + dq[i]
             for i in range(ns):
                 for k in range(gdim):
                     y_end[i, k] = wk.y0[i, k] + wk.dd[i * gdim + k]
@@ -1088,7 +1341,10 @@ def run(t_end, state, model, cache, out, track_energy, frames):
                 continue
             break
         # accepted: the step's forces (at its mid-point) were evaluated last by the Newton iteration
-        _record(rows, t1, dt_try, q1, v1, pq, wk, state, model, out, closed_new, y_end, track_energy)
+        _record(rows, t1, dt_try, q1, pq, wk, state, model, out, closed_new, y_end, record_power, record_seen,
+                nw.scalars)
+        if track_energy:
+            _record_energy(rows, dt_try, q1, v1, v, structure, bodies, model.sites, model.contacts, wk, sums, out)
         rows += 1
         q[:] = q1
         v[:] = v1
@@ -1131,20 +1387,23 @@ def run(t_end, state, model, cache, out, track_energy, frames):
     return DONE, rows
 
 
-@njit(cache=True)
-def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track_energy):
-    """One output row, the dissipated energies and the per-site diagnostics of an accepted step."""
-    structure, sites, contacts, bodies, links, sample_rows = (model.structure, model.sites, model.contacts,
-                                                              model.bodies, model.links, model.sample_rows)
-    sums, v0, z1, zd1 = state.sums, state.v, wk.z1, wk.zd1
+@njit(cache=True, _nrt=False)
+def _record(row, t1, dt, q1, pq, wk, state, model, out, closed, y_end, power, seen, scalars):
+    """One output row, the dissipated energies and the per-site diagnostics of an accepted step (``power``
+    (n_contacts + n_links,), ``seen`` (n_contacts,) bool and ``scalars`` (2): work); the energy columns are
+    :func:`_record_energy`'s."""
+    sites, contacts, links, sample_rows = model.sites, model.contacts, model.links, model.sample_rows
+    sums, z1, zd1 = state.sums, wk.z1, wk.zd1
     n_c = contacts.kind.size
     n_l = links.lower.size
     out.time[row] = t1
     out.dt[row] = dt
-    out.samples[row, :] = sample_rows @ q1
-    out.inputs[row, :] = pq
-    out.z[row, :] = z1
-    out.zd[row, :] = zd1
+    _matvec(sample_rows, q1, out.samples[row], scalars)
+    for p in range(pq.size):
+        out.inputs[row, p] = pq[p]
+    for j in range(z1.size):
+        out.z[row, j] = z1[j]
+        out.zd[row, j] = zd1[j]
     for c in range(n_c + n_l):
         for k in range(3):
             out.force[row, c, k] = 0.0
@@ -1155,9 +1414,10 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
         out.normal[row, c] = 0.0
         out.area[row, c] = 0.0
         out.peak[row, c] = 0.0
-    power = np.zeros(n_c + n_l)
-    tq = np.zeros(3)
-    fneg = np.zeros(3)
+    for c in range(n_c + n_l):
+        power[c] = 0.0
+    tq = wk.fxa
+    fneg = wk.link_work[0]
     # diagnostics: the forces act at the generalized mid-point t1 - alpha_f dt, the displacements y_end at t1
     diagnose = out.site_sums.shape[0] == sites.contact.size
     acc = SiteAccumulators(out.site_sums, out.site_bins, out.site_group, out.site_phase)
@@ -1215,33 +1475,12 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
         sums.dissipated[c] += 0.5 * dt * (previous + power[c])
         sums.power[c] = power[c]
         out.dissipated[row, c] = sums.dissipated[c]
-    if track_energy:
-        vm = 0.5 * (v0 + v1)
-        p_damp = vm @ (structure.C @ vm)
-        sums.damping[0] += dt * p_damp
-        sums.damping[1] = p_damp
-        out.energy[row, 0] = 0.5 * (v1 @ (structure.M @ v1))
-        out.energy[row, 1] = 0.5 * (q1 @ (structure.K @ q1))
-        kin = 0.0
-        for j in range(z1.size):
-            kin += 0.5 * bodies.mass[j] * zd1[j] * zd1[j]
-        out.energy[row, 2] = kin
-        pen = 0.0
-        for i in range(sites.contact.size):
-            c = sites.contact[i]
-            if wk.gap[i] < 0.0:
-                if contacts.kind[c] == NODE:
-                    e = contacts.exponent[c]
-                    pen += contacts.stiffness[c] * (-wk.gap[i]) ** (e + 1.0) / (e + 1.0)
-                else:
-                    pen += sites.weight[i] * _penalty_energy(wk.gap[i], contacts.stiffness[c], contacts.rounding[c])
-        out.energy[row, 3] = pen
-        out.energy[row, 4] = sums.damping[0]
     # each contact's first site: its displacement in its frame (the contact point's path)
     for c in range(n_c):
         for k in range(3):
             out.probe[row, c, k] = 0.0
-    seen = np.zeros(n_c, np.bool_)
+    for c in range(n_c):
+        seen[c] = False
     for i in range(sites.contact.size):
         c = sites.contact[i]
         if seen[c]:
@@ -1249,6 +1488,33 @@ def _record(row, t1, dt, q1, v1, pq, wk, state, model, out, closed, y_end, track
         seen[c] = True
         for r in range(3):
             out.probe[row, c, r] = _dot3(sites.frame[i, r], y_end[i])
+
+
+@njit(cache=True)
+def _record_energy(row, dt, q1, v1, v0, structure, bodies, sites, contacts, wk, sums, out):
+    """The energy columns of an output row and the structural damping loss (output.energies: allocates)."""
+    z1, zd1 = wk.z1, wk.zd1
+    vm = 0.5 * (v0 + v1)
+    p_damp = vm @ (structure.C @ vm)
+    sums.damping[0] += dt * p_damp
+    sums.damping[1] = p_damp
+    out.energy[row, 0] = 0.5 * (v1 @ (structure.M @ v1))
+    out.energy[row, 1] = 0.5 * (q1 @ (structure.K @ q1))
+    kin = 0.0
+    for j in range(z1.size):
+        kin += 0.5 * bodies.mass[j] * zd1[j] * zd1[j]
+    out.energy[row, 2] = kin
+    pen = 0.0
+    for i in range(sites.contact.size):
+        c = sites.contact[i]
+        if wk.gap[i] < 0.0:
+            if contacts.kind[c] == NODE:
+                e = contacts.exponent[c]
+                pen += contacts.stiffness[c] * (-wk.gap[i]) ** (e + 1.0) / (e + 1.0)
+            else:
+                pen += sites.weight[i] * _penalty_energy(wk.gap[i], contacts.stiffness[c], contacts.rounding[c])
+    out.energy[row, 3] = pen
+    out.energy[row, 4] = sums.damping[0]
 
 
 @njit(cache=True)
