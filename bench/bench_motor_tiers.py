@@ -33,8 +33,8 @@ from app.case.schema import load_case  # noqa: E402
 from app.lumped import friction_drive as fd  # noqa: E402
 
 COLUMNS = ["tier", "load_mN_m", "held", "speed_rpm", "torque_mN_m", "normal_force_N", "wave_normal_um",
-           "speed_error_pct", "torque_error_pct", "reference", "periods", "steady", "half_mean_rpm", "half_min_rpm",
-           "half_max_rpm", "loop_wall_s", "setup_wall_s", "run"]
+           "speed_error_pct", "torque_error_pct", "reference", "periods", "steady", "half_mean", "half_min",
+           "half_max", "loop_wall_s", "setup_wall_s", "run"]
 
 
 def run_point(directory: Path) -> dict:
@@ -45,7 +45,7 @@ def run_point(directory: Path) -> dict:
     rotation = summary["case"]["transient"]["bodies"][0]["rotations"][0]
     held = rotation["motion"] == "fixed"
     steady = tr.get("steady_state") or {}
-    half = _last_half_rpm(steady) if not steady.get("steady") else (None, None, None)
+    half = _last_half(steady) if not steady.get("steady") else (None, None, None)
     return {
         "tier": summary["case"]["tier"], "held": held,
         "load_mN_m": 1e3 * (motor["friction_torque_N_m"] if held else motor["load_torque_N_m"]),
@@ -53,21 +53,22 @@ def run_point(directory: Path) -> dict:
         "normal_force_N": motor["normal_force_N"],
         "wave_normal_um": 1e6 * motor["contact_point_amplitude_m"]["normal"],
         "periods": steady.get("cycles"), "steady": bool(steady.get("steady")),
-        "half_mean_rpm": half[0], "half_min_rpm": half[1], "half_max_rpm": half[2],
+        "half_mean": half[0], "half_min": half[1], "half_max": half[2],
         "loop_wall_s": tr["wall_s_per_simulated_ms"] * tr["simulated_time_s"] * 1e3,
         "setup_wall_s": tr["setup_wall_s"], "run": str(directory),
     }
 
 
-def _last_half_rpm(steady: dict) -> tuple:
-    """(mean, least, largest) period-mean speed [rpm] over the run's last half: the spread of a point that wanders
-    (the window rule not met; not reported for a steady point, whose last half may hold its approach) beside the
-    last window's mean; Nones for a held rotor (its watched value is torque)."""
+def _last_half(steady: dict) -> tuple:
+    """(mean, least, largest) over the run's last half of the period means of the watched quantity (a free rotor's
+    speed [rpm], a held rotor's torque [mN m]): the spread of a point that wanders (the window rule not met; not
+    reported for a steady point, whose last half may hold its approach) beside the last window's mean."""
     means = steady.get("cycle_means") or []
-    if steady.get("watched") != "speed" or len(means) < 2:
+    scale = {"speed": 60.0 / (2.0 * math.pi), "torque": 1e3}.get(steady.get("watched"))
+    if scale is None or len(means) < 2:
         return None, None, None
-    rpm = [v * 60.0 / (2.0 * math.pi) for v in means[len(means) // 2:]]
-    return sum(rpm) / len(rpm), min(rpm), max(rpm)
+    half = [v * scale for v in means[len(means) // 2:]]
+    return sum(half) / len(half), min(half), max(half)
 
 
 def lumped_points(section, load_mN_m: float, held: bool, repeat: int) -> list[dict]:
@@ -80,14 +81,14 @@ def lumped_points(section, load_mN_m: float, held: bool, repeat: int) -> list[di
         rows.append({"tier": "lumped", "held": held, "load_mN_m": torque * 1e3 if held else load_mN_m,
                      "speed_rpm": point["speed_rpm"], "torque_mN_m": torque * 1e3,
                      "normal_force_N": p.normal_force_N, "wave_normal_um": point["wave_amplitude_m"] * 1e6,
-                     "periods": None, "steady": True, "half_mean_rpm": None, "half_min_rpm": None,
-                     "half_max_rpm": None, "loop_wall_s": wall, "setup_wall_s": 0.0, "run": "lumped (this process)"})
+                     "periods": None, "steady": True, "half_mean": None, "half_min": None,
+                     "half_max": None, "loop_wall_s": wall, "setup_wall_s": 0.0, "run": "lumped (this process)"})
     return rows
 
 
 def with_errors(rows: list[dict]) -> list[dict]:
     """Each row's error against the FE row at its load, else the modal row: the speed of a free point, the torque
-    of a held one."""
+    of a held one (against the reference's last-half mean where it did not settle)."""
     def reference(row):
         for tier in ("fe", "modal"):
             for other in rows:
@@ -99,12 +100,17 @@ def with_errors(rows: list[dict]) -> list[dict]:
     for row in rows:
         ref = reference(row) if row["tier"] != "fe" else None
         row["reference"] = ref["tier"] if ref else ""
-        row["speed_error_pct"] = (100.0 * (row["speed_rpm"] / ref["speed_rpm"] - 1.0)
+        row["speed_error_pct"] = (100.0 * (row["speed_rpm"] / _level(ref, "speed_rpm") - 1.0)
                                   if ref and not row["held"] else None)
         # a free point's torque is its load in every tier (steady state); the held rotor's is the stall torque
-        row["torque_error_pct"] = (100.0 * (row["torque_mN_m"] / ref["torque_mN_m"] - 1.0)
+        row["torque_error_pct"] = (100.0 * (row["torque_mN_m"] / _level(ref, "torque_mN_m") - 1.0)
                                    if ref and row["held"] else None)
     return rows
+
+
+def _level(row: dict, key: str) -> float:
+    """A reference row's value: its last window's mean, or over its last half where it did not settle."""
+    return row["half_mean"] if row["half_mean"] is not None else row[key]
 
 
 def fmt(value, spec: str) -> str:
@@ -127,15 +133,15 @@ def main() -> None:
     order = {"fe": 0, "modal": 1, "lumped": 2}
     rows = with_errors(sorted(runs + lumped, key=lambda r: (r["held"], round(r["load_mN_m"] if not r["held"] else 0, 6),
                                                              order[r["tier"]])))
-    print("| tier | load [mN m] | speed [rpm] | last half: mean (range) [rpm] | torque [mN m] | N [N] | wave [µm] | "
-          "speed error | torque error | periods (steady) | loop wall [s] | set-up [s] |")
+    print("| tier | load [mN m] | speed [rpm] | last half: mean (range) [rpm; held: mN m] | torque [mN m] | N [N] | "
+          "wave [µm] | speed error | torque error | periods (steady) | loop wall [s] | set-up [s] |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     def err(r, k):
         return "-" if r[k] is None else f"{r[k]:+.1f} % ({r['reference']})"
 
     for r in rows:
-        half = ("-" if r["half_mean_rpm"] is None else
-                f"{r['half_mean_rpm']:.2f} ({r['half_min_rpm']:.2f}–{r['half_max_rpm']:.2f})")
+        half = ("-" if r["half_mean"] is None else
+                f"{r['half_mean']:.2f} ({r['half_min']:.2f}–{r['half_max']:.2f})")
         periods = "-" if r["periods"] is None else f"{r['periods']} ({'yes' if r['steady'] else 'no'})"
         load = "held" if r["held"] else fmt(r["load_mN_m"], ".3f")
         print(f"| {r['tier']} | {load} | {r['speed_rpm']:.2f} | {half} | "
