@@ -8,7 +8,7 @@ tier's stall is the law's μ N r_c. Each point's error is taken against the FE p
 exists, else against the modal tier's.
 
     .venv/bin/python bench/bench_motor_tiers.py --lumped-case cases/wwusm-motor-lumped.toml \
-        --runs /work/runs/fe26/point RUN_DIR ... [--csv docs/figures/motor_tiers.csv]
+        --runs /work/runs/fe26/point RUN_DIR ... [--csv docs/figures/motor_tiers.csv] [--no-lumped]
 
 The cost of a point: the loop's wall time per simulated ms times the simulated time (a run killed and resumed
 reports the rate of its last part, applied to the whole), and the set-up (mesh, reduced stator or cache read,
@@ -86,10 +86,13 @@ def lumped_points(section, load_mN_m: float, held: bool, repeat: int) -> list[di
     return rows
 
 
-def with_errors(rows: list[dict]) -> list[dict]:
+def with_errors(rows: list[dict], baselines: list[dict] = ()) -> list[dict]:
     """Each row's error against the FE row at its load, else the modal row: the speed of a free point, the torque
-    of a held one (against the reference's last-half mean where it did not settle)."""
+    of a held one (a point that did not settle by its last-half mean). With ``baselines`` (a
+    convergence study): against the baseline run of the same kind (free or held) instead."""
     def reference(row):
+        if baselines:
+            return next((b for b in baselines if b["held"] == row["held"] and b["run"] != row["run"]), None)
         for tier in ("fe", "modal"):
             for other in rows:
                 if other["tier"] == tier and other is not row and other["held"] == row["held"] and (
@@ -98,18 +101,18 @@ def with_errors(rows: list[dict]) -> list[dict]:
         return None
 
     for row in rows:
-        ref = reference(row) if row["tier"] != "fe" else None
-        row["reference"] = ref["tier"] if ref else ""
-        row["speed_error_pct"] = (100.0 * (row["speed_rpm"] / _level(ref, "speed_rpm") - 1.0)
+        ref = reference(row) if row["tier"] != "fe" or baselines else None
+        row["reference"] = (Path(ref["run"]).name if baselines else ref["tier"]) if ref else ""
+        row["speed_error_pct"] = (100.0 * (_level(row, "speed_rpm") / _level(ref, "speed_rpm") - 1.0)
                                   if ref and not row["held"] else None)
         # a free point's torque is its load in every tier (steady state); the held rotor's is the stall torque
-        row["torque_error_pct"] = (100.0 * (row["torque_mN_m"] / _level(ref, "torque_mN_m") - 1.0)
+        row["torque_error_pct"] = (100.0 * (_level(row, "torque_mN_m") / _level(ref, "torque_mN_m") - 1.0)
                                    if ref and row["held"] else None)
     return rows
 
 
 def _level(row: dict, key: str) -> float:
-    """A reference row's value: its last window's mean, or over its last half where it did not settle."""
+    """A row's value for a comparison: its last window's mean, or over its last half where it did not settle."""
     return row["half_mean"] if row["half_mean"] is not None else row[key]
 
 
@@ -123,19 +126,29 @@ def main() -> None:
     ap.add_argument("--lumped-case", default=str(ROOT / "cases" / "wwusm-motor-lumped.toml"))
     ap.add_argument("--repeat", type=int, default=3, help="lumped solves per load; the best is reported")
     ap.add_argument("--csv", help="write the table here as well")
+    ap.add_argument("--no-lumped", action="store_true",
+                    help="only the runs' rows (a table of modal or FE points, e.g. a convergence study)")
+    ap.add_argument("--baselines", nargs="*", default=[],
+                    help="runs (a free and a held one) every other run of its kind is compared with, in the runs' "
+                         "order instead of sorted by load")
     args = ap.parse_args()
     runs = [run_point(Path(d)) for d in args.runs]
     section = load_case(args.lumped_case).lumped
     loads = sorted({(round(r["load_mN_m"], 6), r["held"]) for r in runs if not r["held"]}) + [(None, True)]
     lumped = []
-    for load, held in loads:
+    for load, held in ([] if args.no_lumped else loads):
         lumped += lumped_points(section, load or 0.0, held, args.repeat)
     order = {"fe": 0, "modal": 1, "lumped": 2}
-    rows = with_errors(sorted(runs + lumped, key=lambda r: (r["held"], round(r["load_mN_m"] if not r["held"] else 0, 6),
-                                                             order[r["tier"]])))
-    print("| tier | load [mN m] | speed [rpm] | last half: mean (range) [rpm; held: mN m] | torque [mN m] | N [N] | "
-          "wave [µm] | speed error | torque error | periods (steady) | loop wall [s] | set-up [s] |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    baselines = [run_point(Path(d)) for d in args.baselines]
+    if baselines:
+        rows = with_errors(baselines + [r for r in runs + lumped if r["run"] not in {b["run"] for b in baselines}],
+                           baselines)
+    else:
+        rows = with_errors(sorted(runs + lumped, key=lambda r: (
+            r["held"], round(r["load_mN_m"] if not r["held"] else 0, 6), order[r["tier"]])))
+    print("| run | tier | load [mN m] | speed [rpm] | last half: mean (range) [rpm; held: mN m] | torque [mN m] | "
+          "N [N] | wave [µm] | speed error | torque error | periods (steady) | loop wall [s] | set-up [s] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     def err(r, k):
         return "-" if r[k] is None else f"{r[k]:+.1f} % ({r['reference']})"
 
@@ -144,7 +157,7 @@ def main() -> None:
                 f"{r['half_mean']:.2f} ({r['half_min']:.2f}–{r['half_max']:.2f})")
         periods = "-" if r["periods"] is None else f"{r['periods']} ({'yes' if r['steady'] else 'no'})"
         load = "held" if r["held"] else fmt(r["load_mN_m"], ".3f")
-        print(f"| {r['tier']} | {load} | {r['speed_rpm']:.2f} | {half} | "
+        print(f"| {Path(r['run']).name} | {r['tier']} | {load} | {r['speed_rpm']:.2f} | {half} | "
               f"{r['torque_mN_m']:.3f} | {r['normal_force_N']:.3f} | {r['wave_normal_um']:.3f} | "
               f"{err(r, 'speed_error_pct')} | {err(r, 'torque_error_pct')} | {periods} | "
               f"{r['loop_wall_s']:.4g} | {r['setup_wall_s']:.4g} |")
