@@ -34,7 +34,7 @@ from app.lumped import friction_drive as fd  # noqa: E402
 
 COLUMNS = ["tier", "load_mN_m", "held", "speed_rpm", "torque_mN_m", "normal_force_N", "wave_normal_um",
            "speed_error_pct", "torque_error_pct", "reference", "periods", "steady", "half_mean", "half_min",
-           "half_max", "loop_wall_s", "setup_wall_s", "run"]
+           "half_max", "half_ci95", "loop_wall_s", "setup_wall_s", "run"]
 
 
 def run_point(directory: Path) -> dict:
@@ -45,7 +45,7 @@ def run_point(directory: Path) -> dict:
     rotation = summary["case"]["transient"]["bodies"][0]["rotations"][0]
     held = rotation["motion"] == "fixed"
     steady = tr.get("steady_state") or {}
-    half = _last_half(steady) if not steady.get("steady") else (None, None, None)
+    half = _last_half(steady) if not steady.get("steady") else (None, None, None, None)
     return {
         "tier": summary["case"]["tier"], "held": held,
         "load_mN_m": 1e3 * (motor["friction_torque_N_m"] if held else motor["load_torque_N_m"]),
@@ -53,22 +53,31 @@ def run_point(directory: Path) -> dict:
         "normal_force_N": motor["normal_force_N"],
         "wave_normal_um": 1e6 * motor["contact_point_amplitude_m"]["normal"],
         "periods": steady.get("cycles"), "steady": bool(steady.get("steady")),
-        "half_mean": half[0], "half_min": half[1], "half_max": half[2],
+        "half_mean": half[0], "half_min": half[1], "half_max": half[2], "half_ci95": half[3],
         "loop_wall_s": tr["wall_s_per_simulated_ms"] * tr["simulated_time_s"] * 1e3,
         "setup_wall_s": tr["setup_wall_s"], "run": str(directory),
     }
 
 
+#: batches of the last half for the mean's interval, and Student's t at 95 % for their number less one
+BATCHES, T95 = 8, 2.365
+
+
 def _last_half(steady: dict) -> tuple:
-    """(mean, least, largest) over the run's last half of the period means of the watched quantity (a free rotor's
-    speed [rpm], a held rotor's torque [mN m]): the spread of a point that wanders (the window rule not met; not
-    reported for a steady point, whose last half may hold its approach) beside the last window's mean."""
+    """(mean, least, largest, 95 % half-width of the mean) over the run's last half of the period means of the
+    watched quantity (a free rotor's speed [rpm], a held rotor's torque [mN m]): the level of a point that wanders
+    (the window rule not met; not reported for a steady point, whose last half may hold its approach). The interval
+    is from batch means (BATCHES consecutive batches, Student's t), since consecutive periods are correlated."""
     means = steady.get("cycle_means") or []
     scale = {"speed": 60.0 / (2.0 * math.pi), "torque": 1e3}.get(steady.get("watched"))
-    if scale is None or len(means) < 2:
-        return None, None, None
+    if scale is None or len(means) < 2 * BATCHES:
+        return None, None, None, None
     half = [v * scale for v in means[len(means) // 2:]]
-    return sum(half) / len(half), min(half), max(half)
+    size = len(half) // BATCHES
+    batch = [sum(half[i * size:(i + 1) * size]) / size for i in range(BATCHES)]
+    centre = sum(batch) / BATCHES
+    spread = math.sqrt(sum((b - centre) ** 2 for b in batch) / (BATCHES - 1))
+    return sum(half) / len(half), min(half), max(half), T95 * spread / math.sqrt(BATCHES)
 
 
 def lumped_points(section, load_mN_m: float, held: bool, repeat: int) -> list[dict]:
@@ -82,7 +91,8 @@ def lumped_points(section, load_mN_m: float, held: bool, repeat: int) -> list[di
                      "speed_rpm": point["speed_rpm"], "torque_mN_m": torque * 1e3,
                      "normal_force_N": p.normal_force_N, "wave_normal_um": point["wave_amplitude_m"] * 1e6,
                      "periods": None, "steady": True, "half_mean": None, "half_min": None,
-                     "half_max": None, "loop_wall_s": wall, "setup_wall_s": 0.0, "run": "lumped (this process)"})
+                     "half_max": None, "half_ci95": None, "loop_wall_s": wall, "setup_wall_s": 0.0,
+                     "run": "lumped (this process)"})
     return rows
 
 
@@ -146,15 +156,16 @@ def main() -> None:
     else:
         rows = with_errors(sorted(runs + lumped, key=lambda r: (
             r["held"], round(r["load_mN_m"] if not r["held"] else 0, 6), order[r["tier"]])))
-    print("| run | tier | load [mN m] | speed [rpm] | last half: mean (range) [rpm; held: mN m] | torque [mN m] | "
-          "N [N] | wave [µm] | speed error | torque error | periods (steady) | loop wall [s] | set-up [s] |")
+    print("| run | tier | load [mN m] | speed [rpm] | last half: mean ± 95 % (range) [rpm; held: mN m] | "
+          "torque [mN m] | N [N] | wave [µm] | speed error | torque error | periods (steady) | loop wall [s] | "
+          "set-up [s] |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     def err(r, k):
         return "-" if r[k] is None else f"{r[k]:+.1f} % ({r['reference']})"
 
     for r in rows:
         half = ("-" if r["half_mean"] is None else
-                f"{r['half_mean']:.2f} ({r['half_min']:.2f}–{r['half_max']:.2f})")
+                f"{r['half_mean']:.2f} ± {r['half_ci95']:.2f} ({r['half_min']:.2f}–{r['half_max']:.2f})")
         periods = "-" if r["periods"] is None else f"{r['periods']} ({'yes' if r['steady'] else 'no'})"
         load = "held" if r["held"] else fmt(r["load_mN_m"], ".3f")
         print(f"| {Path(r['run']).name} | {r['tier']} | {load} | {r['speed_rpm']:.2f} | {half} | "
