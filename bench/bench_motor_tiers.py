@@ -8,7 +8,7 @@ tier's stall is the law's μ N r_c. Each point's error is taken against the FE p
 exists, else against the modal tier's.
 
     .venv/bin/python bench/bench_motor_tiers.py --lumped-case cases/wwusm-motor-lumped.toml \
-        --runs /work/runs/fe26/point RUN_DIR ... [--csv docs/figures/motor_tiers.csv]
+        --runs /work/runs/fe26/point RUN_DIR ... [--csv docs/figures/motor_tiers.csv] [--no-lumped]
 
 The cost of a point: the loop's wall time per simulated ms times the simulated time (a run killed and resumed
 reports the rate of its last part, applied to the whole), and the set-up (mesh, reduced stator or cache read,
@@ -33,8 +33,8 @@ from app.case.schema import load_case  # noqa: E402
 from app.lumped import friction_drive as fd  # noqa: E402
 
 COLUMNS = ["tier", "load_mN_m", "held", "speed_rpm", "torque_mN_m", "normal_force_N", "wave_normal_um",
-           "speed_error_pct", "torque_error_pct", "reference", "periods", "steady", "half_mean_rpm", "half_min_rpm",
-           "half_max_rpm", "loop_wall_s", "setup_wall_s", "run"]
+           "speed_error_pct", "torque_error_pct", "reference", "periods", "steady", "half_mean", "half_min",
+           "half_max", "half_ci95", "loop_wall_s", "setup_wall_s", "run"]
 
 
 def run_point(directory: Path) -> dict:
@@ -45,7 +45,7 @@ def run_point(directory: Path) -> dict:
     rotation = summary["case"]["transient"]["bodies"][0]["rotations"][0]
     held = rotation["motion"] == "fixed"
     steady = tr.get("steady_state") or {}
-    half = _last_half_rpm(steady) if not steady.get("steady") else (None, None, None)
+    half = _last_half(steady) if not steady.get("steady") else (None, None, None, None)
     return {
         "tier": summary["case"]["tier"], "held": held,
         "load_mN_m": 1e3 * (motor["friction_torque_N_m"] if held else motor["load_torque_N_m"]),
@@ -53,21 +53,31 @@ def run_point(directory: Path) -> dict:
         "normal_force_N": motor["normal_force_N"],
         "wave_normal_um": 1e6 * motor["contact_point_amplitude_m"]["normal"],
         "periods": steady.get("cycles"), "steady": bool(steady.get("steady")),
-        "half_mean_rpm": half[0], "half_min_rpm": half[1], "half_max_rpm": half[2],
+        "half_mean": half[0], "half_min": half[1], "half_max": half[2], "half_ci95": half[3],
         "loop_wall_s": tr["wall_s_per_simulated_ms"] * tr["simulated_time_s"] * 1e3,
         "setup_wall_s": tr["setup_wall_s"], "run": str(directory),
     }
 
 
-def _last_half_rpm(steady: dict) -> tuple:
-    """(mean, least, largest) period-mean speed [rpm] over the run's last half: the spread of a point that wanders
-    (the window rule not met; not reported for a steady point, whose last half may hold its approach) beside the
-    last window's mean; Nones for a held rotor (its watched value is torque)."""
+#: batches of the last half for the mean's interval, and Student's t at 95 % for their number less one
+BATCHES, T95 = 8, 2.365
+
+
+def _last_half(steady: dict) -> tuple:
+    """(mean, least, largest, 95 % half-width of the mean) over the run's last half of the period means of the
+    watched quantity (a free rotor's speed [rpm], a held rotor's torque [mN m]): the level of a point that wanders
+    (the window rule not met; not reported for a steady point, whose last half may hold its approach). The interval
+    is from batch means (BATCHES consecutive batches, Student's t), since consecutive periods are correlated."""
     means = steady.get("cycle_means") or []
-    if steady.get("watched") != "speed" or len(means) < 2:
-        return None, None, None
-    rpm = [v * 60.0 / (2.0 * math.pi) for v in means[len(means) // 2:]]
-    return sum(rpm) / len(rpm), min(rpm), max(rpm)
+    scale = {"speed": 60.0 / (2.0 * math.pi), "torque": 1e3}.get(steady.get("watched"))
+    if scale is None or len(means) < 2 * BATCHES:
+        return None, None, None, None
+    half = [v * scale for v in means[len(means) // 2:]]
+    size = len(half) // BATCHES
+    batch = [sum(half[i * size:(i + 1) * size]) / size for i in range(BATCHES)]
+    centre = sum(batch) / BATCHES
+    spread = math.sqrt(sum((b - centre) ** 2 for b in batch) / (BATCHES - 1))
+    return sum(half) / len(half), min(half), max(half), T95 * spread / math.sqrt(BATCHES)
 
 
 def lumped_points(section, load_mN_m: float, held: bool, repeat: int) -> list[dict]:
@@ -80,15 +90,19 @@ def lumped_points(section, load_mN_m: float, held: bool, repeat: int) -> list[di
         rows.append({"tier": "lumped", "held": held, "load_mN_m": torque * 1e3 if held else load_mN_m,
                      "speed_rpm": point["speed_rpm"], "torque_mN_m": torque * 1e3,
                      "normal_force_N": p.normal_force_N, "wave_normal_um": point["wave_amplitude_m"] * 1e6,
-                     "periods": None, "steady": True, "half_mean_rpm": None, "half_min_rpm": None,
-                     "half_max_rpm": None, "loop_wall_s": wall, "setup_wall_s": 0.0, "run": "lumped (this process)"})
+                     "periods": None, "steady": True, "half_mean": None, "half_min": None,
+                     "half_max": None, "half_ci95": None, "loop_wall_s": wall, "setup_wall_s": 0.0,
+                     "run": "lumped (this process)"})
     return rows
 
 
-def with_errors(rows: list[dict]) -> list[dict]:
+def with_errors(rows: list[dict], baselines: list[dict] = ()) -> list[dict]:
     """Each row's error against the FE row at its load, else the modal row: the speed of a free point, the torque
-    of a held one."""
+    of a held one (a point that did not settle by its last-half mean). With ``baselines`` (a
+    convergence study): against the baseline run of the same kind (free or held) instead."""
     def reference(row):
+        if baselines:
+            return next((b for b in baselines if b["held"] == row["held"] and b["run"] != row["run"]), None)
         for tier in ("fe", "modal"):
             for other in rows:
                 if other["tier"] == tier and other is not row and other["held"] == row["held"] and (
@@ -97,14 +111,19 @@ def with_errors(rows: list[dict]) -> list[dict]:
         return None
 
     for row in rows:
-        ref = reference(row) if row["tier"] != "fe" else None
-        row["reference"] = ref["tier"] if ref else ""
-        row["speed_error_pct"] = (100.0 * (row["speed_rpm"] / ref["speed_rpm"] - 1.0)
+        ref = reference(row) if row["tier"] != "fe" or baselines else None
+        row["reference"] = (Path(ref["run"]).name if baselines else ref["tier"]) if ref else ""
+        row["speed_error_pct"] = (100.0 * (_level(row, "speed_rpm") / _level(ref, "speed_rpm") - 1.0)
                                   if ref and not row["held"] else None)
         # a free point's torque is its load in every tier (steady state); the held rotor's is the stall torque
-        row["torque_error_pct"] = (100.0 * (row["torque_mN_m"] / ref["torque_mN_m"] - 1.0)
+        row["torque_error_pct"] = (100.0 * (_level(row, "torque_mN_m") / _level(ref, "torque_mN_m") - 1.0)
                                    if ref and row["held"] else None)
     return rows
+
+
+def _level(row: dict, key: str) -> float:
+    """A row's value for a comparison: its last window's mean, or over its last half where it did not settle."""
+    return row["half_mean"] if row["half_mean"] is not None else row[key]
 
 
 def fmt(value, spec: str) -> str:
@@ -117,28 +136,39 @@ def main() -> None:
     ap.add_argument("--lumped-case", default=str(ROOT / "cases" / "wwusm-motor-lumped.toml"))
     ap.add_argument("--repeat", type=int, default=3, help="lumped solves per load; the best is reported")
     ap.add_argument("--csv", help="write the table here as well")
+    ap.add_argument("--no-lumped", action="store_true",
+                    help="only the runs' rows (a table of modal or FE points, e.g. a convergence study)")
+    ap.add_argument("--baselines", nargs="*", default=[],
+                    help="runs (a free and a held one) every other run of its kind is compared with, in the runs' "
+                         "order instead of sorted by load")
     args = ap.parse_args()
     runs = [run_point(Path(d)) for d in args.runs]
     section = load_case(args.lumped_case).lumped
     loads = sorted({(round(r["load_mN_m"], 6), r["held"]) for r in runs if not r["held"]}) + [(None, True)]
     lumped = []
-    for load, held in loads:
+    for load, held in ([] if args.no_lumped else loads):
         lumped += lumped_points(section, load or 0.0, held, args.repeat)
     order = {"fe": 0, "modal": 1, "lumped": 2}
-    rows = with_errors(sorted(runs + lumped, key=lambda r: (r["held"], round(r["load_mN_m"] if not r["held"] else 0, 6),
-                                                             order[r["tier"]])))
-    print("| tier | load [mN m] | speed [rpm] | last half: mean (range) [rpm] | torque [mN m] | N [N] | wave [µm] | "
-          "speed error | torque error | periods (steady) | loop wall [s] | set-up [s] |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    baselines = [run_point(Path(d)) for d in args.baselines]
+    if baselines:
+        rows = with_errors(baselines + [r for r in runs + lumped if r["run"] not in {b["run"] for b in baselines}],
+                           baselines)
+    else:
+        rows = with_errors(sorted(runs + lumped, key=lambda r: (
+            r["held"], round(r["load_mN_m"] if not r["held"] else 0, 6), order[r["tier"]])))
+    print("| run | tier | load [mN m] | speed [rpm] | last half: mean ± 95 % (range) [rpm; held: mN m] | "
+          "torque [mN m] | N [N] | wave [µm] | speed error | torque error | periods (steady) | loop wall [s] | "
+          "set-up [s] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     def err(r, k):
         return "-" if r[k] is None else f"{r[k]:+.1f} % ({r['reference']})"
 
     for r in rows:
-        half = ("-" if r["half_mean_rpm"] is None else
-                f"{r['half_mean_rpm']:.2f} ({r['half_min_rpm']:.2f}–{r['half_max_rpm']:.2f})")
+        half = ("-" if r["half_mean"] is None else
+                f"{r['half_mean']:.2f} ± {r['half_ci95']:.2f} ({r['half_min']:.2f}–{r['half_max']:.2f})")
         periods = "-" if r["periods"] is None else f"{r['periods']} ({'yes' if r['steady'] else 'no'})"
         load = "held" if r["held"] else fmt(r["load_mN_m"], ".3f")
-        print(f"| {r['tier']} | {load} | {r['speed_rpm']:.2f} | {half} | "
+        print(f"| {Path(r['run']).name} | {r['tier']} | {load} | {r['speed_rpm']:.2f} | {half} | "
               f"{r['torque_mN_m']:.3f} | {r['normal_force_N']:.3f} | {r['wave_normal_um']:.3f} | "
               f"{err(r, 'speed_error_pct')} | {err(r, 'torque_error_pct')} | {periods} | "
               f"{r['loop_wall_s']:.4g} | {r['setup_wall_s']:.4g} |")
