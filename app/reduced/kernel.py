@@ -785,16 +785,23 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, S, D, pos, FG)
 
 
 @njit(cache=True, _nrt=False)
+def _fortran_copy(k, A, out):
+    """out[:k * k] <- the k x k block of A in Fortran order, as np.linalg's LAPACK calls copy it, refusing infs and
+    NaNs with its message."""
+    for r in range(k):
+        for c in range(k):
+            value = A[r, c]
+            if not math.isfinite(value):
+                raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
+            out[c * k + r] = value
+
+
+@njit(cache=True, _nrt=False)
 def _invert(k, S, LU, ipiv):
     """LU (k * k) <- S^-1 in Fortran order (``LU[:k * k].reshape((k, k)).T`` is S^-1) by LAPACK's getrf and getri
     on a Fortran-order copy of S: the routines, the copy and the order of np.linalg.inv's result (so a product
     with it takes the same BLAS path), without its allocations."""
-    for r in range(k):
-        for c in range(k):
-            value = S[r, c]
-            if not math.isfinite(value):
-                raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
-            LU[c * k + r] = value
+    _fortran_copy(k, S, LU)
     if k > 0:
         if _xgetrf(_XGESV_KIND, k, k, LU.ctypes, k, ipiv.ctypes) != 0:
             raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
@@ -916,12 +923,7 @@ def _matvec(A, x, y, scalars):
 def _lu_solve(N, J, LU, ipiv, x):
     """x (N, holding the right side) <- J^-1 x by LAPACK's gesv: the routine np.linalg.solve calls, on the same
     Fortran-order copy of J (kept), so the same result to the bit, without its three allocations per call."""
-    for r in range(N):
-        for c in range(N):
-            value = J[r, c]
-            if not math.isfinite(value):
-                raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
-            LU[c * N + r] = value
+    _fortran_copy(N, J, LU)
     for r in range(N):
         if not math.isfinite(x[r]):
             raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
