@@ -34,7 +34,8 @@ from app.lumped import friction_drive as fd  # noqa: E402
 
 COLUMNS = ["tier", "load_mN_m", "held", "speed_rpm", "torque_mN_m", "normal_force_N", "wave_normal_um",
            "speed_error_pct", "torque_error_pct", "reference", "periods", "steady", "half_mean", "half_min",
-           "half_max", "half_ci95", "loop_wall_s", "setup_wall_s", "run"]
+           "half_max", "half_ci95", "output_power_mW", "electrical_power_mW", "efficiency_pct", "loop_wall_s",
+           "setup_wall_s", "run"]
 
 
 def run_point(directory: Path) -> dict:
@@ -52,6 +53,8 @@ def run_point(directory: Path) -> dict:
         "speed_rpm": motor["speed_rpm"], "torque_mN_m": 1e3 * motor["friction_torque_N_m"],
         "normal_force_N": motor["normal_force_N"],
         "wave_normal_um": 1e6 * motor["contact_point_amplitude_m"]["normal"],
+        "output_power_mW": 1e3 * motor["output_power_W"], "electrical_power_mW": 1e3 * motor["electrical_power_W"],
+        "efficiency_pct": 100.0 * motor["efficiency"],
         "periods": steady.get("cycles"), "steady": bool(steady.get("steady")),
         "half_mean": half[0], "half_min": half[1], "half_max": half[2], "half_ci95": half[3],
         "loop_wall_s": tr["wall_s_per_simulated_ms"] * tr["simulated_time_s"] * 1e3,
@@ -90,7 +93,10 @@ def lumped_points(section, load_mN_m: float, held: bool, repeat: int) -> list[di
         rows.append({"tier": "lumped", "held": held, "load_mN_m": torque * 1e3 if held else load_mN_m,
                      "speed_rpm": point["speed_rpm"], "torque_mN_m": torque * 1e3,
                      "normal_force_N": p.normal_force_N, "wave_normal_um": point["wave_amplitude_m"] * 1e6,
-                     "periods": None, "steady": True, "half_mean": None, "half_min": None,
+                     "output_power_mW": 1e3 * point["output_power_W"],
+                     "electrical_power_mW": 1e3 * point["electrical_power_W"],
+                     "efficiency_pct": 100.0 * point["efficiency"], "periods": None, "steady": True,
+                     "half_mean": None, "half_min": None,
                      "half_max": None, "half_ci95": None, "loop_wall_s": wall, "setup_wall_s": 0.0,
                      "run": "lumped (this process)"})
     return rows
@@ -157,9 +163,9 @@ def main() -> None:
         rows = with_errors(sorted(runs + lumped, key=lambda r: (
             r["held"], round(r["load_mN_m"] if not r["held"] else 0, 6), order[r["tier"]])))
     print("| run | tier | load [mN m] | speed [rpm] | last half: mean ± 95 % (range) [rpm; held: mN m] | "
-          "torque [mN m] | N [N] | wave [µm] | speed error | torque error | periods (steady) | loop wall [s] | "
-          "set-up [s] |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "torque [mN m] | N [N] | wave [µm] | out / drawn [mW] | efficiency | speed error | torque error | "
+          "periods (steady) | loop wall [s] | set-up [s] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     def err(r, k):
         return "-" if r[k] is None else f"{r[k]:+.1f} % ({r['reference']})"
 
@@ -170,6 +176,7 @@ def main() -> None:
         load = "held" if r["held"] else fmt(r["load_mN_m"], ".3f")
         print(f"| {Path(r['run']).name} | {r['tier']} | {load} | {r['speed_rpm']:.2f} | {half} | "
               f"{r['torque_mN_m']:.3f} | {r['normal_force_N']:.3f} | {r['wave_normal_um']:.3f} | "
+              f"{r['output_power_mW']:.1f} / {r['electrical_power_mW']:.1f} | {r['efficiency_pct']:.1f} % | "
               f"{err(r, 'speed_error_pct')} | {err(r, 'torque_error_pct')} | {periods} | "
               f"{r['loop_wall_s']:.4g} | {r['setup_wall_s']:.4g} |")
     if args.csv:
