@@ -34,7 +34,10 @@ compiled without reference counting (``_nrt=False``: they may neither allocate n
 to compile one that does), their work arrays allocated once per call (:class:`StepWork`, :class:`NewtonWork`),
 and the loop fills its vectors index by index in the order of the array expressions they replace and calls the
 LAPACK and BLAS routines numba's np.linalg.solve, np.linalg.inv and np.dot call (numba's bindings of SciPy's),
-so the numbers are the same to the bit.
+so the numbers are the same to the bit. ``_nrt``, ``numba.np.linalg._LAPACK`` and its ``numba_xx*`` symbols are
+numba's private names (numba 0.56.4, as Debian bookworm ships it): should a later numba drop them, the decorators'
+``_nrt=False`` and these bindings give way to plain ``njit`` and np.linalg / np.dot, with the same results and
+the reference counts' cost back.
 """
 
 from __future__ import annotations
