@@ -30,6 +30,7 @@ sys.path.insert(0, str(ROOT))
 from bench_lumped_motor import lumped_at  # noqa: E402
 
 from app.case.schema import load_case  # noqa: E402
+from app.intervals import half_width_95  # noqa: E402
 from app.lumped import friction_drive as fd  # noqa: E402
 
 COLUMNS = ["tier", "load_mN_m", "held", "speed_rpm", "torque_mN_m", "normal_force_N", "wave_normal_um",
@@ -62,15 +63,15 @@ def run_point(directory: Path) -> dict:
     }
 
 
-#: batches of the last half for the mean's interval, and Student's t at 95 % for their number less one
-BATCHES, T95 = 8, 2.365
+#: batches of the last half for the mean's interval
+BATCHES = 8
 
 
 def _last_half(steady: dict) -> tuple:
     """(mean, least, largest, 95 % half-width of the mean) over the run's last half of the period means of the
     watched quantity (a free rotor's speed [rpm], a held rotor's torque [mN m]): the level of a point that wanders
     (the window rule not met; not reported for a steady point, whose last half may hold its approach). The interval
-    is from batch means (BATCHES consecutive batches, Student's t), since consecutive periods are correlated."""
+    is from batch means (BATCHES consecutive batches, app/intervals.py), since consecutive periods are correlated."""
     means = steady.get("cycle_means") or []
     scale = {"speed": 60.0 / (2.0 * math.pi), "torque": 1e3}.get(steady.get("watched"))
     if scale is None or len(means) < 2 * BATCHES:
@@ -78,9 +79,7 @@ def _last_half(steady: dict) -> tuple:
     half = [v * scale for v in means[len(means) // 2:]]
     size = len(half) // BATCHES
     batch = [sum(half[i * size:(i + 1) * size]) / size for i in range(BATCHES)]
-    centre = sum(batch) / BATCHES
-    spread = math.sqrt(sum((b - centre) ** 2 for b in batch) / (BATCHES - 1))
-    return sum(half) / len(half), min(half), max(half), T95 * spread / math.sqrt(BATCHES)
+    return sum(half) / len(half), min(half), max(half), half_width_95(batch)
 
 
 def lumped_points(section, load_mN_m: float, held: bool, repeat: int) -> list[dict]:

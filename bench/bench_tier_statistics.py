@@ -37,13 +37,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy import stats as sps
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from app import series as S  # noqa: E402
 from app.case.schema import load_case  # noqa: E402
+from app.intervals import half_width_95  # noqa: E402
 from app.transient.impacts import run_statistics  # noqa: E402
 
 CASE = ROOT / "cases" / "usdc-fe.toml"
@@ -80,9 +80,7 @@ def batch_statistics(h5_path: Path, force_N: float, batches: int, skip_s: float)
         dt = window[S.STEP]
         mean_tip = float(np.sum(window[S.point_displacement(cfg.drive.point)] * dt) / np.sum(dt))
         values[RISE].append(1e3 * (mean_tip - start))
-    t_crit = sps.t.ppf(0.975, batches - 1)
-    return {key: (float(np.mean(v)), float(t_crit * np.std(v, ddof=1) / np.sqrt(batches))) for key, v in
-            values.items()}
+    return {key: (float(np.mean(v)), half_width_95(v)) for key, v in values.items()}
 
 
 LUMPED_CASE = ROOT / "cases" / "usdc-lumped-fe-scene.toml"
@@ -136,9 +134,7 @@ def lumped_batch_statistics(force_N: float, seconds: float, batches: int, skip_s
         values["power into rock [W]"].append((work[j + 1] - work[j]) / width)
         rows = (t > lo) & (t <= hi)
         values[RISE].append(1e3 * (float(np.mean(z[rows])) - start))
-    t_crit = sps.t.ppf(0.975, batches - 1)
-    return {key: (float(np.mean(v)), float(t_crit * np.std(v, ddof=1) / np.sqrt(batches))) for key, v in
-            values.items()}
+    return {key: (float(np.mean(v)), half_width_95(v)) for key, v in values.items()}
 
 
 def _run(tier: str, force: float, seconds: float, out: Path) -> float:

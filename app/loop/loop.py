@@ -236,10 +236,8 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
             for name, (units, table) in engine.take_tables().items():
                 series.append_table(name, table, units)
             if fields is not None:           # the frames the engine took; a frame at t when one is due
-                mark, mark_cpu = time.perf_counter(), time.thread_time()
-                fields.write(engine.t, engine.body_positions())
-                field_wall += time.perf_counter() - mark
-                field_cpu += time.thread_time() - mark_cpu
+                field_wall, field_cpu = _timed(lambda: fields.write(engine.t, engine.body_positions()),
+                                               field_wall, field_cpu)
             progress.update(engine.t)
             if checkpoint.due(engine.steps) or steady:
                 field_wall, field_cpu = _flush(fields, field_wall, field_cpu, before_checkpoint=True)
@@ -258,10 +256,7 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
         _write_rows(series, unwritten)          # a failed step: the rows of the steps before it
         series.close()
         if fields is not None:           # waits for the field output's writer thread, if it has one
-            mark, mark_cpu = time.perf_counter(), time.thread_time()
-            fields.close()
-            field_wall += time.perf_counter() - mark
-            field_cpu += time.thread_time() - mark_cpu
+            field_wall, field_cpu = _timed(fields.close, field_wall, field_cpu)
     wall, cpu = time.perf_counter() - start, time.process_time() - start_cpu
     writer_cpu, writer_wall = getattr(fields, "writer_cpu_s", 0.0), getattr(fields, "writer_wall_s", 0.0)
     simulated = engine.t - t_start
@@ -310,8 +305,14 @@ def _flush(fields, wall: float, cpu: float, before_checkpoint: bool = False) -> 
     coordinates each); and at the end. Returns the field output's wall and CPU time [s] with this flush's."""
     if fields is None or (before_checkpoint and getattr(fields, "carries", False)):
         return wall, cpu
+    return _timed(fields.flush, wall, cpu)
+
+
+def _timed(call, wall: float, cpu: float) -> tuple[float, float]:
+    """Run ``call`` and add its wall and CPU time [s] to ``wall`` and ``cpu``: this thread's CPU only (the field
+    output's writer thread counts its own, app/transient/fields.py)."""
     mark, mark_cpu = time.perf_counter(), time.thread_time()
-    fields.flush()
+    call()
     return wall + time.perf_counter() - mark, cpu + time.thread_time() - mark_cpu
 
 

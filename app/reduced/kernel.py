@@ -1100,12 +1100,22 @@ def make_cache(nf: int, nr: int, budget_bytes: float = 3e8) -> Cache:
                  np.zeros((slots, nr, nr)), np.zeros(1, np.int64))
 
 
+@njit(cache=True, _nrt=False)
+def _cached_slot(dts, dt):
+    """The slot of step size ``dt`` among the cache's step sizes ``dts`` (-1: an empty slot), or -1. Takes the one
+    array, not the cache record, so the loop asks it every step without reference counts."""
+    for c in range(dts.size):
+        if dts[c] > 0 and abs(dts[c] - dt) <= 1e-12 * dt:
+            return c
+    return -1
+
+
 @njit(cache=True)
 def _effective(structure, rows, dt, scheme, cache):
     """The cache slot of step size dt (formed on first use)."""
-    for c in range(cache.dt.size):
-        if cache.dt[c] > 0 and abs(cache.dt[c] - dt) <= 1e-12 * dt:
-            return c
+    slot = _cached_slot(cache.dt, dt)
+    if slot >= 0:
+        return slot
     beta, gamma, am, af = scheme
     c_acc = 1.0 / (beta * dt * dt)
     c_vel = gamma / (beta * dt)
@@ -1261,11 +1271,7 @@ def run(t_end, state, model, cache, out, track_energy, frames):
             dt_try = dt if remainder >= dt * (1.0 - 1e-9) else remainder
             istate[I_ATTEMPTS] += 1
             t1 = t + dt_try
-            slot = -1
-            for c in range(cache.dt.size):
-                if cache.dt[c] > 0 and abs(cache.dt[c] - dt_try) <= 1e-12 * dt_try:
-                    slot = c
-                    break
+            slot = _cached_slot(cache.dt, dt_try)       # the one-array lookup; _effective forms a new slot
             if slot < 0:
                 slot = _effective(structure, rows_R, dt_try, scheme, cache)
             A_inv = cache.inv[slot]

@@ -489,24 +489,14 @@ class FieldSeriesExport:
             self._merge(self.comm.bcast(peaks, root=0))
 
     def _merge(self, peaks: list) -> None:
-        """Merge frames' peaks into the series' (the largest of each region's values): per (region, key) over all
-        the frames at once, not frame by frame."""
+        """Merge frames' peaks into the series' (the largest of each region's values)."""
         from app.fe.derived import merge_peaks
 
-        frames = [p for p in peaks or () if p is not None]
-        if self.peaks is None or not frames:
+        if self.peaks is None:
             return
-        try:
-            batch = {region: {key: max(frame[region][key] for frame in frames) for key in values}
-                     for region, values in frames[0].items()}
-            complete = all(frame.keys() == batch.keys() for frame in frames)
-        except KeyError:
-            complete = False
-        if not complete:                       # frames that differ in their regions or keys: one by one
-            batch = {}
-            for frame in frames:
-                merge_peaks(batch, frame)
-        merge_peaks(self.peaks, batch)
+        for frame in peaks or ():
+            if frame is not None:
+                merge_peaks(self.peaks, frame)
 
     def _submit(self, first: int, name: str, frames: list[_Frame]) -> None:
         """Hand a batch to the writer thread (rank 0): it expands, writes and names the batches in order while the

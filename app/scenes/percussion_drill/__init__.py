@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from app import series as S
+from app.intervals import half_width_95
 from app.scenes.registry import SceneReport, register
 from app.transient.impacts import closed_intervals, period_average
 
@@ -106,15 +107,8 @@ def batch_intervals(data: dict[str, np.ndarray], cfg) -> dict:
     out: dict = {}
     for (group, key), values in samples.items():
         if len(values) == BATCHES:
-            out.setdefault(group, {})[key] = _half_width_95(values)
+            out.setdefault(group, {})[key] = half_width_95(values)
     return out
-
-
-def _half_width_95(batch_means) -> float:
-    """Half-width of the 95 % t-interval of the mean of ``BATCHES`` batch means: t_{0.975, B-1} s / sqrt(B)."""
-    from scipy import stats as sps
-
-    return float(sps.t.ppf(0.975, BATCHES - 1)) * float(np.std(batch_means, ddof=1)) / np.sqrt(BATCHES)
 
 
 def lumped_batch_intervals(events: np.ndarray, duration_s: float) -> dict:
@@ -138,8 +132,8 @@ def lumped_batch_intervals(events: np.ndarray, duration_s: float) -> dict:
             rates[name].append(np.sum(inside & closing & (ev[:, K.EV_CONTACT] == c)) / (hi - lo))
         rock_ends = inside & ~closing & (ev[:, K.EV_CONTACT] == CONTACT_NAMES.index("stem_rock"))
         force.append(float(np.sum(ev[rock_ends, K.EV_IMPULSE])) / (hi - lo))
-    return {"impact_rate_per_s": {name: _half_width_95(v) for name, v in rates.items()},
-            "stem_rock_foundation": {"mean_force_N": _half_width_95(force)}}
+    return {"impact_rate_per_s": {name: half_width_95(v) for name, v in rates.items()},
+            "stem_rock_foundation": {"mean_force_N": half_width_95(force)}}
 
 
 def lumped_statistics(data: dict[str, np.ndarray], parameters: dict, duration_s: float, min_rise_m: float,
