@@ -1141,6 +1141,53 @@ def _effective(structure, rows, dt, scheme, cache):
     return slot
 
 
+@njit(cache=True, _nrt=False)
+def _diagonal_free(structure):
+    """True when M and K are diagonal on the free coordinates (exact zeros off the diagonal: the model in its free
+    modes, app/reduced/coordinates.py), so :func:`_free_increment_modal` applies."""
+    free, M, K = structure.free, structure.M, structure.K
+    for i in range(free.size):
+        for k in range(free.size):
+            if i != k and (M[free[i], free[k]] != 0.0 or K[free[i], free[k]] != 0.0):
+                return False
+    return True
+
+
+@njit(cache=True, _nrt=False)
+def _free_increment_modal(q, v, a, pq, dt, structure, scheme, A_inv, dq, y1, y2, y3, b, w, scalars):
+    """The contact-free increment ``dq`` (predictor, inputs at t1, correction w = -K_eff^-1 r0 on the free
+    coordinates) of a structure with diagonal M_FF and K_FF, with one dense product: r0 = M y1 + C y2 + K y3 - load
+    at the predictor's generalized mid-point, and C_FF y2_F = (K_eff y2_F - c_M M_FF y2_F - c_K K_FF y2_F) / c_C
+    (K_eff = c_M M + c_C C + c_K K on the free block), so w = -y2_F / c_C - K_eff^-1 b with b the diagonal and input
+    terms. ``y1``, ``y2``, ``y3`` (n), ``b``, ``w`` (nf) and ``scalars`` (2) are work arrays."""
+    beta, gamma, am, af = scheme
+    c_acc = 1.0 / (beta * dt * dt)
+    c_vel = gamma / (beta * dt)
+    c_m, c_c, c_k = (1.0 - am) * c_acc, (1.0 - af) * c_vel, 1.0 - af
+    M, C, K, load, free, P = structure.M, structure.C, structure.K, structure.load, structure.free, structure.inputs
+    n = q.size
+    for j in range(n):
+        dq[j] = dt * v[j] + 0.5 * dt * dt * a[j]
+    for p in range(P.size):
+        dq[P[p]] = pq[p] - q[P[p]]
+    for j in range(n):
+        a1 = (dq[j] - dt * v[j]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[j]
+        v1 = v[j] + dt * ((1.0 - gamma) * a[j] + gamma * a1)
+        y1[j] = (1.0 - am) * a1 + am * a[j]
+        y2[j] = (1.0 - af) * v1 + af * v[j]
+        y3[j] = q[j] + (1.0 - af) * dq[j]
+    for i in range(free.size):
+        f = free[i]
+        s = M[f, f] * (y1[f] - c_m / c_c * y2[f]) + K[f, f] * (y3[f] - c_k / c_c * y2[f]) - load[f]
+        for p in range(P.size):
+            j = P[p]
+            s += M[f, j] * y1[j] + C[f, j] * y2[j] + K[f, j] * y3[j]
+        b[i] = s
+    _matvec(A_inv, b, w, scalars)
+    for i in range(free.size):
+        dq[free[i]] -= y2[free[i]] / c_c + w[i]
+
+
 @njit(cache=True)
 def _snap(level, dt):
     if dt >= level:
@@ -1230,6 +1277,8 @@ def run(t_end, state, model, cache, out, track_energy, frames):
     r_K = np.zeros(n)
     r0F = np.zeros(nf)
     w = np.zeros(nf)
+    # M_FF and K_FF diagonal (the model in its free modes, app/reduced/coordinates.py): one product per step
+    modal = _diagonal_free(structure)
     y_end = np.zeros((ns, 3))
     v_end = np.zeros((ns, 3))
     closed_sites = np.zeros(ns, np.bool_)
@@ -1280,27 +1329,31 @@ def run(t_end, state, model, cache, out, track_energy, frames):
             input_values(t1, inputs, pq)
             # contact-free increments: predictor, the prescribed inputs at t1, w = -K_eff^-1 r0,
             # r0 = M ((1 - am) a1 + am a) + C ((1 - af) v1 + af v) + K (q + (1 - af) dq) - load
-            for i in range(n):
-                dq[i] = dt_try * v[i] + 0.5 * dt_try * dt_try * a[i]
-            for p in range(P.size):
-                dq[P[p]] = pq[p] - q[P[p]]
-            for i in range(n):
-                a1[i] = (dq[i] - dt_try * v[i]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[i]
-                v1[i] = v[i] + dt_try * ((1.0 - gamma) * a[i] + gamma * a1[i])
-                x_mid[i] = (1.0 - am) * a1[i] + am * a[i]
-            np.dot(structure.M, x_mid, r_M)
-            for i in range(n):
-                x_mid[i] = (1.0 - af) * v1[i] + af * v[i]
-            np.dot(structure.C, x_mid, r_C)
-            for i in range(n):
-                x_mid[i] = q[i] + (1.0 - af) * dq[i]
-            np.dot(structure.K, x_mid, r_K)
-            for i in range(nf):
-                j = free[i]
-                r0F[i] = r_M[j] + r_C[j] + r_K[j] - structure.load[j]
-            np.dot(A_inv, r0F, w)
-            for i in range(nf):
-                dq[free[i]] += -w[i]
+            if modal:
+                _free_increment_modal(q, v, a, pq, dt_try, structure, scheme, A_inv, dq, x_mid, r_M, r_C, r0F, w,
+                                      nw.scalars)
+            else:
+                for i in range(n):
+                    dq[i] = dt_try * v[i] + 0.5 * dt_try * dt_try * a[i]
+                for p in range(P.size):
+                    dq[P[p]] = pq[p] - q[P[p]]
+                for i in range(n):
+                    a1[i] = (dq[i] - dt_try * v[i]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[i]
+                    v1[i] = v[i] + dt_try * ((1.0 - gamma) * a[i] + gamma * a1[i])
+                    x_mid[i] = (1.0 - am) * a1[i] + am * a[i]
+                np.dot(structure.M, x_mid, r_M)
+                for i in range(n):
+                    x_mid[i] = (1.0 - af) * v1[i] + af * v[i]
+                np.dot(structure.C, x_mid, r_C)
+                for i in range(n):
+                    x_mid[i] = q[i] + (1.0 - af) * dq[i]
+                np.dot(structure.K, x_mid, r_K)
+                for i in range(nf):
+                    j = free[i]
+                    r0F[i] = r_M[j] + r_C[j] + r_K[j] - structure.load[j]
+                np.dot(A_inv, r0F, w)
+                for i in range(nf):
+                    dq[free[i]] += -w[i]
             # the sites' start values and contact-free increments
             for i in range(ns):
                 for k in range(gdim):
