@@ -22,6 +22,9 @@ site follows from the others without a solve) and on the corrections of the free
 predictors (no m c_acc z-sized terms in a residual), damped by the natural monotonicity test (Deuflhard).
 A failed step is cut back and retried; steps by contact state (open / closed / change, event refinement,
 approach to a predicted closure) as the FE tier (app/transient/control.py).
+A structure whose M and K are diagonal on the free coordinates (a model in its free modes,
+app/reduced/coordinates.py) takes its contact-free increment with one dense product, by K_eff^-1
+(:func:`_free_increment_modal`), instead of four (M, C, K, K_eff^-1).
 
 Every argument travels as a structured record (NamedTuple of arrays, :func:`make_records`); the state
 arrays (q, v, a, z, zd, zdd, istate, fstate, sums, site_force) hold everything the next call needs, so where a
