@@ -253,3 +253,30 @@ def test_the_drill_in_free_modes_writes_the_fields_and_series_of_the_model_as_bu
     np.testing.assert_array_equal(a["time_s"], b["time_s"])
     for key in b:
         assert np.abs(a[key] - b[key]).max() <= 1e-9 * max(np.abs(b[key]).max(), 1e-300), key
+
+
+def test_a_warm_start_of_the_drill_begins_from_the_free_modes_state_it_names(tmp_path):
+    """``transient.start_from`` a drill run in its free modes: its checkpoint keeps the model as built (the warm
+    start's model check compares that) and its state in the free modes (record: ``coordinates = "free_modes"``),
+    which the warm-started engine takes as it is. Reference: the source run's last checkpoint state; tolerance:
+    none (the state is copied, not converted); a state converted once more (taken for physical) moves q by order
+    one (the checkpoint test above)."""
+    import json
+
+    from conftest import run_case_quiet
+
+    from app.loop.checkpoint import read_warm_start
+    from app.runner import load_for_run
+
+    source = tmp_path / "source"
+    run_case_quiet("usdc-fe.toml", source, *TINY_DRILL, "transient.end_time_s=1e-04")
+    record = json.loads((source / "checkpoint" / "checkpoint.json").read_text())
+    assert record["engine"][RECORD_KEY] == FREE_MODES
+    case = load_for_run(CASES / "usdc-fe.toml", [*TINY_DRILL, "transient.end_time_s=1e-04",
+                                                 f"transient.start_from={str(source)!r}"])
+    warm = _drill(case=case)
+    warm.start()
+    saved = read_warm_start(case, MPI.COMM_WORLD, "modal").arrays
+    for name in ("q", "v", "a"):
+        np.testing.assert_array_equal(getattr(warm, name), saved[name], err_msg=name)
+    assert warm.warm_start["source_time_s"] == pytest.approx(1e-4, rel=1e-12)
