@@ -228,15 +228,16 @@ def test_a_run_split_in_two_in_the_free_modes_resumes_bit_for_bit(shared_tmp):
 
 def test_the_drill_in_free_modes_writes_the_fields_and_series_of_the_model_as_built(monkeypatch, tmp_path):
     """Field output and series of a run (the loop, the files) in the free modes against the model as built: the
-    frames are mapped back to q = T x and expanded with the built model's vertex and derived bases. The tiny drill
+    frames are mapped back to q = T x and expanded with the built model's vertex and derived bases; the series holds
+    the electrode's charge (charge rows on x) and the energies (quadratic forms of M, K, C on x) too. The tiny drill
     to 60 us (its first impact; 8 field frames over the first drive period). Reference: the physical run's files;
     tolerance 1e-9 of each field's and column's largest value, as for the series above (measured: displacement
-    2.0e-10, potential 1.3e-10, series 6.4e-11); a frame expanded from x without T (the vertex basis on the wrong
-    coordinates) is off by order one (measured: the whole displacement)."""
+    2.0e-10, potential 1.3e-10, series 7.0e-11: the contact energy); a frame expanded from x without T (the vertex
+    basis on the wrong coordinates) is off by order one (measured: the whole displacement)."""
     from conftest import run_case_quiet
     from test_transient_checkpoint import frame_group, read_series, xdmf_times
 
-    sets = [*TINY_DRILL[:-1], "output.fields=true", "transient.end_time_s=6e-05",
+    sets = [*TINY_DRILL[:-1], "output.fields=true", "output.energies=true", "transient.end_time_s=6e-05",
             "transient.output_interval_s=5e-05"]
     free_out, built_out = tmp_path / "free", tmp_path / "built"
     run_case_quiet("usdc-fe.toml", free_out, *sets)
