@@ -24,6 +24,7 @@ from app.errors import CaseError, NumericalFailure
 from app.killpoint import kill_point
 from app.loop.checkpoint import Found, read_on_root, write_engine_file
 from app.reduced import kernel as lk
+from app.reduced.coordinates import FREE_MODES, PHYSICAL, RECORD_KEY, free_modes, in_free_modes
 from app.reduced.model import ReducedModel, load_or_build
 
 MODEL_FILE = "reduced-model.npz"
@@ -74,6 +75,14 @@ class ModalEngine:
             self.case, self.drive_lock = locked_case(case, found_Hz)
             self.cfg = cfg = self.case.transient
             log(drive_lock_line(self.drive_lock))
+        # the run's coordinates: the model's free coordinates in its own modes where its site rows are few
+        # (app/reduced/coordinates.py); the model as built stays for the checkpoint's file, the warm-start checks and
+        # the field output
+        self.built_model = self.model
+        inputs = np.arange(self.model.n_interface, self.model.n_interface + len(self.model.inputs))
+        self.free_modes = free_modes(self.model, np.setdiff1d(np.arange(self.model.size), inputs), comm)
+        if self.free_modes is not None:
+            self.model = in_free_modes(self.model, self.free_modes)
         self.setup_wall_s = time.perf_counter() - start
         # electrodes driven A cos(wt + phase) after a harmonic start, A sin from rest; a warm start keeps its
         # source run's, a resumed run its checkpoint's
@@ -257,9 +266,10 @@ class ModalEngine:
         cfg, model, file, key = self.cfg, self.model, self.case.source, "transient.start_from"
         found, other = self._warm
         directory = warm_start_directory(self.case)
-        if other.size != model.size or not (np.allclose(other.K, model.K, rtol=1e-10, atol=1e-10 * abs(model.K).max())
-                                            and np.allclose(other.M, model.M, rtol=1e-10,
-                                                            atol=1e-10 * abs(model.M).max())):
+        built = self.built_model
+        if other.size != built.size or not (np.allclose(other.K, built.K, rtol=1e-10, atol=1e-10 * abs(built.K).max())
+                                            and np.allclose(other.M, built.M, rtol=1e-10,
+                                                            atol=1e-10 * abs(built.M).max())):
             raise CaseError(file, key, f"the run in {directory} has another reduced model ({other.size} coordinates, "
                                        f"this case {model.size}, or other matrices): a warm start needs the same "
                                        "stator, mesh and reduction")
@@ -273,6 +283,7 @@ class ModalEngine:
                                            "a warm start needs the same bodies and contact sites")
         for name in ("q", "v", "a", "z", "zd", "zdd", "site_force"):
             getattr(self, name)[:] = data[name]
+        self._coordinates_of(found)
         held = ~self.bodies_record.free
         self.zd[held] = self.bodies_record.rate[held]
         self.zdd[held] = 0.0
@@ -385,6 +396,7 @@ class ModalEngine:
             getattr(self.sums, name)[:] = data[f"sums_{name}"]
         if "site_force" in data:       # a checkpoint of an older version: its next step starts from no force
             self.site_force[:] = data["site_force"]
+        self._coordinates_of(found)
         self.tables.restore(data, found.engine)
         self.scale_V = float(found.engine["drive_voltage_V"])
         self.cosine_drive = bool(found.engine.get("cosine_drive", self.cfg.initial_state == "harmonic"))
@@ -392,6 +404,22 @@ class ModalEngine:
         _, self._weights, self._phases = electrode_amplitudes(self.case, self.electrodes)
         self.inputs_record = self._inputs(self._weights, self._phases, self.scale_V)
         self._started()
+
+    def _coordinates_of(self, found: Found) -> None:
+        """q, v, a just read from a checkpoint whose record says which coordinates they are in (the model's own
+        before the free modes, app/reduced/coordinates.py): converted to this run's. The same model always makes
+        the same choice, so a conversion happens only for a checkpoint written before the free modes."""
+        saved_in_modes = found.engine.get(RECORD_KEY, PHYSICAL) == FREE_MODES
+        if self.free_modes is None and saved_in_modes:
+            raise CaseError(str(found.pointer), f"engine.{RECORD_KEY}",
+                            "the state is in the free modes of a model this run keeps in its own coordinates")
+        if self.free_modes is not None and not saved_in_modes:
+            for name in ("q", "v", "a"):
+                getattr(self, name)[:] = self.free_modes.to_modes(getattr(self, name))
+
+    def physical(self, q: np.ndarray) -> np.ndarray:
+        """The model's own coordinates (as built) of the run's coordinates ``q`` ((n,) or (n, columns))."""
+        return q if self.free_modes is None else self.free_modes.to_physical(q)
 
     def _started(self) -> None:
         cfg = self.cfg
@@ -512,7 +540,7 @@ class ModalEngine:
         last."""
         f = self.frames
         for i in range(int(f.slots[1])):
-            self._taken.append((float(f.t[i]), f.q[i].copy(), f.z[i].copy()))
+            self._taken.append((float(f.t[i]), self.physical(f.q[i].copy()), f.z[i].copy()))
         f.slots[1] = 0
         if f.slots[0] >= f.times.size and f.times.size:
             self._frame_times(self._frame_series.schedule.next_after(self._taken[-1][0]))
@@ -581,25 +609,27 @@ class ModalEngine:
                   "sums_power": self.sums.power, "sums_damping": self.sums.damping, "site_force": self.site_force,
                   **site_arrays}
         record = {"drive_voltage_V": self.scale_V, "drive_frequency_Hz": self.cfg.drive.frequency_Hz,
-                  "cosine_drive": self.cosine_drive, "warm_start": self.warm_start, **site_record}
+                  "cosine_drive": self.cosine_drive, "warm_start": self.warm_start,
+                  RECORD_KEY: FREE_MODES if self.free_modes is not None else PHYSICAL, **site_record}
         return (arrays if self.comm.rank == 0 else None), record
 
     def checkpoint_files(self, out_dir: Path) -> dict[str, str]:
-        return {"reduced_model": write_engine_file(out_dir, self.comm, MODEL_FILE, self.model.save)}
+        return {"reduced_model": write_engine_file(out_dir, self.comm, MODEL_FILE, self.built_model.save)}
 
     def field_export(self, out_dir: Path, resume_from_s: float | None):
         if not self.case.output.fields:
             return None
-        if not self.model.vertex_basis.size and self.comm.rank == 0:
+        if not self.built_model.vertex_basis.size and self.comm.rank == 0:
             raise CaseError(self.case.source, "output.fields", "the reduced model holds no vertex basis")
         from app.transient.body_shapes import BodyMeshes
         from app.transient.fields import FieldSeriesExport, frame_schedule
 
         case, slices = self.case, dict(self.body_slices)
-        vertex = ReducedVertexFields(self.model, self.comm, self.case.output.derived)
+        # the field bases are on the model's own coordinates: the frames are mapped back to them (self.physical)
+        vertex = ReducedVertexFields(self.built_model, self.comm, self.case.output.derived)
         vertex.prepare()
         series = FieldSeriesExport(Path(out_dir) / "transient_fields.xdmf", vertex,
-                                   lambda: self.q, frame_schedule(self.case),
+                                   lambda: self.physical(self.q), frame_schedule(self.case),
                                    bodies=lambda size: BodyMeshes(case.transient, case.geometry.model, slices, size),
                                    resume_from_s=resume_from_s,
                                    sites=self._site_cloud() if case.output.contact_pressure else None)
@@ -664,6 +694,7 @@ class ModalEngine:
                              "enrichment_modes_Hz": model.enrichment_frequencies_Hz.tolist(),
                              "resonances_near_drive_Hz": model.resonances_Hz(cfg.drive.frequency_Hz).tolist(),
                              "contact_sites": int(self.sites_record.contact.size),
+                             "free_modes": self.free_modes is not None,
                              "fe_dofs": model.fe_dofs, "build_wall_s": model.reduction_wall_s,
                              "from_cache": self.from_cache, "from_checkpoint": self.from_cache is None,
                              "setup_wall_s": self.setup_wall_s,

@@ -22,6 +22,9 @@ site follows from the others without a solve) and on the corrections of the free
 predictors (no m c_acc z-sized terms in a residual), damped by the natural monotonicity test (Deuflhard).
 A failed step is cut back and retried; steps by contact state (open / closed / change, event refinement,
 approach to a predicted closure) as the FE tier (app/transient/control.py).
+A structure whose M and K are diagonal on the free coordinates (a model in its free modes,
+app/reduced/coordinates.py) takes its contact-free increment with one dense product, by K_eff^-1
+(:func:`_free_increment_modal`), instead of four (M, C, K, K_eff^-1).
 
 Every argument travels as a structured record (NamedTuple of arrays, :func:`make_records`); the state
 arrays (q, v, a, z, zd, zdd, istate, fstate, sums, site_force) hold everything the next call needs, so where a
@@ -1141,6 +1144,76 @@ def _effective(structure, rows, dt, scheme, cache):
     return slot
 
 
+@njit(cache=True, _nrt=False)
+def _diagonal_free(structure):
+    """True when M and K are diagonal on the free coordinates (exact zeros off the diagonal: the model in its free
+    modes, app/reduced/coordinates.py), so :func:`_free_increment_modal` applies."""
+    free, M, K = structure.free, structure.M, structure.K
+    for i in range(free.size):
+        for k in range(free.size):
+            if i != k and (M[free[i], free[k]] != 0.0 or K[free[i], free[k]] != 0.0):
+                return False
+    return True
+
+
+@njit(cache=True)
+def _modal_terms(structure):
+    """What :func:`_free_increment_modal` reads of the structure, contiguous (formed once per call of the loop; read
+    in place, the diagonals and input columns of the n x n matrices cost a cache line per entry): (3, nf) the free
+    diagonal of M and of K and the free load; (3, inputs, nf) the free rows of M, C and K on each input column."""
+    free, P = structure.free, structure.inputs
+    diagonal = np.empty((3, free.size))
+    coupling = np.empty((3, P.size, free.size))
+    for i in range(free.size):
+        diagonal[0, i] = structure.M[free[i], free[i]]
+        diagonal[1, i] = structure.K[free[i], free[i]]
+        diagonal[2, i] = structure.load[free[i]]
+        for p in range(P.size):
+            coupling[0, p, i] = structure.M[free[i], P[p]]
+            coupling[1, p, i] = structure.C[free[i], P[p]]
+            coupling[2, p, i] = structure.K[free[i], P[p]]
+    return diagonal, coupling
+
+
+@njit(cache=True, _nrt=False)
+def _free_increment_modal(q, v, a, pq, dt, structure, scheme, A_inv, diagonal, coupling, dq, y, b, w, scalars):
+    """The contact-free increment ``dq`` (predictor, inputs at t1, correction w = -K_eff^-1 r0 on the free
+    coordinates) of a structure with diagonal M_FF and K_FF, with one dense product: r0 = M y1 + C y2 + K y3 - load
+    at the predictor's generalized mid-point, and C_FF y2_F = (K_eff y2_F - c_M M_FF y2_F - c_K K_FF y2_F) / c_C
+    (K_eff = c_M M + c_C C + c_K K on the free block), so w = -y2_F / c_C - K_eff^-1 b with b the diagonal and input
+    terms. ``diagonal``, ``coupling``: :func:`_modal_terms`; ``y`` (3, n: y1, y2, y3), ``b``, ``w`` (nf) and
+    ``scalars`` (2) are work arrays."""
+    beta, gamma, am, af = scheme
+    c_acc = 1.0 / (beta * dt * dt)
+    c_vel = gamma / (beta * dt)
+    c_m, c_c, c_k = (1.0 - am) * c_acc, (1.0 - af) * c_vel, 1.0 - af
+    free, P = structure.free, structure.inputs
+    n = q.size
+    for j in range(n):
+        dq[j] = dt * v[j] + 0.5 * dt * dt * a[j]
+    for p in range(P.size):
+        dq[P[p]] = pq[p] - q[P[p]]
+    for j in range(n):
+        a1 = (dq[j] - dt * v[j]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[j]
+        v1 = v[j] + dt * ((1.0 - gamma) * a[j] + gamma * a1)
+        y[0, j] = (1.0 - am) * a1 + am * a[j]
+        y[1, j] = (1.0 - af) * v1 + af * v[j]
+        y[2, j] = q[j] + (1.0 - af) * dq[j]
+    m_over_c, k_over_c = c_m / c_c, c_k / c_c
+    for i in range(free.size):
+        f = free[i]
+        b[i] = diagonal[0, i] * (y[0, f] - m_over_c * y[1, f]) + diagonal[1, i] * (y[2, f] - k_over_c * y[1, f]) \
+            - diagonal[2, i]
+    for p in range(P.size):
+        j = P[p]
+        y1, y2, y3 = y[0, j], y[1, j], y[2, j]
+        for i in range(free.size):
+            b[i] += coupling[0, p, i] * y1 + coupling[1, p, i] * y2 + coupling[2, p, i] * y3
+    _matvec(A_inv, b, w, scalars)
+    for i in range(free.size):
+        dq[free[i]] -= y[1, free[i]] / c_c + w[i]
+
+
 @njit(cache=True)
 def _snap(level, dt):
     if dt >= level:
@@ -1230,6 +1303,10 @@ def run(t_end, state, model, cache, out, track_energy, frames):
     r_K = np.zeros(n)
     r0F = np.zeros(nf)
     w = np.zeros(nf)
+    # M_FF and K_FF diagonal (the model in its free modes, app/reduced/coordinates.py): one product per step
+    modal = _diagonal_free(structure)
+    diagonal, coupling = _modal_terms(structure)
+    y_mid = np.zeros((3, n))
     y_end = np.zeros((ns, 3))
     v_end = np.zeros((ns, 3))
     closed_sites = np.zeros(ns, np.bool_)
@@ -1280,27 +1357,31 @@ def run(t_end, state, model, cache, out, track_energy, frames):
             input_values(t1, inputs, pq)
             # contact-free increments: predictor, the prescribed inputs at t1, w = -K_eff^-1 r0,
             # r0 = M ((1 - am) a1 + am a) + C ((1 - af) v1 + af v) + K (q + (1 - af) dq) - load
-            for i in range(n):
-                dq[i] = dt_try * v[i] + 0.5 * dt_try * dt_try * a[i]
-            for p in range(P.size):
-                dq[P[p]] = pq[p] - q[P[p]]
-            for i in range(n):
-                a1[i] = (dq[i] - dt_try * v[i]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[i]
-                v1[i] = v[i] + dt_try * ((1.0 - gamma) * a[i] + gamma * a1[i])
-                x_mid[i] = (1.0 - am) * a1[i] + am * a[i]
-            np.dot(structure.M, x_mid, r_M)
-            for i in range(n):
-                x_mid[i] = (1.0 - af) * v1[i] + af * v[i]
-            np.dot(structure.C, x_mid, r_C)
-            for i in range(n):
-                x_mid[i] = q[i] + (1.0 - af) * dq[i]
-            np.dot(structure.K, x_mid, r_K)
-            for i in range(nf):
-                j = free[i]
-                r0F[i] = r_M[j] + r_C[j] + r_K[j] - structure.load[j]
-            np.dot(A_inv, r0F, w)
-            for i in range(nf):
-                dq[free[i]] += -w[i]
+            if modal:
+                _free_increment_modal(q, v, a, pq, dt_try, structure, scheme, A_inv, diagonal, coupling, dq, y_mid,
+                                      r0F, w, nw.scalars)
+            else:
+                for i in range(n):
+                    dq[i] = dt_try * v[i] + 0.5 * dt_try * dt_try * a[i]
+                for p in range(P.size):
+                    dq[P[p]] = pq[p] - q[P[p]]
+                for i in range(n):
+                    a1[i] = (dq[i] - dt_try * v[i]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[i]
+                    v1[i] = v[i] + dt_try * ((1.0 - gamma) * a[i] + gamma * a1[i])
+                    x_mid[i] = (1.0 - am) * a1[i] + am * a[i]
+                np.dot(structure.M, x_mid, r_M)
+                for i in range(n):
+                    x_mid[i] = (1.0 - af) * v1[i] + af * v[i]
+                np.dot(structure.C, x_mid, r_C)
+                for i in range(n):
+                    x_mid[i] = q[i] + (1.0 - af) * dq[i]
+                np.dot(structure.K, x_mid, r_K)
+                for i in range(nf):
+                    j = free[i]
+                    r0F[i] = r_M[j] + r_C[j] + r_K[j] - structure.load[j]
+                np.dot(A_inv, r0F, w)
+                for i in range(nf):
+                    dq[free[i]] += -w[i]
             # the sites' start values and contact-free increments
             for i in range(ns):
                 for k in range(gdim):
