@@ -74,12 +74,65 @@ class ModalEngine:
             self.case, self.drive_lock = locked_case(case, found_Hz)
             self.cfg = cfg = self.case.transient
             log(drive_lock_line(self.drive_lock))
+        self.surgery = None
+        if found is None:           # a checkpoint's model is the one its run used, surgery included
+            self._surgery()
         self.setup_wall_s = time.perf_counter() - start
         # electrodes driven A cos(wt + phase) after a harmonic start, A sin from rest; a warm start keeps its
         # source run's, a resumed run its checkpoint's
         self.cosine_drive = cfg.initial_state == "harmonic"
         self.warm_start: dict | None = None
         self._records()
+
+    def _surgery(self) -> None:
+        """``reduction.surgery`` and ``site_motion`` (app/reduced/surgery.py) on the built model, at the drive as run
+        (after the lock); the free wave at the cone contacts' sites logged and reported (what ``wave_scale`` scales)."""
+        red, cfg, case = self.case.reduction, self.cfg, self.case
+        if red.surgery == "none" and red.site_motion == "full":
+            return
+        from app.drive import electrode_amplitudes
+        from app.reduced import surgery as sg
+
+        model = self.model
+        frequency = cfg.drive.frequency_Hz
+        scale_V, weights, phases = electrode_amplitudes(case, list(model.inputs[:model.n_electrodes]))
+        bodies = {b.name: b for b in cfg.bodies}
+        contact_site = np.asarray(model.site_contact)
+        chosen, frames, angles, travelling = [], [], [], []
+        for k, c in enumerate(cfg.contacts):
+            if c.kind == "surface" and c.shape == "cone":
+                sites = np.flatnonzero(contact_site == k)
+                points = np.asarray(model.site_points)[sites]
+                chosen.append(sites)
+                frames.append(sg.cone_frames(points, bodies[c.body].position_m, c.axis, math.radians(c.half_angle_deg)))
+                angles.append(sg.cone_angles(points, bodies[c.body].position_m, c.axis))
+                travelling.append((sites, frames[-1], angles[-1]))
+        chosen = np.concatenate(chosen) if chosen else np.zeros(0, np.int64)
+        frames = np.concatenate(frames) if frames else np.zeros((0, 3, 3))
+        record = {"surgery": red.surgery, "site_motion": red.site_motion, "wave_scale": red.wave_scale}
+        if chosen.size and model.n_electrodes:
+            wave = sg.site_wave(model, frequency, scale_V * weights, phases, chosen, frames)
+            record["free_site_wave_m"] = wave
+            self.log(f"surgery: the free wave at the cone sites, {scale_V:g} V: normal "
+                     f"{wave['normal_m'] * 1e6:.4g} um, circumferential {wave['circumferential_m'] * 1e6:.4g} um, "
+                     f"meridional {wave['meridional_m'] * 1e6:.4g} um (the reduced model as built)")
+        if red.surgery in ("modal_pair", "rigid_wave", "travelling_wave"):
+            model = sg.modal_pair(model, frequency)
+        if red.surgery == "rigid_wave":
+            model = sg.rigid_wave(model, frequency, weights, phases, red.wave_scale)
+        if red.surgery == "travelling_wave":
+            if len(travelling) != 1:
+                raise CaseError(case.source, "reduction.surgery", "'travelling_wave' needs exactly one cone contact")
+            model = sg.rigid_wave(model, frequency, weights, phases, red.wave_scale, travelling=travelling[0])
+        if red.site_motion == "planar":
+            model = sg.planar_sites(model, chosen, frames)
+        if chosen.size and model.n_electrodes:
+            # the wave the surgery leaves at the sites, free (no contact): a rigid wave's is the one prescribed
+            record["site_wave_m"] = sg.site_wave(model, frequency, scale_V * weights, phases, chosen, frames)
+        self.log(f"surgery: {red.surgery}, sites {red.site_motion}" + (f", wave x {red.wave_scale:g}"
+                                                                      if red.surgery.endswith("_wave") else "")
+                 + f": {model.size} coordinates")
+        self.model, self.surgery = model, record
 
     @classmethod
     def check(cls, case, comm, log) -> None:
@@ -657,6 +710,7 @@ class ModalEngine:
                "initial_state": cfg.initial_state, "warm_start": self.warm_start,
                "stepping_wall_time_s": self._loop_wall,
                **({"drive": self.drive_lock} if self.drive_lock is not None else {}),
+               **({"surgery": self.surgery} if self.surgery is not None else {}),
                "reduction": {"interface_dofs": model.n_interface, "electrodes": list(self.electrodes),
                              "inputs": list(model.inputs),
                              "modes": int(model.mode_frequencies_Hz.size), "size": model.size,
@@ -664,6 +718,7 @@ class ModalEngine:
                              "enrichment_modes_Hz": model.enrichment_frequencies_Hz.tolist(),
                              "resonances_near_drive_Hz": model.resonances_Hz(cfg.drive.frequency_Hz).tolist(),
                              "contact_sites": int(self.sites_record.contact.size),
+                             "band_area_m2": np.asarray(model.band_area_m2, float).tolist(),
                              "fe_dofs": model.fe_dofs, "build_wall_s": model.reduction_wall_s,
                              "from_cache": self.from_cache, "from_checkpoint": self.from_cache is None,
                              "setup_wall_s": self.setup_wall_s,
