@@ -5,17 +5,20 @@ geometry and mesh; each run against the friction-drive law evaluated with its ow
 The steps are model surgery on the case's reduced stator (app/reduced/surgery.py, the case keys
 ``reduction.surgery``, ``reduction.site_motion``, ``reduction.wave_scale``):
 
-1. ``travelling``: the F(1,4) pair's free wave at the contact sites reduced to its travelling component (uniform
-   amplitude, order 4, one direction), normal and circumferential only (``site_motion = "planar"``), prescribed
-   (a rigid stator surface) with its normal amplitude the full model's at that operating point: the law's case;
-2. ``own wave``: the pair's own wave at the sites (its standing part and the ring's non-uniformity), still planar
+1. ``travelling_law``: the F(1,4) pair's free wave at the contact sites reduced to its travelling component
+   (uniform amplitude, order 4, one direction), normal and circumferential only (``site_motion = "planar"``),
+   prescribed (a rigid stator surface) with its normal amplitude the full model's at that operating point; half
+   the case's step and a tenth of its friction regularisation: the law's case;
+2. ``travelling_reg``: + the case's friction regularisation (0.1 mm/s);
+3. ``travelling``: + the case's step (40 per period);
+4. ``own_wave``: + the pair's own wave at the sites (its standing part and the ring's non-uniformity), still planar
    and prescribed;
-3. ``meridional``: + the sites' meridional motion (the full site rows);
-4. ``elastic pair``: + an elastic stator of one mode pair (the F(1,4) pair free, driven by the electrodes and loaded
+5. ``meridional``: + the sites' meridional motion (the full site rows);
+6. ``elastic_pair``: + an elastic stator of one mode pair (the F(1,4) pair free, driven by the electrodes and loaded
    by the contact; the electrodes' static response of the other modes kept): the wave is no longer prescribed;
-5. ``full``: + the full reduced basis (the other modes' compliance at the contact: local, tangential) = the model.
+7. ``full``: + the full reduced basis (the other modes' compliance at the contact: local, tangential) = the model.
 
-The swap: ``elastic pair, planar`` takes step 4 before step 3 (2 -> 4' -> 4), to show how much the order matters.
+The swap: ``elastic_pair_planar`` takes step 6 before step 5 (4 -> 6' -> 6), to show how much the order matters.
 Every run starts as the case does (harmonic start, rotor seated and at rest) and runs to the same end; the held
 rotor is ``motion = "fixed"``. The rigid steps' ``wave_scale`` comes from the full run's wave at the same operating
 point (mean over the sites of the normal displacement's first harmonic, the per-site tables) over the wave the
@@ -25,7 +28,11 @@ The law (app/references/friction_drive.py) with the run's own W (its sites' norm
 circumferential amplitude for a rigid wave, else the contact probe's circumferential amplitude), the penalty as
 the Winkler stiffness, the band's slant width as the depth, N (the run's mean normal force), the wave's order
 round the contact circle r_c, and μ = μ_d (1 + (FACT - 1) exp(-DC |s|)) = μ_s at DC = 0: the contact
-half-angle θ_c from N, then the no-load deficit 1 - V_0 / (ω U_t) and stall / (μ N r_c) = 1.
+half-angle θ_c from N, then the no-load deficit 1 - V_0 / (ω U_t) and stall / (μ N r_c) = 1. The run's deficit is
+taken with two terms the law (first order in the wave) leaves out, both derived, not fitted: the rotor's speed at
+the contact, Ω (r_c - W cos α) (the crest pushes the contact point in by the normal wave's radial part), and the
+scheme's crest speed |g_v| U_t (:func:`scheme_speed_factor`, +0.23 % at the case's step) instead of ω U_t; the
+uncorrected 1 - Ω r_c / (ω U_t) is the column ``deficit_raw``.
 
     .venv/bin/python bench/bench_motor_chain.py --out DIR [--case cases/wwusm-motor.toml] \
         [--set KEY=VALUE ...] [--free-ms 60 --free-min-periods 2000 --held-ms 30 --held-min-periods 1000]
@@ -54,22 +61,29 @@ from app.references import friction_drive as law  # noqa: E402
 
 HELD = 'transient.bodies[0].rotations[0].motion="fixed"'
 #: (name, what it adds, surgery, site motion, the run it changes)
+FINE, FINE_COULOMB = "fine", "fine_coulomb"      # half the case's steps; and a tenth of its regularisation (main)
+#: (name, what it adds, surgery, site motion, extra settings, the run it changes)
 STEPS = [
-    ("travelling", "prescribed travelling wave, normal + circumferential (the law's case)", "travelling_wave",
-     "planar", None),
+    ("travelling_law", "prescribed travelling wave, normal + circumferential; half the case's step, a tenth of its "
+     "friction regularisation (the law's case)", "travelling_wave", "planar", FINE_COULOMB, None),
+    ("travelling_reg", "+ the case's friction regularisation (0.1 mm/s)", "travelling_wave", "planar", FINE,
+     "travelling_law"),
+    ("travelling", "+ the case's step (40 per period)", "travelling_wave", "planar", [], "travelling_reg"),
     ("own_wave", "+ the pair's own wave shape round the ring (standing part, non-uniformity)", "rigid_wave",
-     "planar", "travelling"),
-    ("meridional", "+ meridional motion of the sites", "rigid_wave", "full", "own_wave"),
-    ("elastic_pair", "+ elastic stator: the F(1,4) pair free, loaded by the contact", "modal_pair", "full",
+     "planar", [], "travelling"),
+    ("meridional", "+ meridional motion of the sites", "rigid_wave", "full", [], "own_wave"),
+    ("elastic_pair", "+ elastic stator: the F(1,4) pair free, loaded by the contact", "modal_pair", "full", [],
      "meridional"),
-    ("full", "+ the full reduced basis (the other modes' compliance) = the full model", "none", "full",
+    ("full", "+ the full reduced basis (the other modes' compliance) = the full model", "none", "full", [],
      "elastic_pair"),
-    ("elastic_pair_planar", "swap: + elastic pair before the meridional motion", "modal_pair", "planar", "own_wave"),
+    ("elastic_pair_planar", "swap: + elastic pair before the meridional motion", "modal_pair", "planar", [],
+     "own_wave"),
 ]
 COLUMNS = ["step", "adds", "point", "surgery", "site_motion", "wave_scale", "speed_rpm", "torque_mN_m",
            "normal_force_N", "wave_normal_um", "wave_circumferential_um", "wave_meridional_um", "separation",
-           "theta_c_rad", "deficit", "deficit_law", "deficit_vs_law_pct", "stall_ratio", "stall_vs_law_pct",
-           "speed_change_pct", "torque_change_pct", "from_step", "periods", "steady", "loop_wall_s", "run"]
+           "theta_c_rad", "crest_speed_factor", "contact_radius_factor", "deficit_raw", "deficit", "deficit_law",
+           "deficit_vs_law_pct", "stall_ratio", "stall_vs_law_pct", "speed_change_pct", "torque_change_pct",
+           "from_step", "periods", "steady", "loop_wall_s", "run"]
 
 
 def run(out: Path, name: str, case: Path, sets: list[str]) -> dict:
@@ -119,6 +133,62 @@ def law_values(summary: dict, W: float, U: float) -> dict:
     return out
 
 
+def scheme_speed_factor(summary: dict, omega: float) -> float:
+    """|g_v| / w: a steady harmonic q_n = Re(Q exp(i w n dt)) advanced by Newmark's update has the rate phasor g_v Q
+    (app/reduced/engine.py ModalEngine._scheme_steady_inputs); for the trapezoidal rule (2 / (w dt)) tan(w dt / 2).
+    The discrete crest speed is this factor times w U_t (at the closed-contact step)."""
+    tr = summary["case"]["transient"]
+    beta, gamma, dt = tr["scheme"]["beta"], tr["scheme"]["gamma"], tr["steps"]["closed_s"]
+    z = complex(math.cos(omega * dt), math.sin(omega * dt))
+    g_a = (z - 1) / (dt * dt * (((1 - gamma) + gamma * z) / (z - 1) + 0.5 - beta + beta * z))
+    return abs(dt * ((1 - gamma) + gamma * z) * g_a / (z - 1)) / omega
+
+
+def read_summary(directory: Path) -> dict:
+    return json.loads((Path(directory) / "summary.json").read_text())
+
+
+def chain_row(summary: dict, directory: Path, point: str, scale: float, band_area_m2: float | None = None) -> dict:
+    """One run's chain quantities and the law's (module docstring): ``point`` 'free' (the deficit) or 'held' (the
+    stall ratio)."""
+    tr = summary["results"]["transient"]
+    motor = tr["statistics"]["motor"]
+    record = tr.get("surgery") or {}
+    W = site_wave(directory)
+    probe = motor.get("contact_point_amplitude_m", {})
+    if record.get("surgery") in ("rigid_wave", "travelling_wave"):
+        U = record["site_wave_m"]["circumferential_m"]          # prescribed, at the run's scale
+    else:
+        U = probe.get("tangential", float("nan"))
+    if band_area_m2 is not None:
+        tr["reduction"]["band_area_m2"] = [band_area_m2]
+    lv = law_values(summary, W, U)
+    omega = 2 * math.pi * tr["drive_frequency_Hz"]
+    speed = motor["speed_rad_per_s"]
+    crest = scheme_speed_factor(summary, omega)
+    alpha = math.radians(summary["case"]["transient"]["contacts"][0]["half_angle_deg"])
+    radius = 1.0 - W * math.cos(alpha) / lv["r_c"]
+    free = point == "free"
+    raw = 1.0 - speed * lv["r_c"] / (omega * U) if free else None
+    deficit = 1.0 - speed * lv["r_c"] * radius / (crest * omega * U) if free else None
+    stall = None if free else motor["friction_torque_N_m"] / (lv["mu"] * motor["normal_force_N"] * lv["r_c"])
+    steady = tr.get("steady_state") or {}
+    surgery = record.get("surgery", "none")
+    return {
+        "point": point, "surgery": surgery, "site_motion": record.get("site_motion", "full"), "wave_scale": scale,
+        "speed_rpm": motor["speed_rpm"], "torque_mN_m": 1e3 * motor["friction_torque_N_m"],
+        "normal_force_N": motor["normal_force_N"], "wave_normal_um": 1e6 * W, "wave_circumferential_um": 1e6 * U,
+        "wave_meridional_um": 1e6 * probe.get("meridional", float("nan")),
+        "separation": (motor.get("fractions") or {}).get("separation"),
+        "theta_c_rad": lv.get("theta_c"), "deficit_raw": raw, "deficit": deficit,
+        "crest_speed_factor": crest, "contact_radius_factor": radius,
+        "deficit_law": lv.get("deficit_law") if free else None,
+        "deficit_vs_law_pct": 100.0 * (deficit / lv["deficit_law"] - 1.0) if free and lv.get("deficit_law") else None,
+        "stall_ratio": stall, "stall_vs_law_pct": 100.0 * (stall - 1.0) if stall is not None else None,
+        "periods": steady.get("cycles"), "steady": steady.get("steady"),
+        "loop_wall_s": tr.get("stepping_wall_time_s"), "run": str(directory)}
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", required=True, type=Path)
@@ -138,67 +208,45 @@ def main(argv=None) -> None:
               "held": [f"transient.end_time_s={args.held_ms * 1e-3!r}",
                        f"transient.steady_state.min_cycles={args.held_min_periods}", HELD]}
     base = list(args.sets) + ["output.contact_sites=true"]
+    from app.case.schema import load_case
+
+    steps = load_case(args.case, base).transient.steps
+    fine = [f"transient.steps.{key}={getattr(steps, key) / 2!r}" for key in ("open_s", "closed_s", "change_s")]
+    regularisation = load_case(args.case, base).transient.contacts[0].friction.regularisation_speed_m_per_s
+    fine_coulomb = fine + [f"transient.contacts[0].friction.regularisation_speed_m_per_s={regularisation / 10!r}"]
     rows = []
     for point, point_sets in points.items():
         reference = run(out, f"full-{point}", args.case, base + point_sets)
         W_ref = site_wave(out / f"full-{point}")
         results = {}
-        for name, _adds, surgery, motion, _ in STEPS:
-            sets = base + point_sets + [f'reduction.surgery="{surgery}"', f'reduction.site_motion="{motion}"']
+        for name, _adds, surgery, motion, extra, _ in STEPS:
+            extra = {FINE: fine, FINE_COULOMB: fine_coulomb}.get(extra, extra) if isinstance(extra, str) else extra
+            sets = base + point_sets + [f'reduction.surgery="{surgery}"', f'reduction.site_motion="{motion}"'] + extra
             scale = 1.0
             if surgery in ("rigid_wave", "travelling_wave"):
                 # the prescribed wave at scale 1 (two periods suffice: the surgery's record)
                 probe = run(out, f"{name}-probe", args.case, base + [f'reduction.surgery="{surgery}"',
                                                                      f'reduction.site_motion="{motion}"',
                                                                      "transient.end_time_s=6e-5",
-                                                                     "transient.steady_state.min_cycles=1"])
+                                                                     "transient.steady_state.min_cycles=1"] + extra)
                 scale = W_ref / probe["results"]["transient"]["surgery"]["site_wave_m"]["normal_m"]
                 sets.append(f"reduction.wave_scale={scale!r}")
             summary = reference if surgery == "none" else run(out, f"{name}-{point}", args.case, sets)
             directory = out / (f"full-{point}" if surgery == "none" else f"{name}-{point}")
             results[name] = (summary, directory, scale)
-        for name, adds, surgery, motion, before in STEPS:
+        for name, adds, _surgery, _motion, _, before in STEPS:
             summary, directory, scale = results[name]
-            tr = summary["results"]["transient"]
-            motor = tr["statistics"]["motor"]
-            record = tr.get("surgery") or {}
-            W = site_wave(directory)
-            probe = motor.get("contact_point_amplitude_m", {})
-            if surgery in ("rigid_wave", "travelling_wave"):
-                U = record["site_wave_m"]["circumferential_m"]          # at the run's scale
-            else:
-                U = probe.get("tangential", float("nan"))
-            if args.band_area_m2 is not None:
-                tr["reduction"]["band_area_m2"] = [args.band_area_m2]
-            lv = law_values(summary, W, U)
-            omega = 2 * math.pi * tr["drive_frequency_Hz"]
-            speed = motor["speed_rad_per_s"]
-            deficit = 1.0 - speed * lv["r_c"] / (omega * U) if point == "free" else None
-            stall = motor["friction_torque_N_m"] / (lv["mu"] * motor["normal_force_N"] * lv["r_c"]) \
-                if point == "held" else None
+            row = chain_row(summary, directory, point, scale, args.band_area_m2)
             prev = results.get(before)
-            change_speed = change_torque = None
+            row.update({"step": name, "adds": adds, "from_step": before, "speed_change_pct": None,
+                        "torque_change_pct": None})
             if prev is not None:
                 pm = prev[0]["results"]["transient"]["statistics"]["motor"]
                 if point == "free":
-                    change_speed = 100.0 * (motor["speed_rpm"] / pm["speed_rpm"] - 1.0)
+                    row["speed_change_pct"] = 100.0 * (row["speed_rpm"] / pm["speed_rpm"] - 1.0)
                 else:
-                    change_torque = 100.0 * (motor["friction_torque_N_m"] / pm["friction_torque_N_m"] - 1.0)
-            steady = tr.get("steady_state") or {}
-            rows.append({
-                "step": name, "adds": adds, "point": point, "surgery": surgery, "site_motion": motion,
-                "wave_scale": scale, "speed_rpm": motor["speed_rpm"], "torque_mN_m": 1e3 * motor["friction_torque_N_m"],
-                "normal_force_N": motor["normal_force_N"], "wave_normal_um": 1e6 * W,
-                "wave_circumferential_um": 1e6 * U, "wave_meridional_um": 1e6 * probe.get("meridional", float("nan")),
-                "separation": (motor.get("fractions") or {}).get("separation"),
-                "theta_c_rad": lv.get("theta_c"), "deficit": deficit,
-                "deficit_law": lv.get("deficit_law") if point == "free" else None,
-                "deficit_vs_law_pct": 100.0 * (deficit / lv["deficit_law"] - 1.0)
-                if point == "free" and lv.get("deficit_law") else None,
-                "stall_ratio": stall, "stall_vs_law_pct": 100.0 * (stall - 1.0) if stall is not None else None,
-                "speed_change_pct": change_speed, "torque_change_pct": change_torque, "from_step": before,
-                "periods": steady.get("cycles"), "steady": steady.get("steady"),
-                "loop_wall_s": tr.get("stepping_wall_time_s"), "run": str(directory)})
+                    row["torque_change_pct"] = 100.0 * (row["torque_mN_m"] / (1e3 * pm["friction_torque_N_m"]) - 1.0)
+            rows.append(row)
     with open(out / "chain.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, COLUMNS)
         writer.writeheader()
@@ -213,15 +261,16 @@ def _f(value, fmt):
 
 def markdown(rows: list[dict]) -> str:
     lines = ["| step | adds | point | speed [rpm] | torque [mN m] | N [N] | W [µm] | U_t [µm] | θ_c [rad] | "
-             "deficit | law | vs law | stall/(μNr_c) | change |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "deficit (raw) | deficit | law | vs law | stall/(μNr_c) | change |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         change = r["speed_change_pct"] if r["point"] == "free" else r["torque_change_pct"]
         lines.append(
             f"| {r['step']} | {r['adds']} | {r['point']} | {_f(r['speed_rpm'], '.2f')} | {_f(r['torque_mN_m'], '.3f')}"
             f" | {_f(r['normal_force_N'], '.3f')} | {_f(r['wave_normal_um'], '.3f')}"
             f" | {_f(r['wave_circumferential_um'], '.3f')} | {_f(r['theta_c_rad'], '.4f')}"
-            f" | {_f(r['deficit'], '.5f')} | {_f(r['deficit_law'], '.5f')} | {_f(r['deficit_vs_law_pct'], '+.1f')} %"
+            f" | {_f(r['deficit_raw'], '.5f')} | {_f(r['deficit'], '.5f')} | {_f(r['deficit_law'], '.5f')}"
+            f" | {_f(r['deficit_vs_law_pct'], '+.1f')} %"
             f" | {_f(r['stall_ratio'], '.4f')} | {_f(change, '+.2f')} % from {r['from_step'] or '—'} |")
     return "\n".join(lines) + "\n"
 
