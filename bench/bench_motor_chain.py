@@ -35,7 +35,8 @@ scheme's crest speed |g_v| U_t (:func:`scheme_speed_factor`, +0.23 % at the case
 uncorrected 1 - Ω r_c / (ω U_t) is the column ``deficit_raw``.
 
     .venv/bin/python bench/bench_motor_chain.py --out DIR [--case cases/wwusm-motor.toml] \
-        [--set KEY=VALUE ...] [--free-ms 60 --free-min-periods 2000 --held-ms 30 --held-min-periods 1000]
+        [--set KEY=VALUE ...] [--free-ms 150 --free-min-periods 2000 --held-ms 60 --held-min-periods 2000 \
+        --tolerance 2e-4 --window-periods 1000]
 
 writes DIR/chain.csv and DIR/chain.md (one row per run) and keeps every run's directory (a run whose directory
 holds a summary of the same settings is read, not run again). The docs' table: the coarse stator of the tests
@@ -83,7 +84,8 @@ COLUMNS = ["step", "adds", "point", "surgery", "site_motion", "wave_scale", "spe
            "normal_force_N", "wave_normal_um", "wave_circumferential_um", "wave_meridional_um", "separation",
            "theta_c_rad", "crest_speed_factor", "contact_radius_factor", "deficit_raw", "deficit", "deficit_law",
            "deficit_vs_law_pct", "stall_ratio", "stall_vs_law_pct", "speed_change_pct", "torque_change_pct",
-           "from_step", "periods", "steady", "loop_wall_s", "run"]
+           "from_step", "periods", "steady", "window_periods", "speed_rpm_hw95", "torque_mN_m_hw95",
+           "normal_force_N_hw95", "loop_wall_s", "run"]
 
 
 def run(out: Path, name: str, case: Path, sets: list[str]) -> dict:
@@ -109,6 +111,34 @@ def site_wave(directory: Path, contact: str = "stator_rotor", rows: int = 20) ->
         c = f[f"{contact}_sites_normal_displacement_cos"][-rows:]
         s = f[f"{contact}_sites_normal_displacement_sin"][-rows:]
     return float(np.hypot(c, s).mean())
+
+
+def window_means(directory: Path, period_s: float, periods: int, batch: int = 20,
+                 contact: str = "stator_rotor", body: str = "rotor") -> dict:
+    """Means over the run's last ``periods`` drive periods of the rotor's speed [rad/s], the friction torque [N m]
+    and the normal force [N] (time-weighted, per step), with the 95 % half-width of each from batch means of
+    ``batch`` periods (app/intervals.py): a riding rotor's speed and torque wander over more than the motor
+    statistic's 20-period window (a limit cycle of tens of periods, a creep over thousands)."""
+    import h5py
+
+    from app.intervals import half_width_95
+
+    with h5py.File(Path(directory) / "transient.h5", "r") as f:
+        t = f["time_s"][:]
+        series = {"speed_rad_per_s": f[f"{body}_angular_velocity_rad_per_s"][:, 0],
+                  "torque_N_m": f[f"{contact}_torque_N_m"][:, 0], "normal_force_N": f[f"{contact}_normal_force_N"][:]}
+    n = periods // batch
+    edges = t[-1] - period_s * batch * np.arange(n, -1, -1)
+    out = {}
+    for name, y in series.items():
+        means = []
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            inside = (t > lo) & (t <= hi)
+            means.append(np.trapz(y[inside], t[inside]) / (t[inside][-1] - t[inside][0]))
+        out[name] = float(np.mean(means))
+        out[name + "_hw95"] = half_width_95(np.asarray(means))
+    out["window_periods"] = n * batch
+    return out
 
 
 def law_values(summary: dict, W: float, U: float) -> dict:
@@ -148,11 +178,22 @@ def read_summary(directory: Path) -> dict:
     return json.loads((Path(directory) / "summary.json").read_text())
 
 
-def chain_row(summary: dict, directory: Path, point: str, scale: float, band_area_m2: float | None = None) -> dict:
+def chain_row(summary: dict, directory: Path, point: str, scale: float, band_area_m2: float | None = None,
+              window_periods: int | None = None) -> dict:
     """One run's chain quantities and the law's (module docstring): ``point`` 'free' (the deficit) or 'held' (the
-    stall ratio)."""
+    stall ratio); speed, torque and N the means over the last ``window_periods`` periods (:func:`window_means`;
+    None: the motor statistic's window)."""
     tr = summary["results"]["transient"]
-    motor = tr["statistics"]["motor"]
+    motor = dict(tr["statistics"]["motor"])
+    spread = {}
+    if window_periods:
+        means = window_means(directory, 1.0 / tr["drive_frequency_Hz"], window_periods)
+        motor.update(speed_rad_per_s=means["speed_rad_per_s"], speed_rpm=means["speed_rad_per_s"] * 30 / math.pi,
+                     friction_torque_N_m=means["torque_N_m"], normal_force_N=means["normal_force_N"])
+        spread = {"speed_rpm_hw95": means["speed_rad_per_s_hw95"] * 30 / math.pi,
+                  "torque_mN_m_hw95": 1e3 * means["torque_N_m_hw95"],
+                  "normal_force_N_hw95": means["normal_force_N_hw95"],
+                  "window_periods": means["window_periods"]}
     record = tr.get("surgery") or {}
     W = site_wave(directory)
     probe = motor.get("contact_point_amplitude_m", {})
@@ -186,7 +227,7 @@ def chain_row(summary: dict, directory: Path, point: str, scale: float, band_are
         "deficit_vs_law_pct": 100.0 * (deficit / lv["deficit_law"] - 1.0) if free and lv.get("deficit_law") else None,
         "stall_ratio": stall, "stall_vs_law_pct": 100.0 * (stall - 1.0) if stall is not None else None,
         "periods": steady.get("cycles"), "steady": steady.get("steady"),
-        "loop_wall_s": tr.get("stepping_wall_time_s"), "run": str(directory)}
+        "loop_wall_s": tr.get("stepping_wall_time_s"), "run": str(directory), **spread}
 
 
 def main(argv=None) -> None:
@@ -194,19 +235,25 @@ def main(argv=None) -> None:
     parser.add_argument("--out", required=True, type=Path)
     parser.add_argument("--case", type=Path, default=ROOT / "cases" / "wwusm-motor.toml")
     parser.add_argument("--set", action="append", default=[], dest="sets")
-    parser.add_argument("--free-ms", type=float, default=60.0)
+    parser.add_argument("--free-ms", type=float, default=150.0)
     parser.add_argument("--free-min-periods", type=int, default=2000)
-    parser.add_argument("--held-ms", type=float, default=30.0)
-    parser.add_argument("--held-min-periods", type=int, default=1000)
+    parser.add_argument("--held-ms", type=float, default=60.0)
+    parser.add_argument("--held-min-periods", type=int, default=2000)
+    parser.add_argument("--tolerance", type=float, default=2e-4,
+                        help="the steady-state rule's relative tolerance over its 20 periods (the case's 5e-3 stops a "
+                             "riding rotor that still creeps by 0.1 %% per 20 periods)")
+    parser.add_argument("--window-periods", type=int, default=1000,
+                        help="speed, torque and N: means over the last this many periods (batches of 20)")
     parser.add_argument("--band-area-m2", type=float, default=None,
                         help="the contact band's area (default: the run's, results.transient.reduction)")
     args = parser.parse_args(argv)
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
+    rule = f"transient.steady_state.relative_tolerance={args.tolerance!r}"
     points = {"free": [f"transient.end_time_s={args.free_ms * 1e-3!r}",
-                       f"transient.steady_state.min_cycles={args.free_min_periods}"],
+                       f"transient.steady_state.min_cycles={args.free_min_periods}", rule],
               "held": [f"transient.end_time_s={args.held_ms * 1e-3!r}",
-                       f"transient.steady_state.min_cycles={args.held_min_periods}", HELD]}
+                       f"transient.steady_state.min_cycles={args.held_min_periods}", rule, HELD]}
     base = list(args.sets) + ["output.contact_sites=true"]
     from app.case.schema import load_case
 
@@ -234,19 +281,21 @@ def main(argv=None) -> None:
             summary = reference if surgery == "none" else run(out, f"{name}-{point}", args.case, sets)
             directory = out / (f"full-{point}" if surgery == "none" else f"{name}-{point}")
             results[name] = (summary, directory, scale)
+        by_step = {}
         for name, adds, _surgery, _motion, _, before in STEPS:
             summary, directory, scale = results[name]
-            row = chain_row(summary, directory, point, scale, args.band_area_m2)
+            row = chain_row(summary, directory, point, scale, args.band_area_m2, args.window_periods)
             prev = results.get(before)
             row.update({"step": name, "adds": adds, "from_step": before, "speed_change_pct": None,
                         "torque_change_pct": None})
             if prev is not None:
-                pm = prev[0]["results"]["transient"]["statistics"]["motor"]
+                pm = by_step[before]
                 if point == "free":
                     row["speed_change_pct"] = 100.0 * (row["speed_rpm"] / pm["speed_rpm"] - 1.0)
                 else:
-                    row["torque_change_pct"] = 100.0 * (row["torque_mN_m"] / (1e3 * pm["friction_torque_N_m"]) - 1.0)
+                    row["torque_change_pct"] = 100.0 * (row["torque_mN_m"] / pm["torque_mN_m"] - 1.0)
             rows.append(row)
+            by_step[name] = row
     with open(out / "chain.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, COLUMNS)
         writer.writeheader()
