@@ -28,11 +28,12 @@ The law (app/references/friction_drive.py) with the run's own W (its sites' norm
 circumferential amplitude for a rigid wave, else the contact probe's circumferential amplitude), the penalty as
 the Winkler stiffness, the band's slant width as the depth, N (the run's mean normal force), the wave's order
 round the contact circle r_c, and μ = μ_d (1 + (FACT - 1) exp(-DC |s|)) = μ_s at DC = 0: the contact
-half-angle θ_c from N, then the no-load deficit 1 - V_0 / (ω U_t) and stall / (μ N r_c) = 1. The run's deficit is
-taken with two terms the law (first order in the wave) leaves out, both derived, not fitted: the rotor's speed at
-the contact, Ω (r_c - W cos α) (the crest pushes the contact point in by the normal wave's radial part), and the
-scheme's crest speed |g_v| U_t (:func:`scheme_speed_factor`, +0.23 % at the case's step) instead of ω U_t; the
-uncorrected 1 - Ω r_c / (ω U_t) is the column ``deficit_raw``.
+half-angle θ_c from N, then the no-load deficit 1 - V_0 / (ω U_t) and stall / (μ N r_c) = 1 (the column
+``stall_ratio_at_contact`` divides by μ N (r_c - W cos α) instead: the friction's lever is the contact point's).
+The run's deficit is taken with two terms the law (first order in the wave) leaves out, both derived, not
+fitted: the rotor's speed at the contact, Ω (r_c - W cos α) (the crest pushes the contact point in by the normal
+wave's radial part), and the scheme's crest speed |g_v| U_t (:func:`scheme_speed_factor`, +0.23 % at the case's
+step) instead of ω U_t; the uncorrected 1 - Ω r_c / (ω U_t) is the column ``deficit_raw``.
 
     .venv/bin/python bench/bench_motor_chain.py --out DIR [--case cases/wwusm-motor.toml] \
         [--set KEY=VALUE ...] [--free-ms 150 --free-min-periods 2000 --held-ms 60 --held-min-periods 2000 \
@@ -90,7 +91,8 @@ STEPS = [
 COLUMNS = ["step", "adds", "point", "surgery", "site_motion", "wave_scale", "speed_rpm", "torque_mN_m",
            "normal_force_N", "wave_normal_um", "wave_circumferential_um", "wave_meridional_um", "separation",
            "theta_c_rad", "crest_speed_factor", "contact_radius_factor", "deficit_raw", "deficit", "deficit_law",
-           "deficit_vs_law_pct", "stall_ratio", "stall_vs_law_pct", "speed_change_pct", "torque_change_pct",
+           "deficit_vs_law_pct", "stall_ratio", "stall_vs_law_pct", "stall_ratio_at_contact", "speed_change_pct",
+           "torque_change_pct",
            "from_step", "periods", "steady", "window_periods", "speed_rpm_hw95", "torque_mN_m_hw95",
            "normal_force_N_hw95", "loop_wall_s", "run"]
 
@@ -233,6 +235,7 @@ def chain_row(summary: dict, directory: Path, point: str, scale: float, band_are
         "deficit_law": lv.get("deficit_law") if free else None,
         "deficit_vs_law_pct": 100.0 * (deficit / lv["deficit_law"] - 1.0) if free and lv.get("deficit_law") else None,
         "stall_ratio": stall, "stall_vs_law_pct": 100.0 * (stall - 1.0) if stall is not None else None,
+        "stall_ratio_at_contact": stall / radius if stall is not None else None,
         "periods": steady.get("cycles"), "steady": steady.get("steady"),
         "loop_wall_s": tr.get("stepping_wall_time_s"), "run": str(directory), **spread}
 
