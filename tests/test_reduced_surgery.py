@@ -169,6 +169,8 @@ MOTOR = CASES / "wwusm-motor.toml"
     (['reduction.surgery="rigid_wave"', "electrodes.B.phase_deg=180.0", "electrodes.Bm.phase_deg=0.0"],
      "reduction.surgery"),                                                       # a standing drive
     (['tier="fe"', 'reduction.site_motion="planar"'], "reduction.site_motion"),
+    (['reduction.surgery="travelling_wave"', 'transient.contacts[0].shape="plane"',
+      "transient.contacts[0].normal=[0.0, 0.0, 1.0]"], "reduction.surgery"),      # no cone to go round
     (['reduction.site_motion="planar"', 'transient.contacts[0].shape="plane"',
       "transient.contacts[0].normal=[0.0, 0.0, 1.0]"], "transient.contacts[0].shape"),
 ])

@@ -135,6 +135,10 @@ def _check_surgery(case, file: str) -> None:
         if not spans:
             raise CaseError(file, "reduction.surgery", f"{red.surgery!r} needs voltage electrodes driven in two "
                                                        "independent phases (a travelling wave)")
+    if red.surgery == "travelling_wave" and sum(c.kind == "surface" and c.shape == "cone"
+                                                for c in case.transient.contacts) != 1:
+        raise CaseError(file, "reduction.surgery", "'travelling_wave' takes the wave round one cone contact: the case "
+                                                   "needs exactly one ([[transient.contacts]] with shape 'cone')")
     if red.site_motion == "planar":
         if case.geometry.model != "3d":
             raise CaseError(file, "reduction.site_motion", "'planar' needs a 3D model")

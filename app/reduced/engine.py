@@ -120,9 +120,7 @@ class ModalEngine:
             model = sg.modal_pair(model, frequency)
         if red.surgery == "rigid_wave":
             model = sg.rigid_wave(model, frequency, weights, phases, red.wave_scale)
-        if red.surgery == "travelling_wave":
-            if len(travelling) != 1:
-                raise CaseError(case.source, "reduction.surgery", "'travelling_wave' needs exactly one cone contact")
+        if red.surgery == "travelling_wave":         # one cone contact (app/case/options.py)
             model = sg.rigid_wave(model, frequency, weights, phases, red.wave_scale, travelling=travelling[0])
         if red.site_motion == "planar":
             model = sg.planar_sites(model, chosen, frames)
