@@ -47,8 +47,9 @@ A riding rotor's full model may still creep after the steady-state rule (measure
         --set 'transient.start_from="/abs/DIR/full-free"'
 
 The bench writes DIR/chain.csv and DIR/chain.md (one row per run) and keeps every run's directory (a run whose directory
-holds a summary of the same settings is read, not run again). The docs' table: the coarse stator of the tests
-(``--set geometry.parameters.mesh_size_m=0.006 --set geometry.parameters.tip_mesh_size_m=0.002 --set
+holds a summary of the same settings is read, not run again). The docs' tables: the case mesh (``--set
+output.fields=false --set output.plots=false``) and the coarse stator of the tests (``--set
+geometry.parameters.mesh_size_m=0.006 --set geometry.parameters.tip_mesh_size_m=0.002 --set
 reduction.interface_nodes=32 --set output.fields=false --set output.plots=false``).
 """
 

@@ -7,19 +7,21 @@ kinematics, a rigid stator surface, the penalty as Winkler layer.
 * Held rotor: every contact point slides forward, so the torque is mu N r (law: F = mu N at V = 0), mu = mu_s
   (DC = 0), with the run's N and the friction's lever r the contact point's, r_c - W cos(alpha) (the crest pushes it
   in by the normal wave's radial part: 0.25 % here). Measured T / (mu N r_c) = 0.99747 and T / (mu N (r_c - W cos
-  alpha)) = 1.00004 here (3 ms); in the chain's 1 000-period run 0.99810 and 1.00001 (docs/motor-chain.md). Allowed
-  0.1 % (what is left: the regularisation, 1e-4 m/s against slip speeds of metres per second, and the rotor's small
-  axial motion giving the slip a meridional share); without the lever's correction the test fails.
+  alpha)) = 1.00004 here (3 ms); over the chain's 1 000-period window 0.99810 and 1.000003
+  (docs/figures/motor_chain_coarse.csv). Allowed 0.1 % (what is left: the regularisation, 1e-4 m/s against slip
+  speeds of metres per second, and the rotor's small axial motion giving the slip a meridional share); without the
+  lever's correction the test fails.
 * Free rotor: the no-load deficit 1 - V_0 / (w U_t) against the law's (app/references/friction_drive.py) with the
   run's own N, W, U_t and the contact half-angle those give. The run's V_0 and crest speed carry two terms the law
   (first order in the wave) leaves out, each larger than the deficit (6.2e-4) itself: the contact point sits
   W cos(alpha) = 33 um inside r_c (-0.25 %), and the scheme's crest speed is |g_v| U_t, |g_v| / w - 1 = 5.8e-4 at
   80 steps per period (trapezoidal rule: tan(w dt / 2) / (w dt / 2)). With both (derived, not fitted) the deficit
-  is the law's to +2.0 % here (150 periods, the rotor started at the crest speed; the chain's 2 000-period runs:
-  +1.8 % at 80 steps per period, +1.3 % with a tenth of the regularisation, +3.0 % at 40, docs/motor-chain.md);
-  allowed 5 %. Without the contact radius the deficit is -1.9e-3 (-410 %), and with the prescribed wave started
-  on the continuous rates instead of the scheme's steady state (an alternation of the prescribed site velocity from
-  step to step, app/reduced/engine.py) +17 %: measured, so the test sees either.
+  is the law's to +2.0 % here (150 periods, the rotor started at the crest speed). The chain's 2 000-period runs
+  on this stator: +1.3 % with a tenth of the regularisation, +1.8 % at 80 steps per period, +3.1 % at 40
+  (docs/figures/motor_chain_coarse.csv); on the case mesh +0.6, +1.8, +1.8 % (docs/motor-chain.md). Allowed
+  5 %. Without the contact radius the deficit is -1.9e-3 (-410 %), and with the prescribed wave started on the
+  continuous rates instead of the scheme's steady state (an alternation of the prescribed site velocity from step
+  to step, app/reduced/engine.py) +17 %: measured, so the test sees either.
 """
 
 from __future__ import annotations
