@@ -93,6 +93,7 @@ def check_tier(case, file: str, written=None) -> None:
                 raise CaseError(file, f"transient.contacts[{i}].sample_rings",
                                 "rings across the band see one displacement with the nodes interface: set "
                                 'reduction.interface = "band" or reduction.site_displacement = "field"')
+    _check_surgery(case, file)
     if case.transient is not None and case.transient.start_from is not None and case.tier != "modal":
         raise CaseError(file, "transient.start_from", f"warm starts are offered by the modal tier only (this case "
                                                       f"runs tier {case.tier!r})")
@@ -107,3 +108,41 @@ def _check_contact_pressure(case, file: str) -> None:
     if not any(c.kind == "surface" for c in case.transient.contacts):
         raise CaseError(file, "output.contact_pressure", "the case has no surface contact ([[transient.contacts]] "
                                                          "of kind 'surface') to write the pressure of")
+
+
+def _check_surgery(case, file: str) -> None:
+    """``reduction.surgery``, ``site_motion``, ``wave_scale`` (app/reduced/surgery.py): the modal tier's transient,
+    electrodes only as inputs, a prescribed wave driven in two phases, planar sites on cone contacts."""
+    import math
+
+    red = case.reduction
+    given = [(key, value) for key, value, default in (("surgery", red.surgery, "none"),
+                                                      ("site_motion", red.site_motion, "full"),
+                                                      ("wave_scale", red.wave_scale, 1.0)) if value != default]
+    if not given:
+        return
+    key = f"reduction.{given[0][0]}"
+    if case.tier != "modal" or case.transient is None or "transient" not in (case.analyses or ()):
+        raise CaseError(file, key, "acts on the modal tier's transient only")
+    if red.wave_scale != 1.0 and red.surgery not in ("rigid_wave", "travelling_wave"):
+        raise CaseError(file, "reduction.wave_scale", "scales the prescribed wave of surgery = 'rigid_wave' or "
+                                                      "'travelling_wave' only")
+    if red.surgery != "none" and case.transient.base_motions:
+        raise CaseError(file, "reduction.surgery", "keeps electrode inputs only: remove [[transient.base_motions]]")
+    if red.surgery in ("rigid_wave", "travelling_wave"):
+        phases = [math.radians(e.phase_deg) for e in case.electrodes.values() if e.kind == "voltage"]
+        spans = any(abs(math.sin(a - b)) > 1e-6 for a in phases for b in phases)
+        if not spans:
+            raise CaseError(file, "reduction.surgery", f"{red.surgery!r} needs voltage electrodes driven in two "
+                                                       "independent phases (a travelling wave)")
+    if red.surgery == "travelling_wave" and sum(c.kind == "surface" and c.shape == "cone"
+                                                for c in case.transient.contacts) != 1:
+        raise CaseError(file, "reduction.surgery", "'travelling_wave' takes the wave round one cone contact: the case "
+                                                   "needs exactly one ([[transient.contacts]] with shape 'cone')")
+    if red.site_motion == "planar":
+        if case.geometry.model != "3d":
+            raise CaseError(file, "reduction.site_motion", "'planar' needs a 3D model")
+        for i, contact in enumerate(case.transient.contacts):
+            if contact.kind == "surface" and contact.shape != "cone":
+                raise CaseError(file, f"transient.contacts[{i}].shape",
+                                "reduction.site_motion = 'planar' drops a cone's meridional motion: cone contacts only")

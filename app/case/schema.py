@@ -275,6 +275,21 @@ class ReductionSection:
         0, ge=0, le=16, doc="add the full FE model's modes nearest the drive frequency (electrodes held, interface "
                             "free) to the basis, so its resonance there is the FE model's exactly: 2 for the motor's "
                             "F(1,4) pair (a drive within a few bandwidths of it makes the wave steep in the detuning)")
+    surgery: Literal["none", "modal_pair", "rigid_wave", "travelling_wave"] = param(
+        "none", doc="model surgery for a chain of controlled runs (docs/motor-chain.md, app/reduced/surgery.py): "
+                    "'none' runs the reduced model as built; 'modal_pair' keeps only the two modes nearest the "
+                    "drive (and the electrodes' static response), loaded by the contacts; 'rigid_wave' prescribes "
+                    "that pair's free steady wave at the contact sites (a rigid stator surface: the contact forces "
+                    "load nothing), its amplitude wave_scale x the free one; 'travelling_wave' the same reduced to "
+                    "its travelling component round the (one) cone contact: uniform amplitude, one order, one "
+                    "direction (the friction-drive law's wave)")
+    site_motion: Literal["full", "planar"] = param(
+        "full", doc="the contact sites' motion: 'full', or 'planar': each cone contact's sites moving along the cone's "
+                    "normal and circumference only (the meridional component dropped: the friction-drive law's "
+                    "kinematics)")
+    wave_scale: float = param(
+        1.0, gt=0, doc="surgery = 'rigid_wave' or 'travelling_wave': the prescribed wave's amplitude over the free "
+                       "steady wave's (set it so the normal wave equals a full run's at the same operating point)")
 
 
 @dataclass(frozen=True)

@@ -75,9 +75,12 @@ class ModalEngine:
             self.case, self.drive_lock = locked_case(case, found_Hz)
             self.cfg = cfg = self.case.transient
             log(drive_lock_line(self.drive_lock))
+        self.surgery = None
+        if found is None:           # a checkpoint's model is the one its run used, surgery included
+            self._surgery()
         # the run's coordinates: the model's free coordinates in its own modes where its site rows are few
-        # (app/reduced/coordinates.py); the model as built stays for the checkpoint's file, the warm-start checks and
-        # the field output
+        # (app/reduced/coordinates.py); the model as built (and operated on) stays for the checkpoint's file, the
+        # warm-start checks and the field output
         self.built_model = self.model
         inputs = np.arange(self.model.n_interface, self.model.n_interface + len(self.model.inputs))
         self.free_modes = free_modes(self.model, np.setdiff1d(np.arange(self.model.size), inputs), comm)
@@ -89,6 +92,54 @@ class ModalEngine:
         self.cosine_drive = cfg.initial_state == "harmonic"
         self.warm_start: dict | None = None
         self._records()
+
+    def _surgery(self) -> None:
+        """``reduction.surgery`` and ``site_motion`` (app/reduced/surgery.py) on the built model, at the drive as run
+        (after the lock); the free wave at the cone contacts' sites logged and reported (what ``wave_scale`` scales)."""
+        red, cfg, case = self.case.reduction, self.cfg, self.case
+        if red.surgery == "none" and red.site_motion == "full":
+            return
+        from app.drive import electrode_amplitudes
+        from app.reduced import surgery as sg
+
+        model = self.model
+        frequency = cfg.drive.frequency_Hz
+        scale_V, weights, phases = electrode_amplitudes(case, list(model.inputs[:model.n_electrodes]))
+        bodies = {b.name: b for b in cfg.bodies}
+        contact_site = np.asarray(model.site_contact)
+        chosen, frames, angles, travelling = [], [], [], []
+        for k, c in enumerate(cfg.contacts):
+            if c.kind == "surface" and c.shape == "cone":
+                sites = np.flatnonzero(contact_site == k)
+                points = np.asarray(model.site_points)[sites]
+                chosen.append(sites)
+                frames.append(sg.cone_frames(points, bodies[c.body].position_m, c.axis, math.radians(c.half_angle_deg)))
+                angles.append(sg.cone_angles(points, bodies[c.body].position_m, c.axis))
+                travelling.append((sites, frames[-1], angles[-1]))
+        chosen = np.concatenate(chosen) if chosen else np.zeros(0, np.int64)
+        frames = np.concatenate(frames) if frames else np.zeros((0, 3, 3))
+        record = {"surgery": red.surgery, "site_motion": red.site_motion, "wave_scale": red.wave_scale}
+        if chosen.size and model.n_electrodes:
+            wave = sg.site_wave(model, frequency, scale_V * weights, phases, chosen, frames)
+            record["free_site_wave_m"] = wave
+            self.log(f"surgery: the free wave at the cone sites, {scale_V:g} V: normal "
+                     f"{wave['normal_m'] * 1e6:.4g} um, circumferential {wave['circumferential_m'] * 1e6:.4g} um, "
+                     f"meridional {wave['meridional_m'] * 1e6:.4g} um (the reduced model as built)")
+        if red.surgery in ("modal_pair", "rigid_wave", "travelling_wave"):
+            model = sg.modal_pair(model, frequency)
+        if red.surgery == "rigid_wave":
+            model = sg.rigid_wave(model, frequency, weights, phases, red.wave_scale)
+        if red.surgery == "travelling_wave":         # one cone contact (app/case/options.py)
+            model = sg.rigid_wave(model, frequency, weights, phases, red.wave_scale, travelling=travelling[0])
+        if red.site_motion == "planar":
+            model = sg.planar_sites(model, chosen, frames)
+        if chosen.size and model.n_electrodes:
+            # the wave the surgery leaves at the sites, free (no contact): a rigid wave's is the one prescribed
+            record["site_wave_m"] = sg.site_wave(model, frequency, scale_V * weights, phases, chosen, frames)
+        self.log(f"surgery: {red.surgery}, sites {red.site_motion}" + (f", wave x {red.wave_scale:g}"
+                                                                      if red.surgery.endswith("_wave") else "")
+                 + f": {model.size} coordinates")
+        self.model, self.surgery = model, record
 
     @classmethod
     def check(cls, case, comm, log) -> None:
@@ -234,6 +285,8 @@ class ModalEngine:
         if cfg.initial_state == "harmonic":
             x = self._harmonic(self.scale_V)
             q[:], v[:], a[:] = x.real, -omega * x.imag, -omega**2 * x.real
+            if self.surgery is not None and self.surgery["surgery"] in ("rigid_wave", "travelling_wave"):
+                self._scheme_steady_inputs(x)
             kill_point("harmonic_start")
         else:                    # from rest: the free coordinates cancel the moving inputs' modes
             values = np.zeros(P.size)
@@ -255,6 +308,26 @@ class ModalEngine:
         if self.case.output.contact_sites:
             self.tables.geometry(self.model.site_points, self.model.site_weight)
         self._started()
+
+    def _scheme_steady_inputs(self, x: np.ndarray) -> None:
+        """A prescribed wave's harmonic start (``reduction.surgery`` 'rigid_wave', 'travelling_wave'): the inputs'
+        rate and acceleration on the time scheme's own steady state at the closed-contact step, not the continuous
+        one. The kernel advances a prescribed coordinate's rate and acceleration by Newmark's update from its
+        values (app/reduced/kernel.py), so for q_n = Re(Q z^n), z = exp(i w dt), the rate and acceleration phasors
+        are V = g_v Q, A = g_a Q (A = (z - 1) Q / (dt^2 [((1 - gamma) + gamma z) / (z - 1) + 1/2 - beta + beta z]),
+        V = dt ((1 - gamma) + gamma z) A / (z - 1)); started from the continuous ones instead, the difference
+        (for the trapezoidal rule |g_v| = (2 / dt) tan(w dt / 2), 0.2 % above w at 40 steps per period) rides on
+        the prescribed rates as an undamped step-to-step alternation of that size, which the contact sites would
+        feel as slip. The prescribed crest speed is then |g_v| U_t (bench/bench_motor_chain.py compares with it)."""
+        P = self.structure.inputs
+        s = self.scheme
+        dt = self.cfg.steps.closed_s
+        omega = self.inputs_record.omega
+        z = np.exp(1j * omega * dt)
+        g_a = (z - 1) / (dt * dt * (((1 - s.gamma) + s.gamma * z) / (z - 1) + 0.5 - s.beta + s.beta * z))
+        g_v = dt * ((1 - s.gamma) + s.gamma * z) * g_a / (z - 1)
+        self.v[P] = (g_v * x[P]).real
+        self.a[P] = (g_a * x[P]).real
 
     def _warm_start(self) -> None:
         """``transient.start_from``: the structure's and the bodies' state at the end of an earlier run of the same
@@ -687,6 +760,7 @@ class ModalEngine:
                "initial_state": cfg.initial_state, "warm_start": self.warm_start,
                "stepping_wall_time_s": self._loop_wall,
                **({"drive": self.drive_lock} if self.drive_lock is not None else {}),
+               **({"surgery": self.surgery} if self.surgery is not None else {}),
                "reduction": {"interface_dofs": model.n_interface, "electrodes": list(self.electrodes),
                              "inputs": list(model.inputs),
                              "modes": int(model.mode_frequencies_Hz.size), "size": model.size,
@@ -695,6 +769,7 @@ class ModalEngine:
                              "resonances_near_drive_Hz": model.resonances_Hz(cfg.drive.frequency_Hz).tolist(),
                              "contact_sites": int(self.sites_record.contact.size),
                              "free_modes": self.free_modes is not None,
+                             "band_area_m2": np.asarray(model.band_area_m2, float).tolist(),
                              "fe_dofs": model.fe_dofs, "build_wall_s": model.reduction_wall_s,
                              "from_cache": self.from_cache, "from_checkpoint": self.from_cache is None,
                              "setup_wall_s": self.setup_wall_s,

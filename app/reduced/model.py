@@ -153,7 +153,8 @@ def cache_key(case) -> str:
     # the damping's reference): a case that states them and one that takes them from the drive hash alike (a drive
     # locked to the resonance states them: app/drive.py locked_case)
     reduction = dict(data["reduction"])
-    for key in ("cutoff_Hz", "cutoff_factor", "enrich_near_Hz"):
+    # the surgery's keys act on the built model (app/reduced/surgery.py): one cached model for every step of a chain
+    for key in ("cutoff_Hz", "cutoff_factor", "enrich_near_Hz", "surgery", "site_motion", "wave_scale"):
         reduction.pop(key, None)
     if reduction.get("interface") == "nodes":       # the default: the keys of models built before the key existed
         reduction.pop("interface")
