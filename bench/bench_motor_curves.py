@@ -10,7 +10,8 @@ by an FE run of the case, see BENCHMARKS.md) times the steps the modal tier took
 the same curves.
 
     .venv/bin/python bench/bench_motor_curves.py --out /tmp/motor_curves [--points 8] [--fe-step-s 2.0]
-        [--preloads 4.116] [--chain up|down] [--set 'transient.contacts[0].sample_points=256' ...]
+        [--preloads 4.116] [--chain up|down] [--case bench/cases/wwusm-motor-pinned.toml]
+        [--set 'transient.contacts[0].sample_points=256' ...]
 
 Without ``--chain`` each point starts from the case's start (the stator's harmonic state or rest, the rotor
 seated), and pays the start's transient (300-700 periods on the case mesh). ``--chain down`` runs the held
@@ -45,13 +46,13 @@ COLUMNS = ("preload_N", "load_torque_N_m", "speed_rpm", "speed_rad_per_s", "fric
            "wall_s", "warm_from")
 
 
-def point(out: Path, sets: list[str], warm_from: Path | None = None) -> dict:
+def point(out: Path, sets: list[str], warm_from: Path | None = None, case: Path = CASE) -> dict:
     """One operating point: ``piezodyn run`` of the case with ``sets`` (from the end state of the run in
     ``warm_from`` if given); its row (the motor scene's statistics)."""
     start = time.perf_counter()
     if warm_from is not None:
         sets = sets + [f"transient.start_from={str(Path(warm_from).resolve())!r}"]
-    tr = run_case(CASE, sets, out, quiet=True)["results"]["transient"]
+    tr = run_case(case, sets, out, quiet=True)["results"]["transient"]
     wall = time.perf_counter() - start
     m = tr["statistics"]["motor"]
     steady = tr.get("steady_state", {})
@@ -92,6 +93,9 @@ def speed_torque_plot(path: Path, curves: dict, title: str) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="/tmp/motor_curves")
+    parser.add_argument("--case", type=Path, default=CASE,
+                        help="the motor case (default: the shipped one; bench/cases/wwusm-motor-pinned.toml: the "
+                             "stator of issue 11's curves)")
     parser.add_argument("--points", type=int, default=8, help="free-rotor load points per preload (besides stall)")
     parser.add_argument("--fe-step-s", type=float, default=None, help="FE-tier wall time per step of this case")
     parser.add_argument("--preloads", nargs="*", type=float, default=list(PRELOADS_N), metavar="N",
@@ -107,7 +111,8 @@ def main() -> None:
     start = time.perf_counter()
     for preload in args.preloads:
         base = [f"transient.bodies[0].applied_force_N=[0.0, 0.0, {-preload!r}]"] + args.set
-        stall = point(out / f"P{preload}_stall", base + ['transient.bodies[0].rotations[0].motion="fixed"'])
+        stall = point(out / f"P{preload}_stall", base + ['transient.bodies[0].rotations[0].motion="fixed"'],
+                      case=args.case)
         stall_torque = stall["friction_torque_N_m"]
         stall.update(preload_N=preload, load_torque_N_m=stall_torque)
         print(f"P = {preload} N: stall torque {stall_torque * 1e3:.4g} mN m ({stall['wall_s']:.0f} s)", flush=True)
@@ -115,7 +120,7 @@ def main() -> None:
         for k in (reversed(range(args.points)) if args.chain == "down" else range(args.points)):
             load = stall_torque * k / args.points
             sets = base + [f"transient.bodies[0].rotations[0].torque_N_m={-load!r}"]
-            row = point(out / f"P{preload}_T{k}", sets, previous)
+            row = point(out / f"P{preload}_T{k}", sets, previous, args.case)
             if args.chain is not None:
                 previous = out / f"P{preload}_T{k}"
             row["preload_N"] = preload
@@ -138,7 +143,7 @@ def main() -> None:
         curves[f"preload {preload} N"]["torque_N_m"] = curves[f"preload {preload} N"].pop("load_torque_N_m")
     from app.runner import load_for_run
 
-    case = load_for_run(CASE, args.set)
+    case = load_for_run(args.case, args.set)
     vpp = 2 * max(e.amplitude_V or 0.0 for e in case.electrodes.values())
     speed_torque_plot(out / "motor_speed_torque.png", curves, f"WW-USM, modal tier: speed-torque at {vpp:.4g} Vpp, "
                                                 f"{case.transient.drive.frequency_Hz / 1e3:.5g} kHz")
