@@ -106,7 +106,8 @@ RATE_SCALE_RAD_PER_S = 1e-4
 SITE_TOL_M = 1e-14
 SITE_RTOL = 1e-9
 #: the Newton system goes to the structure's coordinates (Woodbury) when gdim x active sites exceed this multiple
-#: of the free coordinates: there its inverse (nf^3) costs less than the contact-space LU ((gdim n_active)^3 / 3)
+#: of the free coordinates their rows touch (S, :func:`_woodbury_columns`): there its inverse (|S|^3) costs less
+#: than the contact-space LU ((gdim n_active)^3 / 3)
 WOODBURY_FACTOR = 1.5
 FORCE_RTOL = 1e-10
 EPS = 2.220446049250313e-16
