@@ -242,9 +242,10 @@ def test_newton_matrix_equals_differences_of_the_residual():
 
     # The whole Newton iteration (app/reduced/kernel.py:_newton, compiled without reference counts, its arrays in a
     # NewtonWork) with every site pressed in: on the sparse compliance it takes the Woodbury path (3 x 6 active
-    # rows > 1.5 x 10 free coordinates), on the same H given densely (the sites as 18 free coordinates) the
-    # contact-space LU. The same equations, so the same solution to the iteration's tolerances (1e-14 m or 1e-9 of
-    # a site increment, 1e-10 of the body's force scale); 1e-6 catches a wrong or stale system (order one).
+    # rows > 1.5 x the 10 free coordinates they touch), on the same H given densely (the sites as 18 free
+    # coordinates) the contact-space LU. The same equations, so the same solution to the iteration's tolerances
+    # (1e-14 m or 1e-9 of a site increment, 1e-10 of the body's force scale); 1e-6 catches a wrong or stale system
+    # (order one).
     wk.y0[:] = -3e-8 * normals
     solutions = []
     for compliance_ in (sparse, kr.dense_compliance(GT @ RF.T)):
