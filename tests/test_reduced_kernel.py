@@ -232,8 +232,9 @@ def test_newton_matrix_equals_differences_of_the_residual():
     J, rhs = kr._newton_matrix(n_active, wk, sparse, model, free_body, dt)
     body_rows, rhs_b = kr._newton_matrix(n_active, wk, sparse, model, free_body, dt, False)
     np.testing.assert_array_equal(body_rows, J[n_active * gdim:])
-    S_inv, D = kr._woodbury(n_active, wk, sparse, model, free_body, body_rows)
-    x = kr._woodbury_solve(S_inv, D, wk.active[:n_active].copy(), n_active, gdim, sparse, body_rows, rhs_b)
+    S_inv, D, cols, col_pos = kr._woodbury(n_active, wk, sparse, model, free_body, body_rows, True)
+    x = kr._woodbury_solve(S_inv, D, cols, col_pos, wk.active[:n_active].copy(), n_active, gdim, sparse, body_rows,
+                           rhs_b)
     reference = np.linalg.solve(J, rhs)
     scale = np.concatenate([np.full(n_active * gdim, np.abs(reference[:n_active * gdim]).max()),
                             np.abs(reference[n_active * gdim:])])
@@ -241,13 +242,14 @@ def test_newton_matrix_equals_differences_of_the_residual():
 
     # The whole Newton iteration (app/reduced/kernel.py:_newton, compiled without reference counts, its arrays in a
     # NewtonWork) with every site pressed in: on the sparse compliance it takes the Woodbury path (3 x 6 active
-    # rows > 1.5 x 10 free coordinates), on the same H given densely (the sites as 18 free coordinates) the
-    # contact-space LU. The same equations, so the same solution to the iteration's tolerances (1e-14 m or 1e-9 of
-    # a site increment, 1e-10 of the body's force scale); 1e-6 catches a wrong or stale system (order one).
+    # rows > 1.5 x the 10 free coordinates they touch), on the same H given densely (the sites as 18 free
+    # coordinates) the contact-space LU. The same equations, so the same solution to the iteration's tolerances
+    # (1e-14 m or 1e-9 of a site increment, 1e-10 of the body's force scale); 1e-6 catches a wrong or stale system
+    # (order one).
     wk.y0[:] = -3e-8 * normals
     solutions = []
     for compliance_ in (sparse, kr.dense_compliance(GT @ RF.T)):
-        nw = kr.newton_work(n_sites, gdim, m, compliance_.GT.shape[1])
+        nw = kr.newton_work(n_sites, gdim, m, compliance_.GT.shape[1], compliance_.RF)
         wk.dd[:] = wk.dw
         wk.xi[:] = 0.0
         converged, its = kr._newton(wk, nw, compliance_, state, dt, model, free_body)
@@ -255,5 +257,55 @@ def test_newton_matrix_equals_differences_of_the_residual():
         solutions.append((wk.dd.copy(), wk.xi.copy(), bool(np.any(nw.S_LU != 0.0))))
     (dd_w, xi_w, woodbury), (dd_c, xi_c, contact_space_woodbury) = solutions
     assert woodbury and not contact_space_woodbury
+    np.testing.assert_allclose(dd_w, dd_c, rtol=1e-6, atol=1e-13)
+    np.testing.assert_allclose(xi_w, xi_c, rtol=1e-6, atol=1e-16)
+
+    # The Woodbury system restricted to the coordinates S the active sites' rows touch (_woodbury_columns): exact,
+    # since every R_A^T x lives on S. Site rows as the motor's "interface" sites have them, a few nonzeros on a
+    # structure of many more free coordinates: here site i's three rows on 2 of nf = 40 coordinates, shared with its
+    # neighbour (columns c_i, c_i+1), so S has 6 of the 40 however many sites are active. Against the contact-space
+    # LU of the same J (1e-9 as above), the restricted against the full system too; a column missing from S
+    # (a row of R_A^T written into another row) breaks both by order one.
+    nf = 40
+    ring = rng.choice(nf, n_sites, replace=False)
+    RF = np.zeros((nr, nf))
+    for i in range(n_sites):
+        RF[3 * i:3 * i + 3, [ring[i], ring[(i + 1) % n_sites]]] = rng.normal(size=(3, 2))
+    B_ = rng.normal(size=(nf, nf))
+    GT = RF @ (1e-9 * (B_ @ B_.T / nf + np.eye(nf)))
+    local = kr.compliance_of(GT @ RF.T, GT, RF)
+    wk.y0[:] = depth[:, None] * normals
+    n_active = kr._evaluate(dd0, xi0, wk, local, state, dt, model, True)
+    assert 0 < n_active < n_sites
+    J, rhs = kr._newton_matrix(n_active, wk, local, model, free_body, dt)
+    body_rows, rhs_b = kr._newton_matrix(n_active, wk, local, model, free_body, dt, False)
+    reference = np.linalg.solve(J, rhs)
+    scale = np.concatenate([np.full(n_active * gdim, np.abs(reference[:n_active * gdim]).max()),
+                            np.abs(reference[n_active * gdim:])])
+    active = wk.active[:n_active].copy()
+    touched = np.flatnonzero(np.any(RF[np.concatenate([np.r_[3 * i:3 * i + 3] for i in active])] != 0.0, axis=0))
+    for full in (False, True):
+        S_inv, D, cols, col_pos = kr._woodbury(n_active, wk, local, model, free_body, body_rows, full)
+        np.testing.assert_array_equal(cols, np.arange(nf) if full else touched)
+        assert S_inv.shape == (cols.size + free_body.size,) * 2
+        x = kr._woodbury_solve(S_inv, D, cols, col_pos, active, n_active, gdim, local, body_rows, rhs_b)
+        assert np.max(np.abs(x - reference) / scale) < 1e-9
+
+    # And the whole Newton iteration with every site pressed in: 18 active rows on |S| = 6 coordinates take the
+    # restricted system (18 > 1.5 x 6, where the full one, 18 > 1.5 x 40, was not taken), against the contact-space
+    # LU of the same H given densely; the tolerances as above. The same Newton steps to round-off, so the same
+    # iterations too (a wrong matrix still converges, by the residual, but not in Newton's count).
+    wk.y0[:] = -3e-8 * normals
+    solutions = []
+    for compliance_ in (local, kr.dense_compliance(GT @ RF.T)):
+        nw = kr.newton_work(n_sites, gdim, m, compliance_.GT.shape[1], compliance_.RF)
+        wk.dd[:] = wk.dw
+        wk.xi[:] = 0.0
+        converged, its = kr._newton(wk, nw, compliance_, state, dt, model, free_body)
+        assert converged and its > 1
+        solutions.append((wk.dd.copy(), wk.xi.copy(), bool(np.any(nw.S_LU != 0.0)), its))
+    (dd_w, xi_w, woodbury, its_w), (dd_c, xi_c, contact_space_woodbury, its_c) = solutions
+    assert woodbury and not contact_space_woodbury
+    assert its_w == its_c
     np.testing.assert_allclose(dd_w, dd_c, rtol=1e-6, atol=1e-13)
     np.testing.assert_allclose(xi_w, xi_c, rtol=1e-6, atol=1e-16)

@@ -106,7 +106,8 @@ RATE_SCALE_RAD_PER_S = 1e-4
 SITE_TOL_M = 1e-14
 SITE_RTOL = 1e-9
 #: the Newton system goes to the structure's coordinates (Woodbury) when gdim x active sites exceed this multiple
-#: of the free coordinates: there its inverse (nf^3) costs less than the contact-space LU ((gdim n_active)^3 / 3)
+#: of the free coordinates their rows touch (S, :func:`_woodbury_columns`): there its inverse (|S|^3) costs less
+#: than the contact-space LU ((gdim n_active)^3 / 3)
 WOODBURY_FACTOR = 1.5
 FORCE_RTOL = 1e-10
 EPS = 2.220446049250313e-16
@@ -718,36 +719,71 @@ def _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, site_block, J, r
             J[row - row0, n_active * gdim + q2] -= wk.dQ[j, free_body[q2]]
 
 
+@njit(cache=True, _nrt=False)
+def _woodbury_columns(n_active, active, gdim, RF, col_pos, cols):
+    """The free coordinates the active sites' rows touch (the support S of every R_A^T x): ``cols[:n]`` (nf,
+    int64) in increasing order and ``col_pos`` (nf, int64) each free coordinate's place in it (-1: not in S).
+    Returns n = |S|."""
+    nf = col_pos.size
+    for j in range(nf):
+        col_pos[j] = -1
+    for a in range(n_active):
+        k = active[a]
+        for r in range(gdim):
+            row = k * gdim + r
+            for e in range(RF.count[row]):
+                col_pos[RF.index[row, e]] = 0
+    n = 0
+    for j in range(nf):
+        if col_pos[j] == 0:
+            col_pos[j] = n
+            cols[n] = j
+            n += 1
+    return n
+
+
 @njit(cache=True)
-def _woodbury(n_active, wk, cp, model, free_body, body_rows):
+def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False):
     """The Newton system of many active sites in the structure's free coordinates (Woodbury): with the site
     block I - H_AA D - H_AA E = I - G_A^T R_A^T (D, E) (G^T = R_F K_eff^-1, R_A the active rows; D, E the
     sites' derivatives), y = R_A^T (D x_A + E x_b) and x_A = rhs_A + G_A^T y turn it into
     [[I - R_A^T D G_A^T, -R_A^T E], [P G_A^T, Q]] [y, x_b] = [R_A^T D rhs_A, rhs_b - P rhs_A]
-    (``body_rows`` = [P, Q]), of size nf + nfb instead of gdim n_active + nfb. Returns that matrix's inverse
-    and the active sites' D (the next evaluation overwrites wk.Fd)."""
+    (``body_rows`` = [P, Q]), of size nf + nfb instead of gdim n_active + nfb. Every R_A^T x lives on the
+    coordinates S the active rows touch (:func:`_woodbury_columns`), so y does and G_A^T y needs G^T's columns S
+    alone: the same system restricted to S (size |S| + nfb, ``full``: all nf coordinates) is exact. Returns that
+    matrix's inverse, the active sites' D (the next evaluation overwrites wk.Fd), S's columns and positions."""
     nf = cp.GT.shape[1]
-    k = nf + free_body.size
+    cols = np.empty(nf, np.int64)
+    col_pos = np.empty(nf, np.int64)
+    if full:
+        for j in range(nf):
+            cols[j] = j
+            col_pos[j] = j
+        n = nf
+    else:
+        n = _woodbury_columns(n_active, wk.active, model.bodies.gdim, cp.RF, col_pos, cols)
+    k = n + free_body.size
     S = np.empty((k, k))
     D = np.empty((n_active, 3, 3))
-    _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, S, D, np.empty(wk.xi.size, np.int64),
-                   np.empty((3, nf)))
-    return np.linalg.inv(S), D
+    _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols[:n], col_pos, S, D,
+                   np.empty(wk.xi.size, np.int64), np.empty((3, n)))
+    return np.linalg.inv(S), D, cols[:n].copy(), col_pos
 
 
 @njit(cache=True, _nrt=False)
-def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, S, D, pos, FG):
-    """:func:`_woodbury`'s matrix into ``S`` (k x k) and the sites' derivatives into ``D`` (n_active, 3, 3); ``pos``
-    (m,) int64 and ``FG`` (3, nf) work."""
+def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG):
+    """:func:`_woodbury`'s matrix on the coordinates ``cols`` (their places ``col_pos``) into ``S`` (k x k,
+    k = cols.size + nfb) and the sites' derivatives into ``D`` (n_active, 3, 3); ``pos`` (m,) int64 and ``FG``
+    (3, >= cols.size) work."""
     bodies, contacts, sites = model.bodies, model.contacts, model.sites
     gdim = bodies.gdim
     GT, RF = cp.GT, cp.RF
-    nf = GT.shape[1]
+    ns = cols.size
     nfb = free_body.size
-    for r in range(nf + nfb):
-        for c in range(nf + nfb):
+    for r in range(ns + nfb):
+        for c in range(ns + nfb):
             S[r, c] = 0.0
-    for j in range(nf):
+    for j in range(ns):
         S[j, j] = 1.0
     for j in range(pos.size):
         pos[j] = -1
@@ -763,31 +799,33 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, S, D, pos, FG)
         for r in range(gdim):
             for cc in range(gdim):
                 D[a, r, cc] = wk.Fd[k, r, cc]
-            for j in range(nf):
+            for j in range(ns):
+                col = cols[j]
                 value = 0.0
                 for cc in range(gdim):
-                    value += wk.Fd[k, r, cc] * GT[k * gdim + cc, j]
+                    value += wk.Fd[k, r, cc] * GT[k * gdim + cc, col]
                 FG[r, j] = value
         for r in range(gdim):
             row = k * gdim + r
             for e in range(RF.count[row]):
-                idx = RF.index[row, e]
+                idx = col_pos[RF.index[row, e]]
                 val = RF.value[row, e]
-                for j in range(nf):
+                for j in range(ns):
                     S[idx, j] -= val * FG[r, j]
                 for kk in range(gdim + n_rot):
                     q = pos[s0 + kk]
                     if q >= 0:
-                        S[idx, nf + q] -= val * wk.Fz[k, r, kk]
+                        S[idx, ns + q] -= val * wk.Fz[k, r, kk]
         for q in range(nfb):
             for cc in range(gdim):
                 p = body_rows[q, a * gdim + cc]
                 if p != 0.0:
-                    for j in range(nf):
-                        S[nf + q, j] += p * GT[k * gdim + cc, j]
+                    row = GT[k * gdim + cc]
+                    for j in range(ns):
+                        S[ns + q, j] += p * row[cols[j]]
     for q in range(nfb):
         for q2 in range(nfb):
-            S[nf + q, nf + q2] = body_rows[q, n_active * gdim + q2]
+            S[ns + q, ns + q2] = body_rows[q, n_active * gdim + q2]
 
 
 @njit(cache=True, _nrt=False)
@@ -816,24 +854,26 @@ def _invert(k, S, LU, ipiv):
 
 
 @njit(cache=True)
-def _woodbury_solve(S_inv, D, active, n_active, gdim, cp, body_rows, rhs):
-    """x of J x = rhs through :func:`_woodbury`'s matrix (its inverse ``S_inv``, the sites' ``D``)."""
+def _woodbury_solve(S_inv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs):
+    """x of J x = rhs through :func:`_woodbury`'s matrix (its inverse ``S_inv``, the sites' ``D``, its
+    coordinates ``cols`` and their places ``col_pos``)."""
     k = S_inv.shape[0]
     x = np.empty(rhs.size)
-    _woodbury_solve_into(S_inv, D, active, n_active, gdim, cp, body_rows, rhs, x, np.empty(k), np.empty(k),
-                         np.empty(2))
+    _woodbury_solve_into(S_inv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, np.empty(k),
+                         np.empty(k), np.empty(2))
     return x
 
 
 @njit(cache=True, _nrt=False)
-def _woodbury_solve_into(S_inv, D, active, n_active, gdim, cp, body_rows, rhs, x, small, sol, scalars):
-    """:func:`_woodbury_solve` into ``x`` (may be ``rhs``), ``small`` and ``sol`` (nf + nfb) and ``scalars`` (2)
+def _woodbury_solve_into(S_inv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, small, sol,
+                         scalars):
+    """:func:`_woodbury_solve` into ``x`` (may be ``rhs``), ``small`` and ``sol`` (|S| + nfb) and ``scalars`` (2)
     work."""
     GT, RF = cp.GT, cp.RF
-    nf = GT.shape[1]
+    ns = cols.size
     na = n_active * gdim
     nfb = rhs.size - na
-    for j in range(nf + nfb):
+    for j in range(ns + nfb):
         small[j] = 0.0
     for a in range(n_active):
         k = active[a]
@@ -843,30 +883,30 @@ def _woodbury_solve_into(S_inv, D, active, n_active, gdim, cp, body_rows, rhs, x
                 value += D[a, r, cc] * rhs[a * gdim + cc]
             row = k * gdim + r
             for e in range(RF.count[row]):
-                small[RF.index[row, e]] += RF.value[row, e] * value
+                small[col_pos[RF.index[row, e]]] += RF.value[row, e] * value
     for q in range(nfb):
         value = rhs[na + q]
         for col in range(na):
             value -= body_rows[q, col] * rhs[col]
-        small[nf + q] = value
+        small[ns + q] = value
     _matvec(S_inv, small, sol, scalars)
     for a in range(n_active):
         k = active[a]
         for r in range(gdim):
             row = GT[k * gdim + r]
             value = rhs[a * gdim + r]
-            for j in range(nf):
-                value += row[j] * sol[j]
+            for j in range(ns):
+                value += row[cols[j]] * sol[j]
             x[a * gdim + r] = value
     for q in range(nfb):
-        x[na + q] = sol[nf + q]
+        x[na + q] = sol[ns + q]
 
 
 class NewtonWork(NamedTuple):
     """The Newton iteration's arrays (allocated once per call): its system in the contact space (at most ``size``
     unknowns: the active sites' increments and the free body corrections; C order in the first N^2 entries of
     ``J``), its copy in Fortran order for LAPACK's gesv, the corrections, and the Woodbury system of many active
-    sites (:func:`_woodbury`; empty where it cannot be taken)."""
+    sites on the coordinates their rows touch (:func:`_woodbury`; empty where it cannot be taken)."""
 
     J: np.ndarray             # (size * size,)
     LU: np.ndarray            # (size * size,)
@@ -881,30 +921,41 @@ class NewtonWork(NamedTuple):
     du: np.ndarray            # (nr,) every site's correction
     df: np.ndarray            # (ns, 3) the active sites' force corrections
     dxi: np.ndarray           # (m,) the body corrections
-    S: np.ndarray             # (k * k,) the Woodbury matrix, k = nf + m (0: no Woodbury)
+    S: np.ndarray             # (k * k,) the Woodbury matrix, k = |S| + m, |S| at most newton_work's s_max
     S_LU: np.ndarray          # (k * k,) its inverse in Fortran order (getrf and getri in place)
     S_ipiv: np.ndarray        # (k,) int32
-    FG: np.ndarray            # (3, nf) work
+    FG: np.ndarray            # (3, s_max) work
     small: np.ndarray         # (k,) work
     sol: np.ndarray           # (k,) work
     scalars: np.ndarray       # (2,) work: gemv's alpha and beta
     D: np.ndarray             # (ns, 3, 3) the active sites' derivatives for it
     body_rows: np.ndarray     # (m * (nr + m),) the body rows of J for it
+    cols: np.ndarray          # (nf,) int64 the coordinates S the active rows touch (:func:`_woodbury_columns`)
+    col_pos: np.ndarray       # (nf,) int64 each free coordinate's place in S (-1: none)
 
 
 @njit(cache=True)
-def newton_work(ns, gdim, m, nf):
-    """:class:`NewtonWork` of ``ns`` sites, ``m`` body coordinates and ``nf`` free structure coordinates."""
+def newton_work(ns, gdim, m, nf, RF):
+    """:class:`NewtonWork` of ``ns`` sites, ``m`` body coordinates, ``nf`` free structure coordinates and the
+    site rows ``RF`` (:class:`SparseRows`, free numbering). The Woodbury system is taken on |S| coordinates when
+    gdim n_active > WOODBURY_FACTOR |S| (:func:`_newton`), so |S| stays below nr / WOODBURY_FACTOR, nf and the
+    count of coordinates any site row touches: s_max, its buffers' size."""
     nr = ns * gdim
     size = min(nr, int(WOODBURY_FACTOR * nf)) + m
-    woodbury = nr > WOODBURY_FACTOR * nf
-    k = nf + m if woodbury else 0
+    touched = np.zeros(nf, np.bool_)
+    for row in range(min(nr, RF.count.size)):
+        for e in range(RF.count[row]):
+            touched[RF.index[row, e]] = True
+    s_max = min(int(np.sum(touched)), int(nr / WOODBURY_FACTOR) + 1)
+    woodbury = nr > 0
+    k = s_max + m if woodbury else 0
     return NewtonWork(np.zeros(size * size), np.zeros(size * size), np.zeros(size, np.int32), np.zeros(nr + m),
                       np.zeros(nr + m), np.zeros(nr + m), np.zeros(nr + m), np.zeros(m), np.zeros(m, np.int64),
                       np.zeros(max(ns, 1), np.int64), np.zeros(nr), np.zeros((ns, 3)), np.zeros(m),
                       np.zeros(k * k), np.zeros(k * k), np.zeros(k, np.int32),
-                      np.zeros((3, nf if woodbury else 0)), np.zeros(k), np.zeros(k), np.zeros(2),
-                      np.zeros((ns if woodbury else 0, 3, 3)), np.zeros(m * (nr + m) if woodbury else 0))
+                      np.zeros((3, s_max if woodbury else 0)), np.zeros(k), np.zeros(k), np.zeros(2),
+                      np.zeros((ns if woodbury else 0, 3, 3)), np.zeros(m * (nr + m) if woodbury else 0),
+                      np.zeros(nf, np.int64), np.zeros(nf, np.int64))
 
 
 @njit(cache=True, _nrt=False)
@@ -973,27 +1024,30 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
             res = max(res, abs(wk.rz[j]) / tol)
         if res <= 1.0:
             return True, its
-        # many active sites (a rotor lying on the ring): the system in the structure's coordinates is smaller
-        woodbury = n_active * gdim > WOODBURY_FACTOR * cp.GT.shape[1]
+        # many active sites (a rotor lying on the ring): the system on the structure's coordinates their rows touch
+        # (S, of |S| coordinates) is smaller
         for a in range(n_active):
             active_rows[a] = wk.active[a]
+        n_cols = _woodbury_columns(n_active, active_rows, gdim, cp.RF, nw.col_pos, nw.cols)
+        woodbury = n_active * gdim > WOODBURY_FACTOR * n_cols
         N = n_active * gdim + nfb
         dy = nw.dy[:N]
         NJ = 0 if woodbury else N          # the contact-space matrix (its buffer holds no larger one)
         J = nw.J[:NJ * NJ].reshape((NJ, NJ))
         # the Woodbury system's views (empty when it is not taken: its buffers may be)
-        k = cp.GT.shape[1] + nfb if woodbury else 0
+        k = n_cols + nfb if woodbury else 0
+        cols = nw.cols[:n_cols if woodbury else 0]
         S_inv = nw.S_LU[:k * k].reshape((k, k)).T         # Fortran order, as np.linalg.inv returns it
         D = nw.D[:n_active if woodbury else 0]
         body_rows = nw.body_rows[:nfb * N if woodbury else 0].reshape((nfb if woodbury else 0, N))
         if woodbury:
             rhs = nw.rhs[:N]
             _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, False, body_rows, rhs, nw.body_pos)
-            _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, nw.S[:k * k].reshape((k, k)), D,
-                           nw.body_pos, nw.FG)
+            _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, nw.col_pos,
+                           nw.S[:k * k].reshape((k, k)), D, nw.body_pos, nw.FG)
             _invert(k, nw.S[:k * k].reshape((k, k)), nw.S_LU, nw.S_ipiv)
-            _woodbury_solve_into(S_inv, D, active_rows, n_active, gdim, cp, body_rows, rhs, dy, nw.small, nw.sol,
-                                 nw.scalars)
+            _woodbury_solve_into(S_inv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp, body_rows, rhs, dy,
+                                 nw.small, nw.sol, nw.scalars)
         else:
             rhs = nw.rhs[:N]
             _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, True, J, rhs, nw.body_pos)
@@ -1056,8 +1110,8 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
             for q in range(nfb):
                 trial[n_active * gdim + q] = -wk.rz[free_body[q]]
             if woodbury:
-                _woodbury_solve_into(S_inv, D, active_rows, n_active, gdim, cp, body_rows, trial, trial, nw.small,
-                                     nw.sol, nw.scalars)
+                _woodbury_solve_into(S_inv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp, body_rows, trial,
+                                     trial, nw.small, nw.sol, nw.scalars)
             else:
                 _lu_solve(N, J, nw.LU, nw.ipiv, trial)
             if _scaled_norm(trial, scale, N) <= (1.0 - 0.5 * lam) * size0 + 1e-300:
@@ -1272,7 +1326,6 @@ def run(t_end, state, model, cache, out, track_energy, frames):
         s0, n_rot = _body_rotations(bodies, b)
         kmax = max(kmax, gdim + n_rot)
     wk = step_work(ns, gdim, m, kmax, n_l)
-    nw = newton_work(ns, gdim, m, nf)
     free_count = 0
     for j in range(m):
         if bodies.free[j]:
@@ -1287,6 +1340,7 @@ def run(t_end, state, model, cache, out, track_energy, frames):
     # the site rows by their nonzeros: on every coordinate (site values) and on the free ones (the compliance)
     site_rows = sparse_rows(rows_R, np.arange(q.size))
     free_rows = sparse_rows(rows_R, free)
+    nw = newton_work(ns, gdim, m, nf, free_rows)
     u = np.zeros(nf)
     u_work = np.zeros(nf)
     # the structure's step: increments, end-of-step rates and coordinates, the generalized mid-point arguments of
