@@ -240,25 +240,33 @@ def test_newton_matrix_equals_differences_of_the_residual():
                             np.abs(reference[n_active * gdim:])])
     assert np.max(np.abs(x - reference) / scale) < 1e-9
 
+    def newton_both_ways(compliance_, GT, RF):
+        """The whole Newton iteration with every site pressed in, on ``compliance_`` and on the same H given densely
+        (the contact-space LU): (iterations of each, whether each took the Woodbury system), the solutions checked
+        equal to the iteration's tolerances (1e-14 m or 1e-9 of a site increment, 1e-10 of the body's force scale;
+        1e-6 catches a wrong or stale system, order one)."""
+        wk.y0[:] = -3e-8 * normals
+        solutions = []
+        for c in (compliance_, kr.dense_compliance(GT @ RF.T)):
+            nw = kr.newton_work(n_sites, gdim, m, c.GT.shape[1], c.RF)
+            wk.dd[:] = wk.dw
+            wk.xi[:] = 0.0
+            converged, its = kr._newton(wk, nw, c, state, dt, model, free_body)
+            assert converged and its > 1
+            solutions.append((wk.dd.copy(), wk.xi.copy(), bool(np.any(nw.S_LU != 0.0)), its))
+        (dd_w, xi_w, woodbury, its_w), (dd_c, xi_c, dense_woodbury, its_c) = solutions
+        np.testing.assert_allclose(dd_w, dd_c, rtol=1e-6, atol=1e-13)
+        np.testing.assert_allclose(xi_w, xi_c, rtol=1e-6, atol=1e-16)
+        return (its_w, its_c), (woodbury, dense_woodbury)
+
     # The whole Newton iteration (app/reduced/kernel.py:_newton, compiled without reference counts, its arrays in a
     # NewtonWork) with every site pressed in: on the sparse compliance it takes the Woodbury path (3 x 6 active
     # rows > 1.5 x the 10 free coordinates they touch), on the same H given densely (the sites as 18 free
     # coordinates) the contact-space LU. The same equations, so the same solution to the iteration's tolerances
     # (1e-14 m or 1e-9 of a site increment, 1e-10 of the body's force scale); 1e-6 catches a wrong or stale system
     # (order one).
-    wk.y0[:] = -3e-8 * normals
-    solutions = []
-    for compliance_ in (sparse, kr.dense_compliance(GT @ RF.T)):
-        nw = kr.newton_work(n_sites, gdim, m, compliance_.GT.shape[1], compliance_.RF)
-        wk.dd[:] = wk.dw
-        wk.xi[:] = 0.0
-        converged, its = kr._newton(wk, nw, compliance_, state, dt, model, free_body)
-        assert converged and its > 1
-        solutions.append((wk.dd.copy(), wk.xi.copy(), bool(np.any(nw.S_LU != 0.0))))
-    (dd_w, xi_w, woodbury), (dd_c, xi_c, contact_space_woodbury) = solutions
-    assert woodbury and not contact_space_woodbury
-    np.testing.assert_allclose(dd_w, dd_c, rtol=1e-6, atol=1e-13)
-    np.testing.assert_allclose(xi_w, xi_c, rtol=1e-6, atol=1e-16)
+    its, woodbury = newton_both_ways(sparse, GT, RF)
+    assert woodbury == (True, False)
 
     # The Woodbury system restricted to the coordinates S the active sites' rows touch (_woodbury_columns): exact,
     # since every R_A^T x lives on S. Site rows as the motor's "interface" sites have them, a few nonzeros on a
@@ -295,17 +303,6 @@ def test_newton_matrix_equals_differences_of_the_residual():
     # restricted system (18 > 1.5 x 6, where the full one, 18 > 1.5 x 40, was not taken), against the contact-space
     # LU of the same H given densely; the tolerances as above. The same Newton steps to round-off, so the same
     # iterations too (a wrong matrix still converges, by the residual, but not in Newton's count).
-    wk.y0[:] = -3e-8 * normals
-    solutions = []
-    for compliance_ in (local, kr.dense_compliance(GT @ RF.T)):
-        nw = kr.newton_work(n_sites, gdim, m, compliance_.GT.shape[1], compliance_.RF)
-        wk.dd[:] = wk.dw
-        wk.xi[:] = 0.0
-        converged, its = kr._newton(wk, nw, compliance_, state, dt, model, free_body)
-        assert converged and its > 1
-        solutions.append((wk.dd.copy(), wk.xi.copy(), bool(np.any(nw.S_LU != 0.0)), its))
-    (dd_w, xi_w, woodbury, its_w), (dd_c, xi_c, contact_space_woodbury, its_c) = solutions
-    assert woodbury and not contact_space_woodbury
-    assert its_w == its_c
-    np.testing.assert_allclose(dd_w, dd_c, rtol=1e-6, atol=1e-13)
-    np.testing.assert_allclose(xi_w, xi_c, rtol=1e-6, atol=1e-16)
+    its, woodbury = newton_both_ways(local, GT, RF)
+    assert woodbury == (True, False)
+    assert its[0] == its[1]
