@@ -68,6 +68,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from app.references import friction_drive as law  # noqa: E402
+from forms.newmark import harmonic_rate_gains  # noqa: E402
 
 HELD = 'transient.bodies[0].rotations[0].motion="fixed"'
 #: (name, what it adds, surgery, site motion, the run it changes)
@@ -107,10 +108,9 @@ def run(out: Path, name: str, case: Path, sets: list[str]) -> dict:
     if (directory / "summary.json").is_file() and record.is_file() and json.loads(record.read_text()) == sets:
         return json.loads((directory / "summary.json").read_text())
     print(f"chain: {name}: {' '.join(sets)}", flush=True)
-    summary = run_case(case, sets, directory, quiet=True)
+    run_case(case, sets, directory, quiet=True)
     record.write_text(json.dumps(sets))
-    return json.loads((directory / "summary.json").read_text()) if summary is None else \
-        json.loads((directory / "summary.json").read_text())
+    return json.loads((directory / "summary.json").read_text())
 
 
 def site_wave(directory: Path, contact: str = "stator_rotor", rows: int = 20) -> float:
@@ -178,10 +178,8 @@ def scheme_speed_factor(summary: dict, omega: float) -> float:
     (app/reduced/engine.py ModalEngine._scheme_steady_inputs); for the trapezoidal rule (2 / (w dt)) tan(w dt / 2).
     The discrete crest speed is this factor times w U_t (at the closed-contact step)."""
     tr = summary["case"]["transient"]
-    beta, gamma, dt = tr["scheme"]["beta"], tr["scheme"]["gamma"], tr["steps"]["closed_s"]
-    z = complex(math.cos(omega * dt), math.sin(omega * dt))
-    g_a = (z - 1) / (dt * dt * (((1 - gamma) + gamma * z) / (z - 1) + 0.5 - beta + beta * z))
-    return abs(dt * ((1 - gamma) + gamma * z) * g_a / (z - 1)) / omega
+    g_v, _ = harmonic_rate_gains(omega, tr["steps"]["closed_s"], tr["scheme"]["beta"], tr["scheme"]["gamma"])
+    return abs(g_v) / omega
 
 
 def read_summary(directory: Path) -> dict:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_motor_tiers import run_point  # noqa: E402
+from bench_motor_tiers import _level, run_point  # noqa: E402
 
 COLUMNS = ["preload_N", "branch", "start", "load_mN_m", "held", "speed_rpm", "steady", "periods", "half_mean",
            "half_ci95", "half_min", "half_max", "torque_mN_m", "normal_force_N", "wave_normal_um", "output_power_mW",
@@ -48,7 +48,7 @@ def curve_rows(preload: float, branch: str, start: str, directories: list[str]) 
 
 def level(row: dict) -> float:
     """A free point's speed [rpm]: its last window's mean, or its last half's where it did not settle."""
-    return row["half_mean"] if row["half_mean"] is not None and not row["steady"] else row["speed_rpm"]
+    return _level(row, "speed_rpm")
 
 
 def designer_summary(rows: list[dict]) -> str:

@@ -51,8 +51,7 @@ def main() -> None:
     args = ap.parse_args()
     model = ReducedModel.load(args.reduced)
     n = model.K.shape[0]
-    held = np.arange(model.n_interface, model.n_interface + len(model.inputs))
-    free = np.setdiff1d(np.arange(n), held)
+    held, free = model.input_coordinates, model.free_coordinates
     K, M, C = model.K, model.M, model.C
     omega2, X = eigh(K[np.ix_(free, free)], M[np.ix_(free, free)])
     freqs = np.sqrt(np.abs(omega2)) / (2 * math.pi)

@@ -136,3 +136,15 @@ def amplification_matrix(omega_dt: float, scheme: TimeScheme, damping_ratio: flo
 
 def spectral_radius(omega_dt: float, scheme: TimeScheme) -> float:
     return float(max(abs(np.linalg.eigvals(amplification_matrix(omega_dt, scheme)))))
+
+
+def harmonic_rate_gains(omega: float, dt: float, beta: float, gamma: float) -> tuple[complex, complex]:
+    """(g_v, g_a): a prescribed coordinate whose values follow a steady harmonic, q_n = Re(Q z^n) with
+    z = exp(i omega dt), and whose rate and acceleration are advanced by the Newmark updates above from those
+    values, settles on the rate and acceleration phasors g_v Q and g_a Q (the continuous ones are i omega and
+    -omega^2; for the trapezoidal rule |g_v| = (2 / dt) tan(omega dt / 2)). A start on other phasors leaves
+    an undamped step-to-step alternation of the difference."""
+    z = np.exp(1j * omega * dt)
+    g_a = (z - 1) / (dt * dt * (((1 - gamma) + gamma * z) / (z - 1) + 0.5 - beta + beta * z))
+    g_v = dt * ((1 - gamma) + gamma * z) * g_a / (z - 1)
+    return g_v, g_a

@@ -8,6 +8,7 @@ Data only (the case layer builds no engine object): the runner maps each tier to
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from app.errors import CaseError
@@ -113,8 +114,6 @@ def _check_contact_pressure(case, file: str) -> None:
 def _check_surgery(case, file: str) -> None:
     """``reduction.surgery``, ``site_motion``, ``wave_scale`` (app/reduced/surgery.py): the modal tier's transient,
     electrodes only as inputs, a prescribed wave driven in two phases, planar sites on cone contacts."""
-    import math
-
     red = case.reduction
     given = [(key, value) for key, value, default in (("surgery", red.surgery, "none"),
                                                       ("site_motion", red.site_motion, "full"),

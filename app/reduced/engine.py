@@ -82,8 +82,7 @@ class ModalEngine:
         # (app/reduced/coordinates.py); the model as built (and operated on) stays for the checkpoint's file, the
         # warm-start checks and the field output
         self.built_model = self.model
-        inputs = np.arange(self.model.n_interface, self.model.n_interface + len(self.model.inputs))
-        self.free_modes = free_modes(self.model, np.setdiff1d(np.arange(self.model.size), inputs), comm)
+        self.free_modes = free_modes(self.model, self.model.free_coordinates, comm)
         if self.free_modes is not None:
             self.model = in_free_modes(self.model, self.free_modes)
         self.setup_wall_s = time.perf_counter() - start
@@ -163,9 +162,7 @@ class ModalEngine:
         case, cfg, model = self.case, self.cfg, self.model
         file = case.source
         gdim = model.gdim
-        n = model.size
-        inputs = np.arange(model.n_interface, model.n_interface + len(model.inputs), dtype=np.int64)
-        free = np.setdiff1d(np.arange(n), inputs).astype(np.int64)
+        inputs, free = model.input_coordinates, model.free_coordinates
         gravity = np.asarray(cfg.loads.gravity_m_per_s2 or [0.0] * gdim, dtype=float)
         force = np.asarray(cfg.loads.fe_force_N or [0.0] * gdim, dtype=float)
         for key, value in (("gravity_m_per_s2", gravity), ("fe_force_N", force)):
@@ -319,13 +316,11 @@ class ModalEngine:
         (for the trapezoidal rule |g_v| = (2 / dt) tan(w dt / 2), 0.2 % above w at 40 steps per period) rides on
         the prescribed rates as an undamped step-to-step alternation of that size, which the contact sites would
         feel as slip. The prescribed crest speed is then |g_v| U_t (bench/bench_motor_chain.py compares with it)."""
+        from forms.newmark import harmonic_rate_gains
+
         P = self.structure.inputs
-        s = self.scheme
-        dt = self.cfg.steps.closed_s
-        omega = self.inputs_record.omega
-        z = np.exp(1j * omega * dt)
-        g_a = (z - 1) / (dt * dt * (((1 - s.gamma) + s.gamma * z) / (z - 1) + 0.5 - s.beta + s.beta * z))
-        g_v = dt * ((1 - s.gamma) + s.gamma * z) * g_a / (z - 1)
+        g_v, g_a = harmonic_rate_gains(self.inputs_record.omega, self.cfg.steps.closed_s, self.scheme.beta,
+                                       self.scheme.gamma)
         self.v[P] = (g_v * x[P]).real
         self.a[P] = (g_a * x[P]).real
 

@@ -1230,6 +1230,27 @@ def _modal_terms(structure):
 
 
 @njit(cache=True, _nrt=False)
+def _predictor(q, v, a, pq, dt, P, scheme, dq, y):
+    """The contact-free step's predictor: ``dq`` (n) = dt v + dt^2 a / 2, the prescribed inputs ``P`` at their
+    values ``pq`` at t1; ``y`` (3, n) the generalized mid-point arguments of M, C and K: (1 - am) a1 + am a,
+    (1 - af) v1 + af v, q + (1 - af) dq, with a1, v1 Newmark's end-of-step rates of dq. Both contact-free
+    increments (the dense one in :func:`run`, :func:`_free_increment_modal`) start from it."""
+    beta, gamma, am, af = scheme
+    c_acc = 1.0 / (beta * dt * dt)
+    n = q.size
+    for j in range(n):
+        dq[j] = dt * v[j] + 0.5 * dt * dt * a[j]
+    for p in range(P.size):
+        dq[P[p]] = pq[p] - q[P[p]]
+    for j in range(n):
+        a1 = (dq[j] - dt * v[j]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[j]
+        v1 = v[j] + dt * ((1.0 - gamma) * a[j] + gamma * a1)
+        y[0, j] = (1.0 - am) * a1 + am * a[j]
+        y[1, j] = (1.0 - af) * v1 + af * v[j]
+        y[2, j] = q[j] + (1.0 - af) * dq[j]
+
+
+@njit(cache=True, _nrt=False)
 def _free_increment_modal(q, v, a, pq, dt, structure, scheme, A_inv, diagonal, coupling, dq, y, b, w, scalars):
     """The contact-free increment ``dq`` (predictor, inputs at t1, correction w = -K_eff^-1 r0 on the free
     coordinates) of a structure with diagonal M_FF and K_FF, with one dense product: r0 = M y1 + C y2 + K y3 - load
@@ -1242,17 +1263,7 @@ def _free_increment_modal(q, v, a, pq, dt, structure, scheme, A_inv, diagonal, c
     c_vel = gamma / (beta * dt)
     c_m, c_c, c_k = (1.0 - am) * c_acc, (1.0 - af) * c_vel, 1.0 - af
     free, P = structure.free, structure.inputs
-    n = q.size
-    for j in range(n):
-        dq[j] = dt * v[j] + 0.5 * dt * dt * a[j]
-    for p in range(P.size):
-        dq[P[p]] = pq[p] - q[P[p]]
-    for j in range(n):
-        a1 = (dq[j] - dt * v[j]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[j]
-        v1 = v[j] + dt * ((1.0 - gamma) * a[j] + gamma * a1)
-        y[0, j] = (1.0 - am) * a1 + am * a[j]
-        y[1, j] = (1.0 - af) * v1 + af * v[j]
-        y[2, j] = q[j] + (1.0 - af) * dq[j]
+    _predictor(q, v, a, pq, dt, P, scheme, dq, y)
     m_over_c, k_over_c = c_m / c_c, c_k / c_c
     for i in range(free.size):
         f = free[i]
@@ -1351,7 +1362,6 @@ def run(t_end, state, model, cache, out, track_energy, frames):
     a1 = np.zeros(n)
     v1 = np.zeros(n)
     q1 = np.zeros(n)
-    x_mid = np.zeros(n)
     r_M = np.zeros(n)
     r_C = np.zeros(n)
     r_K = np.zeros(n)
@@ -1360,7 +1370,7 @@ def run(t_end, state, model, cache, out, track_energy, frames):
     # M_FF and K_FF diagonal (the model in its free modes, app/reduced/coordinates.py): one product per step
     modal = _diagonal_free(structure)
     diagonal, coupling = _modal_terms(structure)
-    y_mid = np.zeros((3, n))
+    y_mid = np.zeros((3, n))          # the mid-point arguments of M, C and K (_predictor)
     y_end = np.zeros((ns, 3))
     v_end = np.zeros((ns, 3))
     closed_sites = np.zeros(ns, np.bool_)
@@ -1415,21 +1425,10 @@ def run(t_end, state, model, cache, out, track_energy, frames):
                 _free_increment_modal(q, v, a, pq, dt_try, structure, scheme, A_inv, diagonal, coupling, dq, y_mid,
                                       r0F, w, nw.scalars)
             else:
-                for i in range(n):
-                    dq[i] = dt_try * v[i] + 0.5 * dt_try * dt_try * a[i]
-                for p in range(P.size):
-                    dq[P[p]] = pq[p] - q[P[p]]
-                for i in range(n):
-                    a1[i] = (dq[i] - dt_try * v[i]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * a[i]
-                    v1[i] = v[i] + dt_try * ((1.0 - gamma) * a[i] + gamma * a1[i])
-                    x_mid[i] = (1.0 - am) * a1[i] + am * a[i]
-                np.dot(structure.M, x_mid, r_M)
-                for i in range(n):
-                    x_mid[i] = (1.0 - af) * v1[i] + af * v[i]
-                np.dot(structure.C, x_mid, r_C)
-                for i in range(n):
-                    x_mid[i] = q[i] + (1.0 - af) * dq[i]
-                np.dot(structure.K, x_mid, r_K)
+                _predictor(q, v, a, pq, dt_try, P, scheme, dq, y_mid)
+                np.dot(structure.M, y_mid[0], r_M)
+                np.dot(structure.C, y_mid[1], r_C)
+                np.dot(structure.K, y_mid[2], r_K)
                 for i in range(nf):
                     j = free[i]
                     r0F[i] = r_M[j] + r_C[j] + r_K[j] - structure.load[j]

@@ -84,12 +84,23 @@ class ReducedModel:
     def size(self) -> int:
         return self.K.shape[0]
 
+    @property
+    def input_coordinates(self) -> np.ndarray:
+        """The prescribed inputs' positions among the coordinates (electrode potentials, base-motion patterns: they
+        follow the interface ones), int64."""
+        return np.arange(self.n_interface, self.n_interface + len(self.inputs), dtype=np.int64)
+
+    @property
+    def free_coordinates(self) -> np.ndarray:
+        """Every other coordinate's position (interface, modal), ascending, int64."""
+        return np.setdiff1d(np.arange(self.size), self.input_coordinates).astype(np.int64)
+
     def resonances_Hz(self, near_Hz: float, count: int = 2) -> np.ndarray:
         """The reduced structure's ``count`` natural frequencies nearest ``near_Hz`` with every input held
         (short circuit, as the driven transient sees them) [Hz], ascending."""
         import scipy.linalg
 
-        keep = np.r_[0:self.n_interface, self.n_interface + len(self.inputs):self.size]
+        keep = self.free_coordinates
         values = scipy.linalg.eigh(self.K[np.ix_(keep, keep)], self.M[np.ix_(keep, keep)], eigvals_only=True)
         frequencies = np.sqrt(np.abs(values)) / (2 * math.pi)
         return np.sort(frequencies[np.argsort(np.abs(frequencies - near_Hz))[:count]])

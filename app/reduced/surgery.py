@@ -40,9 +40,7 @@ from app.reduced.model import ReducedModel
 
 
 def _partition(model: ReducedModel) -> tuple[np.ndarray, np.ndarray]:
-    P = np.arange(model.n_interface, model.n_interface + len(model.inputs))
-    F = np.setdiff1d(np.arange(model.size), P)
-    return P, F
+    return model.input_coordinates, model.free_coordinates
 
 
 def _transformed(model: ReducedModel, T: np.ndarray, **changes) -> ReducedModel:
