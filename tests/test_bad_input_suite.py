@@ -190,6 +190,7 @@ SET_INPUTS = [
     (MOTOR, ["transient.steady_state.period_count=3"], "transient.steady_state.period_count"),
     (MOTOR, ["transient.bodies[0].rotations=[]"], "transient.steady_state.body"),
     (MOTOR, ['transient.steady_state.rule="fit"'], "transient.steady_state.rule"),
+    (MOTOR, ['tier="fe"', 'transient.steady_state.rule="orbit"'], "transient.steady_state.rule"),
     # warm starts (transient.start_from): the modal tier's, from a result directory with a checkpoint
     (MOTOR, ['tier="fe"', 'transient.start_from="elsewhere"'], "transient.start_from"),
     (MOTOR, ['transient.start_from=""'], "transient.start_from"),

@@ -208,18 +208,22 @@ def test_motor_resume_errors_are_one_line(capsys, one_go, tmp_path):
 
 # ------------------------------------------------------------------ the trend rule and warm starts
 @pytest.mark.mpi
-def test_motor_trend_rule_resume_equals_one_run(shared_tmp):
+@pytest.mark.parametrize("rule", ["trend", "orbit"])
+def test_motor_trend_rule_resume_equals_one_run(shared_tmp, rule):
     """The trend steady-state rule (app/loop/steady.py) decides from the cycle means the checkpoint holds: a run
     split at 6 periods and resumed equals the run in one go bit for bit, its last fit included (fitted over
     periods on both sides of the split). In 12 periods the rotor is still spinning up (cycle means 0.05 to 3.4
     rad/s), which the window rule at SETS' loose tolerance takes for steady at period 10 and the trend rule does
     not: the fit's change still to come exceeds the tolerance (measured: 5 to 28 times the means' scale). The stop
-    decision after a restore is checked on the watch itself (tests/test_steady_rules.py)."""
+    decision after a restore is checked on the watch itself (tests/test_steady_rules.py). The orbit rule adds the
+    stator's state at each period end: the checkpoint holds the last one, so the resumed run's relative returns
+    (every period's, known from the first closed one on) equal the run's in one go."""
     comm = MPI.COMM_WORLD
-    trend = SETS + ['transient.steady_state.rule="trend"']
+    trend = SETS + [f'transient.steady_state.rule="{rule}"']
     whole = shared_tmp / "whole"
     res = run_case_quiet(CASE, whole, *trend)["results"]["transient"]["steady_state"]
-    assert res["rule"] == "trend" and not res["steady"] and res["cycles"] == 11
+    assert res["rule"] == rule and not res["steady"] and res["cycles"] == 11
+    assert len(res["period_returns"]) == 11 and all(r is not None and r > 0 for r in res["period_returns"])
     fitted = res["cycle_means"][-res["trend"]["fit_periods"]:]
     assert res["trend"]["remaining"] > 0.8 * max(abs(m) for m in fitted)
     split = shared_tmp / "split"

@@ -95,6 +95,11 @@ def check_tier(case, file: str, written=None) -> None:
                                 "rings across the band see one displacement with the nodes interface: set "
                                 'reduction.interface = "band" or reduction.site_displacement = "field"')
     _check_surgery(case, file)
+    steady = case.transient.steady_state if case.transient is not None else None
+    if steady is not None and steady.rule == "orbit" and case.tier != "modal":
+        raise CaseError(file, "transient.steady_state.rule",
+                        f"'orbit' compares the reduced structure's state period to period: the modal tier's only "
+                        f"(this case runs tier {case.tier!r}; use 'trend')")
     if case.transient is not None and case.transient.start_from is not None and case.tier != "modal":
         raise CaseError(file, "transient.start_from", f"warm starts are offered by the modal tier only (this case "
                                                       f"runs tier {case.tier!r})")

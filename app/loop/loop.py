@@ -225,7 +225,7 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
             if rows and len(rows[S.TIME]):
                 unwritten.append(rows)
                 if watch is not None:
-                    steady = watch.update_block(rows)
+                    steady = watch.update_block(rows, getattr(engine, "period_state", None))
             # a stop for a field frame only: its rows go to the file with the next block (an HDF5 append costs
             # milliseconds, a frame burst stops the engine every few steps); a checkpoint writes them first
             if unwritten and (engine.t >= series_due - 1e-9 * progress_step or checkpoint.due(engine.steps) or steady

@@ -39,7 +39,13 @@ Two rules (``rule``), both on the closed cycle means only, so a resumed run deci
   nil for a moment, so the test must also have held when the run was 1/1.1 of its age (a recorded chained motor
   point fell to 25.09 rpm and climbed to 26.9 rpm: without this the rule stopped on the minimum). Fitting costs
   about a millisecond per period and runs only once the window test has passed.
-  docs/transient.md, "Steady-state stop", has the choice and the measurements.
+* ``"orbit"`` (:func:`orbit_rule_is_steady`, the modal tier): the structure's state too. At each period end the
+  engine's ``period_state`` is taken and the period's relative return ``|x(bT) - x((b-1)T)| / |x(bT)|`` recorded
+  (:meth:`SteadyStateWatch._period_state`). A run whose returns grow over the window (by more than ORBIT_GROWTH) is
+  leaving a periodic orbit: not steady, however flat its speed (the pinned motor's no-load plateau: the returns
+  grow 1.5x per 20 periods through it, tests/data/motor-pinned-rest-plateau-means-returns.txt). Otherwise the trend
+  rule decides on the cycle means since the run last was leaving one.
+  docs/transient.md, "Steady-state stop", has the choices and the measurements.
 """
 
 from __future__ import annotations
@@ -64,7 +70,14 @@ def window_is_steady(means, window_cycles: int, relative_tolerance: float, min_c
 
 
 #: the steady-state rules of ``[transient.steady_state]`` (``rule``)
-RULES = ("window", "trend")
+RULES = ("window", "trend", "orbit")
+#: the orbit rule: a state is taken at a period end when the step ends there to this fraction of a period
+RETURN_TIME_TOLERANCE = 1e-6
+#: the orbit rule: the largest growth of the relative return over the window (log-linear fit) that counts as holding
+#: an orbit (a saturated, non-periodic state's returns scatter a few % about their level)
+ORBIT_GROWTH = 1.1
+#: the orbit rule: returns below this are round-off (the fit takes them at this value)
+ORBIT_FLOOR = 1e-12
 #: the trend rule: share of the closed periods (the latest) its fit spans
 TREND_FIT_FRACTION = 0.5
 #: the trend rule: a drift is extrapolated over this many times the run's age (closed periods)
@@ -136,13 +149,58 @@ def trend_rule_is_steady(means, window_cycles: int, relative_tolerance: float, m
     return trend_is_steady(means[:earlier], window_cycles, relative_tolerance, min_cycles, floor)
 
 
+def return_growth(returns, window_cycles: int) -> np.ndarray:
+    """Per closed period k (index k - 1), the growth factor of the relative returns over the window ending there:
+    exp(slope x window_cycles), the slope of a least-squares line through log(return) of periods k - window_cycles
+    .. k (returns below ORBIT_FLOOR taken at it). NaN where the window is not complete or holds an unknown return."""
+    r = np.array([np.nan if x is None else x for x in returns], dtype=float)
+    growth = np.full(r.size, np.nan)
+    width = window_cycles + 1
+    if r.size < width:
+        return growth
+    x = np.arange(width, dtype=float) - 0.5 * (width - 1)
+    slopes = np.correlate(np.log(np.maximum(r, ORBIT_FLOOR)), x, mode="valid") / float(x @ x)
+    growth[width - 1:] = np.exp(slopes * window_cycles)
+    return growth
+
+
+def orbit_rule_is_steady(means, returns, window_cycles: int, relative_tolerance: float, min_cycles: int,
+                         floor: float = 0.0) -> bool:
+    """The orbit rule after period n = len(means) closes, ``returns``: the structure's relative return per closed
+    period (None where unknown). The run is leaving a periodic orbit in a period whose window's returns grow by more
+    than ORBIT_GROWTH (:func:`return_growth`; an unknown return counts as leaving); steady when it is not leaving
+    one now and :func:`trend_rule_is_steady` holds on the cycle means since it last was (the slow dynamics of the
+    state it has settled into, its age counted from there)."""
+    since = orbit_held_since(returns, window_cycles)
+    if since is None:
+        return False
+    return trend_rule_is_steady(means[since:], window_cycles, relative_tolerance, min_cycles, floor)
+
+
+def orbit_held_since(returns, window_cycles: int) -> int | None:
+    """The closed periods before the run last was leaving a periodic orbit (0: never; see
+    :func:`orbit_rule_is_steady`), None if it is leaving one now (or its last return is unknown)."""
+    growth = return_growth(returns, window_cycles)
+    holding = growth <= ORBIT_GROWTH
+    if not holding.size or not holding[-1]:
+        return None
+    leaving = ~holding
+    leaving[:window_cycles] = False         # no complete window yet: no evidence either way
+    return int(np.flatnonzero(leaving)[-1]) + 1 if leaving.any() else 0
+
+
 def stop_period(rule: str, means, window_cycles: int, relative_tolerance: float, min_cycles: int,
-                floor: float = 0.0) -> int | None:
-    """The number of closed periods after which a run whose cycle means are ``means`` stops under ``rule``
-    ("window" or "trend"), as :class:`SteadyStateWatch` decides; None: not within them."""
-    test = {"window": window_is_steady, "trend": trend_rule_is_steady}[rule]
+                floor: float = 0.0, returns=None) -> int | None:
+    """The number of closed periods after which a run whose cycle means are ``means`` (and, rule "orbit", relative
+    returns ``returns``) stops under ``rule``, as :class:`SteadyStateWatch` decides; None: not within them."""
     for n in range(1, len(means) + 1):
-        if test(means[:n], window_cycles, relative_tolerance, min_cycles, floor):
+        if rule == "orbit":
+            steady = orbit_rule_is_steady(means[:n], returns[:n], window_cycles, relative_tolerance, min_cycles,
+                                          floor)
+        else:
+            test = {"window": window_is_steady, "trend": trend_rule_is_steady}[rule]
+            steady = test(means[:n], window_cycles, relative_tolerance, min_cycles, floor)
+        if steady:
             return n
     return None
 
@@ -170,10 +228,14 @@ class SteadyStateWatch:
         self.means: list[list[float]] = []  # closed periods: [speed mean, torque mean]
         self.steady = False
         self.skip_cycle = -1               # the period the count started in (entered late)
+        self.returns: list[float | None] = []   # per closed period: its relative return (see _period_state)
+        self.orbit_last = None             # (period end index, the engine's state there as a list)
 
-    def update_block(self, block: dict) -> bool:
+    def update_block(self, block: dict, state=None) -> bool:
         """Add the accepted steps of a time-series block (rows of ``time_s``, the speed and torque columns);
-        True once the run is steady (the rows after the period that made it steady are not looked at)."""
+        True once the run is steady (the rows after the period that made it steady are not looked at).
+        ``state``: a callable giving the engine's state after the block's last step (the engine's
+        ``period_state``), asked only when that step ends a period."""
         from app import series as S
 
         t = block[S.TIME]
@@ -182,7 +244,7 @@ class SteadyStateWatch:
         for name in self.torque_columns:
             torque = torque + np.asarray(block[name]).reshape(t.size, -1)[:, 0]
         for k in range(t.size):
-            if self.update(float(t[k]), float(speed[k]), float(torque[k])):
+            if self.update(float(t[k]), float(speed[k]), float(torque[k]), state if k == t.size - 1 else None):
                 break
         return self.steady
 
@@ -190,8 +252,9 @@ class SteadyStateWatch:
     def watched(self) -> str:
         return "speed" if self.free else "torque"
 
-    def update(self, t_s: float, speed: float, torque: float) -> bool:
-        """Add an accepted step (its time [s], the watched body's speed [rad/s] and contact torque [N m]);
+    def update(self, t_s: float, speed: float, torque: float, state=None) -> bool:
+        """Add an accepted step (its time [s], the watched body's speed [rad/s] and contact torque [N m];
+        ``state``: None, or a callable giving the engine's state after this step, see :meth:`update_block`);
         True once the run is steady."""
         t1 = float(t_s)
         y1 = np.array([speed, torque])
@@ -201,6 +264,7 @@ class SteadyStateWatch:
             self.cycle = int(math.floor(t1 / self.period_s + 1e-9))
             self.skip_cycle = self.cycle
             self.last = (t1, float(y1[0]), float(y1[1]))
+            self._period_state(t1, round(t1 / self.period_s), state)
             return self.steady
         t0, y0 = self.last[0], np.array(self.last[1:])
         while True:
@@ -212,8 +276,10 @@ class SteadyStateWatch:
             w = (boundary - t0) / (t1 - t0) if t1 > t0 else 1.0
             yb = y0 + min(max(w, 0.0), 1.0) * (y1 - y0)
             self.integral += 0.5 * (boundary - t0) * (y0 + yb)
+            returned = self._period_state(t1, self.cycle + 1, state)
             if self.cycle != self.skip_cycle:
                 self.means.append((self.integral / self.period_s).tolist())
+                self.returns.append(returned)
             self.integral = np.zeros(2)
             self.cycle += 1
             t0, y0 = boundary, yb
@@ -221,17 +287,38 @@ class SteadyStateWatch:
         self.last = (t1, float(y1[0]), float(y1[1]))
         return self.steady
 
+    def _period_state(self, t_s: float, boundary: int, state) -> float | None:
+        """Take the engine's state at period end ``boundary`` (index: its time is boundary x T) if ``state`` is given
+        and ``t_s`` is that time (to RETURN_TIME_TOLERANCE of a period); returns the relative return
+        ||x(b T) - x((b - 1) T)|| / ||x(b T)|| of the period ending there, None when either state is not known."""
+        if state is None or abs(t_s - boundary * self.period_s) > RETURN_TIME_TOLERANCE * self.period_s:
+            return None
+        x = np.asarray(state(), dtype=float)
+        returned = None
+        if self.orbit_last is not None and self.orbit_last[0] == boundary - 1:
+            size = float(np.linalg.norm(x))
+            if size > 0:
+                returned = float(np.linalg.norm(x - np.asarray(self.orbit_last[1])) / size)
+        self.orbit_last = (boundary, x.tolist())
+        return returned
+
     def _test(self) -> None:
         if not self.steady:
             column = 0 if self.free else 1
-            test = window_is_steady if self.rule == "window" else trend_rule_is_steady
-            self.steady = test([m[column] for m in self.means], self.window_cycles, self.relative_tolerance,
-                               self.min_cycles, self.floor)
+            means = [m[column] for m in self.means]
+            if self.rule == "orbit":
+                self.steady = orbit_rule_is_steady(means, self.returns, self.window_cycles, self.relative_tolerance,
+                                                   self.min_cycles, self.floor)
+            else:
+                test = window_is_steady if self.rule == "window" else trend_rule_is_steady
+                self.steady = test(means, self.window_cycles, self.relative_tolerance, self.min_cycles, self.floor)
 
     # ------------------------------------------------------------ checkpoints and results
     def snapshot(self) -> dict:
         return {"cycle": self.cycle, "integral": self.integral.tolist(), "last": list(self.last) if self.last else None,
-                "means": [list(m) for m in self.means], "steady": self.steady, "skip_cycle": self.skip_cycle}
+                "means": [list(m) for m in self.means], "steady": self.steady, "skip_cycle": self.skip_cycle,
+                "returns": list(self.returns),
+                "orbit_last": [self.orbit_last[0], self.orbit_last[1]] if self.orbit_last is not None else None}
 
     def restore(self, snap: dict) -> None:
         self.cycle = int(snap["cycle"])
@@ -240,6 +327,10 @@ class SteadyStateWatch:
         self.means = [list(map(float, m)) for m in snap["means"]]
         self.steady = bool(snap["steady"])
         self.skip_cycle = int(snap["skip_cycle"])
+        # a checkpoint of a version before the return residuals: none known
+        self.returns = [None if r is None else float(r) for r in snap.get("returns", [None] * len(self.means))]
+        last = snap.get("orbit_last")
+        self.orbit_last = (int(last[0]), [float(v) for v in last[1]]) if last is not None else None
 
     def results(self) -> dict:
         """The summary.json block: steady or not, closed periods, the last cycle means."""
@@ -250,8 +341,18 @@ class SteadyStateWatch:
                "cycles": len(self.means), "window_cycles": self.window_cycles,
                "relative_tolerance": self.relative_tolerance, "min_cycles": self.min_cycles, "floor": self.floor,
                "cycle_mean_speed_rad_per_s": last[0], "cycle_mean_torque_N_m": last[1], "cycle_means": means}
-        if self.rule == "trend" and len(means) > self.window_cycles:
+        if any(r is not None for r in self.returns):
+            out["period_returns"] = list(self.returns)
+        fitted = means
+        if self.rule == "orbit":
+            # since the state last was leaving a periodic orbit (all of it when it is leaving one at the end)
+            since = orbit_held_since(self.returns, self.window_cycles)
+            growth = return_growth(self.returns, self.window_cycles)
+            out["orbit"] = {"held_since_period": since,
+                            "return_growth": float(growth[-1]) if growth.size and np.isfinite(growth[-1]) else None}
+            fitted = means[since or 0:]
+        if self.rule in ("trend", "orbit") and len(fitted) > self.window_cycles:
             # the last fit (of the periods the stop, or the end, saw): what the rule extrapolated
-            span = max(self.window_cycles + 1, int(math.ceil(TREND_FIT_FRACTION * len(means))))
-            out["trend"] = {"fit_periods": span, **trend_fit(means[-span:], len(means), self.window_cycles)}
+            span = max(self.window_cycles + 1, int(math.ceil(TREND_FIT_FRACTION * len(fitted))))
+            out["trend"] = {"fit_periods": span, **trend_fit(fitted[-span:], len(fitted), self.window_cycles)}
         return out

@@ -669,6 +669,21 @@ class ModalEngine:
     def take_tables(self) -> dict:
         return self.tables.take()
 
+    def period_state(self) -> np.ndarray:
+        """The structure's state as the steady-state watch compares it from one period end to the next
+        (``[transient.steady_state] rule = "orbit"``, app/loop/steady.py): its free coordinates, scaled so the
+        vector's squared Euclidean norm is w^2 q_F^T M_FF q_F + v_F^T M_FF v_F [J] (w the drive's
+        angular frequency): twice the kinetic energy of a harmonic motion at w through this state, so the
+        norm of a steady harmonic state does not depend on the phase it is sampled at. M_FF, not K_FF: the mass
+        block is positive definite also for a structure with rigid-body freedom. The bodies' state is left out (the
+        rotor's speed is the watched quantity; its angle grows)."""
+        F = self.structure.free
+        if getattr(self, "_period_factor", None) is None:
+            # M_FF = L L^T: ||L^T x||^2 = x^T M_FF x
+            self._period_factor = np.linalg.cholesky(self.model.M[np.ix_(F, F)]).T
+        omega = 2 * math.pi * self.cfg.drive.frequency_Hz
+        return np.concatenate([omega * (self._period_factor @ self.q[F]), self._period_factor @ self.v[F]])
+
     # ---------------------------------------------------------------- checkpoints, fields, results
     def snapshot(self) -> tuple[dict | None, dict]:
         site_arrays, site_record = self.tables.snapshot()
