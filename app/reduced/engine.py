@@ -790,8 +790,11 @@ class ReducedVertexFields:
     Every field is linear in q, so each basis vector's fields are laid out once, transposed (coordinates x
     values: a batch's product is frames x values, each frame's values contiguous): the vertex values, and of
     the region-wise averaged derived values (app.fe.derived.RegionAveraging) only the columns the derived fields
-    and the peaks need (app.fe.derived.raw_columns; 9 of 18 for the default fields), their (region, vertex)
-    pairs ordered by region so each region's peaks read a slice."""
+    and the peaks need (app.fe.derived.raw_columns; 9 of 18 for the default fields), component by component,
+    their (region, vertex) pairs ordered by region so each region's peaks read a slice. Components that are
+    zero for every basis vector (a model of revolution's u_theta, the potential of its metal parts, its shears
+    yz and xy, its E_theta: a third of the product) are not formed; the expansion writes zeros for them and its
+    invariants (von Mises, principal stresses: app.fe.derived.principal_of_parts, |E|) take them as 0.0."""
 
     def __init__(self, model: ReducedModel, comm, derived=()):
         self.comm = comm
