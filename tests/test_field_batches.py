@@ -150,6 +150,31 @@ def test_batched_series_equals_the_per_frame_series(tmp_path):
             assert np.abs(a[name] - b[name]).max() <= 1e-13 * np.abs(b[name]).max()
 
 
+def test_bodies_of_a_batch_are_each_frames_own(tmp_path):
+    """The rigid bodies' companion (transient_bodies.xdmf) of a modal series, its batches displaced at once
+    (app/transient/body_shapes.py BodyMeshes.displacements, on the writer thread): frame k's displacement, read
+    back through the XML, is that of its own coordinates z_k. Reference by hand: a ball translated by z_k moves
+    every vertex by z_k (round-off of the reference position, 1e-18 m)."""
+    from app.transient.body_shapes import BodyMeshes, sphere_shape
+
+    meshes = BodyMeshes.from_shapes([("ball", (0.0, 0.0, 0.0), [], [sphere_shape(1e-3)])], 3, "3d",
+                                    {"ball": slice(0, 3)})
+    state = {"q": None}
+    export = FieldSeriesExport(tmp_path / "transient_fields.xdmf", FakeBasis(), lambda: state["q"],
+                               FrameSchedule(PERIOD_S, 1, interval_periods=1), bodies=lambda size: meshes,
+                               batch_frames=4, writer_thread=True)
+    shifts = [np.array([1e-4 * k, -2e-5 * k, 3e-6 * k * k]) for k in range(FRAMES)]
+    for k in range(FRAMES):
+        state["q"] = coordinates(k)
+        export.write(k * PERIOD_S, body_positions=shifts[k])
+    export.close()
+    frames = read_frames(tmp_path / "transient_bodies.xdmf", ("displacement",))
+    assert [t for t, _ in frames] == [k * PERIOD_S for k in range(FRAMES)]
+    for (_, values), shift in zip(frames, shifts):
+        np.testing.assert_allclose(values["displacement"], np.tile(shift, (len(meshes.points), 1)), rtol=0,
+                                   atol=1e-18)
+
+
 KILL_SCRIPT = """
 import sys
 from pathlib import Path
