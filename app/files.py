@@ -75,8 +75,9 @@ def write_h5_atomic(path: Path, datasets: dict[str, np.ndarray], attrs: dict[str
             ds = low.dataset(name, values)
             if ds is None:
                 ds = f.create_dataset(name, data=values).id
-            for key, value in attrs.get(name, {}).items():
-                low.attribute(ds, key, value)
+            if name in attrs:
+                for key, value in attrs[name].items():
+                    low.attribute(ds, key, value)
         for name, values in attrs.items():
             if name not in datasets:
                 group = low.group(name.strip("/"))
@@ -92,9 +93,10 @@ class _LowLevel:
 
     def __init__(self, f):
         import h5py
-        from h5py import h5p, h5s, h5t
+        from h5py import h5d, h5p, h5s, h5t
 
         self.f = f
+        self.h5d, self.h5s = h5d, h5s        # looked up once: an import statement per dataset costs as much as a call
         self.lcpl = h5p.create(h5p.LINK_CREATE)
         self.lcpl.set_char_encoding(h5t.CSET_UTF8)
         self.types: dict = {}
@@ -120,17 +122,15 @@ class _LowLevel:
         return gid
 
     def _type(self, dtype):
-        tid = self.types.get(dtype.str)
+        tid = self.types.get(dtype)
         if tid is None:
             from h5py import h5t
 
-            tid = self.types[dtype.str] = h5t.py_create(dtype)
+            tid = self.types[dtype] = h5t.py_create(dtype)
         return tid
 
     def dataset(self, name: str, values):
         """The low-level dataset of a numeric array (None for anything else: h5py's high level writes it)."""
-        from h5py import h5d, h5s
-
         arr = values if isinstance(values, np.ndarray) else np.asarray(values)
         if arr.dtype.kind not in "fiub" or arr.ndim == 0 or arr.size == 0:
             return None
@@ -138,11 +138,11 @@ class _LowLevel:
             arr = np.ascontiguousarray(arr)
         space = self.spaces.get(arr.shape)
         if space is None:
-            space = self.spaces[arr.shape] = h5s.create_simple(arr.shape)
+            space = self.spaces[arr.shape] = self.h5s.create_simple(arr.shape)
         tid = self._type(arr.dtype)
         parent, _, base = name.strip("/").rpartition("/")
-        ds = h5d.create(self.group(parent), base.encode(), tid, space, lcpl=self.lcpl)
-        ds.write(h5s.ALL, h5s.ALL, arr, mtype=tid)       # the memory type is the file's: no lookup per write
+        ds = self.h5d.create(self.group(parent), base.encode(), tid, space, lcpl=self.lcpl)
+        ds.write(self.h5s.ALL, self.h5s.ALL, arr, mtype=tid)       # the memory type is the file's: no lookup
         return ds
 
     def attribute(self, ds, key: str, value) -> None:

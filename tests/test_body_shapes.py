@@ -77,6 +77,14 @@ def test_motor_rotor_is_a_closed_conical_disc_that_turns():
     moved = meshes.points + meshes.displacement(z)
     expected = np.column_stack([-meshes.points[:, 1], meshes.points[:, 0], meshes.points[:, 2] + lift])
     np.testing.assert_allclose(moved, expected, rtol=0, atol=1e-15)
+    # a batch of frames at once (the field output's): the quarter turn, a half turn (x -> -x, y -> -y) with
+    # another lift, the start
+    half = np.array([0.0, 0.0, reference[2] - lift, np.pi])
+    start = np.array([0.0, 0.0, reference[2], 0.0])
+    batch = meshes.points + meshes.displacements(np.array([z, half, start]))
+    np.testing.assert_allclose(batch[0], expected, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(batch[1], meshes.points * [-1, -1, 1] - [0, 0, lift], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(batch[2], meshes.points, rtol=0, atol=1e-15)
 
 
 def test_plane_obstacle_is_a_slab_on_its_side_of_the_plane():

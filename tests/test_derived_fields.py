@@ -359,3 +359,42 @@ def test_principal_stresses_agree_with_lapack_near_repeated_values():
         reference = np.linalg.eigvalsh(derived.voigt_tensor(T))[..., ::-1]
         error = np.abs(derived.principal_stresses(T) - reference) / np.maximum(np.abs(T).max(axis=-1), 1e-300)[:, None]
         assert error.max() <= 1e-12
+    # one shear zero everywhere, given as the float 0.0 (the modal field output's components): the general closed
+    # form on the other five, the same values as the tensors with that column zero
+    T = near.copy()
+    T[:, 3] = 0.0
+    parts = [0.0 if i == 3 else T[:, i] for i in range(6)]
+    np.testing.assert_array_equal(np.stack(derived.principal_of_parts(parts), axis=-1), derived.principal_stresses(T))
+
+
+@pytest.mark.parametrize("normal", [0, 1, 2])
+def test_principal_stresses_of_plane_tensors_agree_with_lapack(normal):
+    """The closed form of app.fe.derived.principal_of_parts for tensors whose two shears out of one plane are zero
+    everywhere (a model of revolution's or a plane model's: one principal direction normal to the plane, the
+    in-plane pair from a 2 x 2 problem), for each of the three planes: against LAPACK's eigvalsh, within 1e-12 of
+    the tensor's largest component (LAPACK's own error is a few machine epsilons of |T|), on tensors whose normal
+    stress equals an in-plane principal one (the axis of a model of revolution, sigma_rr = sigma_thetatheta),
+    nearly equals it (1e-1 ... 1e-13), lies above, between and below the pair, and on zero tensors; and given the
+    zero shears as the float 0.0 (the modal field output's components zero everywhere), the same values."""
+    rng = np.random.default_rng(5)
+    n = 1400
+    plane = [i for i in range(3) if i != normal]
+    shear = {2: 5, 1: 4, 0: 3}[normal]              # xy, xz, yz: the plane's own shear
+    angle = rng.uniform(0, 2 * np.pi, n)
+    s_hi, s_lo = rng.uniform(-1e8, 1e8, n), rng.uniform(-1e8, 1e8, n)
+    s_hi, s_lo = np.maximum(s_hi, s_lo), np.minimum(s_hi, s_lo)
+    gaps = np.repeat(np.r_[0.0, 10.0 ** -np.arange(1, 14)], 100)
+    normal_stress = np.concatenate([s_hi[:700] * (1 - gaps[:700]), s_lo[700:] * (1 + gaps[700:])])
+    normal_stress[::7] = rng.uniform(-3e8, 3e8, normal_stress[::7].size)      # anywhere: above, between, below
+    c, s = np.cos(angle), np.sin(angle)
+    T = np.zeros((n, 6))
+    T[:, plane[0]] = s_hi * c * c + s_lo * s * s
+    T[:, plane[1]] = s_hi * s * s + s_lo * c * c
+    T[:, shear] = (s_hi - s_lo) * s * c
+    T[:, normal] = normal_stress
+    T[-5:] = 0.0
+    reference = np.linalg.eigvalsh(derived.voigt_tensor(T))[..., ::-1]
+    scale = np.maximum(np.abs(T).max(axis=-1), 1e-300)[:, None]
+    assert (np.abs(derived.principal_stresses(T) - reference) / scale).max() <= 1e-12
+    parts = [T[:, i] if i in (plane[0], plane[1], shear, normal) else 0.0 for i in range(6)]
+    np.testing.assert_array_equal(np.stack(derived.principal_of_parts(parts), axis=-1), derived.principal_stresses(T))

@@ -150,6 +150,31 @@ def test_batched_series_equals_the_per_frame_series(tmp_path):
             assert np.abs(a[name] - b[name]).max() <= 1e-13 * np.abs(b[name]).max()
 
 
+def test_bodies_of_a_batch_are_each_frames_own(tmp_path):
+    """The rigid bodies' companion (transient_bodies.xdmf) of a modal series, its batches displaced at once
+    (app/transient/body_shapes.py BodyMeshes.displacements, on the writer thread): frame k's displacement, read
+    back through the XML, is that of its own coordinates z_k. Reference by hand: a ball translated by z_k moves
+    every vertex by z_k (round-off of the reference position, 1e-18 m)."""
+    from app.transient.body_shapes import BodyMeshes, sphere_shape
+
+    meshes = BodyMeshes.from_shapes([("ball", (0.0, 0.0, 0.0), [], [sphere_shape(1e-3)])], 3, "3d",
+                                    {"ball": slice(0, 3)})
+    state = {"q": None}
+    export = FieldSeriesExport(tmp_path / "transient_fields.xdmf", FakeBasis(), lambda: state["q"],
+                               FrameSchedule(PERIOD_S, 1, interval_periods=1), bodies=lambda size: meshes,
+                               batch_frames=4, writer_thread=True)
+    shifts = [np.array([1e-4 * k, -2e-5 * k, 3e-6 * k * k]) for k in range(FRAMES)]
+    for k in range(FRAMES):
+        state["q"] = coordinates(k)
+        export.write(k * PERIOD_S, body_positions=shifts[k])
+    export.close()
+    frames = read_frames(tmp_path / "transient_bodies.xdmf", ("displacement",))
+    assert [t for t, _ in frames] == [k * PERIOD_S for k in range(FRAMES)]
+    for (_, values), shift in zip(frames, shifts):
+        np.testing.assert_allclose(values["displacement"], np.tile(shift, (len(meshes.points), 1)), rtol=0,
+                                   atol=1e-18)
+
+
 KILL_SCRIPT = """
 import sys
 from pathlib import Path
@@ -277,22 +302,33 @@ def test_batch_file_layout_and_a_resumed_series_of_the_older_layout(tmp_path):
     assert resumed.peaks == kept and resumed.written == 7
 
 
-def test_modal_expansion_of_a_batch_equals_frame_by_frame():
+@pytest.mark.parametrize("plane", [False, True])
+def test_modal_expansion_of_a_batch_equals_frame_by_frame(plane):
     """app/reduced/engine.py ReducedVertexFields: ``expand`` of a batch of coordinates (one product of each basis
     with all the columns, the derived fields and peaks of all the frames at once) against ``sample`` and
-    ``derived_frame`` of each column alone (the per-frame path), on random bases over the 2 x 3 quad mesh with a
-    piezoelectric region (so principal stresses and |E| enter the peaks). Tolerance 1e-13 of each field's largest
-    value: the same sums in another BLAS call (gemm against gemv)."""
+    ``derived_frame`` of each column alone (the per-frame path, every component formed), on random bases over
+    the 2 x 3 quad mesh with a piezoelectric region (so principal stresses and |E| enter the peaks). ``plane``: the
+    bases of a model of revolution, components zero for every basis vector (u_y, the potential of a metal part,
+    the shears yz and xy, E_y), which ``expand`` does not form (one third fewer products) and puts back as
+    zeros. Tolerance 1e-13 of each field's largest value: the same sums in another BLAS call (gemm against
+    gemv), the principal stresses of the batch component by component against those of the frame's tensors."""
     from types import SimpleNamespace
 
-    from app.fe.derived import RAW_COLUMNS, RegionAveraging
+    from app.fe.derived import RAW, RAW_COLUMNS, RegionAveraging
     from app.reduced.engine import ReducedVertexFields
 
     rng = np.random.default_rng(11)
     mesh = FakeBasis().mesh_arrays
     pairs = RegionAveraging(mesh["topology"], mesh["region"], 12, [2]).size
-    model = SimpleNamespace(vertex_basis=rng.standard_normal((48, MODES)),
-                            derived_basis=rng.standard_normal((pairs * RAW_COLUMNS, MODES)) * 1e6,
+    vertex_basis = rng.standard_normal((48, MODES))
+    derived_basis = rng.standard_normal((pairs, RAW_COLUMNS, MODES)) * 1e6
+    if plane:
+        vertex_basis[1:36:3] = 0.0                  # u_y
+        vertex_basis[36:42] = 0.0                   # the potential of vertices 0-5 (the horn's bottom rows)
+        stress, field = RAW["stress"].start, RAW["electric_field"].start
+        derived_basis[:, [stress + 3, stress + 5, field + 1]] = 0.0
+    model = SimpleNamespace(vertex_basis=vertex_basis,
+                            derived_basis=derived_basis.reshape(pairs * RAW_COLUMNS, MODES),
                             region_table=np.array(["1|horn|0", "2|piezo|1"]), mesh_geometry=mesh["geometry"],
                             mesh_topology=mesh["topology"], mesh_region=mesh["region"],
                             mesh_topology_type="Quadrilateral")
@@ -311,6 +347,11 @@ def test_modal_expansion_of_a_batch_equals_frame_by_frame():
         assert sorted(peaks["piezo"]) == ["electric_field_V_per_m", "max_principal_stress_Pa", "von_mises_Pa"]
         for region, values in peaks1.items():
             assert peaks[region] == pytest.approx(values, rel=1e-13)
+        if plane:
+            assert not u[:, 1].any() and not phi[:6].any() and not fields["stress_Pa"][:, [3, 5]].any()
+            assert not fields["electric_field_V_per_m"][:, 1].any()
+    formed = 4 + 2 if plane else 6 + 3              # stress and E components in the derived product
+    assert vertex._derived_T.shape == (MODES, formed * pairs)
 
 
 def test_fast_hdf5_writer_reads_back_as_h5py_high_level(tmp_path):
@@ -402,9 +443,10 @@ def test_a_checkpoint_record_of_the_older_format_resumes(tmp_path):
 
 def test_region_peaks_from_chosen_columns_and_any_pair_order():
     """app/fe/derived.py frame_region_peaks on the raw columns raw_columns chooses (stress and E for these
-    fields), with the von Mises and principal stresses passed in (``known``), and on the pairs in another order
-    (a region's pairs not consecutive: indices instead of a slice), against the 18-column call on pairs ordered
-    by region: the same peaks exactly (maxima of the same values)."""
+    fields), with the quantities whose maxima the peaks are passed in (``known``: von Mises, the largest principal
+    stress, |E| at every pair, no values), and on the pairs in another order (a region's pairs not consecutive:
+    indices instead of a slice), against the 18-column call on pairs ordered by region: the same peaks exactly
+    (maxima of the same values)."""
     from types import SimpleNamespace
 
     from app.fe.derived import RAW_COLUMNS, frame_region_peaks, node_fields, raw_columns
@@ -419,13 +461,15 @@ def test_region_peaks_from_chosen_columns_and_any_pair_order():
     indices, columns = raw_columns(names, electric=True)
     assert indices.tolist() == list(range(6, 15))
     chosen = values[..., indices]
-    known = {key: v.reshape(4, 30, *v.shape[1:])
-             for key, v in node_fields(chosen.reshape(120, -1), names, columns=columns).items()}
+    fields = {key: v.reshape(4, 30, *v.shape[1:])
+              for key, v in node_fields(chosen.reshape(120, -1), names, columns=columns).items()}
+    known = {"von_mises_Pa": fields["von_mises_Pa"], "max_principal_stress_Pa": fields["principal_stress_Pa"][..., 0],
+             "electric_field_V_per_m": np.linalg.norm(chosen[..., columns["electric_field"]], axis=-1)}
     order = rng.permutation(30)
     for peaks in (frame_region_peaks(chosen, pair_region, regions, columns),
-                  frame_region_peaks(chosen, pair_region, regions, columns, known=known),
+                  frame_region_peaks(None, pair_region, regions, known=known),
                   frame_region_peaks(chosen[:, order], pair_region[order], regions, columns),
-                  frame_region_peaks(values[:, order], pair_region[order], regions,
+                  frame_region_peaks(None, pair_region[order], regions,
                                      known={k: v[:, order] for k, v in known.items()})):
         assert peaks == reference
     assert sorted(reference[0]["piezo"]) == ["electric_field_V_per_m", "max_principal_stress_Pa", "von_mises_Pa"]

@@ -118,31 +118,70 @@ def voigt_tensor(T: np.ndarray) -> np.ndarray:
     return out
 
 
+def voigt_parts(T: np.ndarray) -> list:
+    """The six Voigt components (xx, yy, zz, yz, xz, xy) of (..., 6) stresses, as the ``parts`` the invariants
+    below take (each an array, or the float 0.0 for a component that is zero everywhere)."""
+    return [T[..., i] for i in range(6)]
+
+
 def von_mises(T: np.ndarray) -> np.ndarray:
     """Von Mises stress [Pa] of (..., 6) Voigt stresses [Pa]."""
-    return np.sqrt(np.maximum(_vm_form(T, T), 0.0))
+    return von_mises_of_parts(voigt_parts(T))
+
+
+def von_mises_of_parts(parts) -> np.ndarray:
+    """Von Mises stress [Pa] of the Voigt components ``parts`` (:func:`voigt_parts`)."""
+    return np.sqrt(np.maximum(_vm_parts(parts, parts), 0.0))
 
 
 def _vm_form(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """The symmetric bilinear form whose quadratic form is the von Mises stress squared."""
-    d = lambda X: (X[..., 0] - X[..., 1], X[..., 1] - X[..., 2], X[..., 2] - X[..., 0])  # noqa: E731
-    return (0.5 * sum(a * b for a, b in zip(d(A), d(B)))
-            + 3.0 * (A[..., 3] * B[..., 3] + A[..., 4] * B[..., 4] + A[..., 5] * B[..., 5]))
+    return _vm_parts(voigt_parts(A), voigt_parts(B))
+
+
+def _vm_parts(A, B):
+    """:func:`_vm_form` of Voigt components (:func:`voigt_parts`)."""
+    d = lambda X: (X[0] - X[1], X[1] - X[2], X[2] - X[0])  # noqa: E731
+    return 0.5 * sum(a * b for a, b in zip(d(A), d(B))) + 3.0 * (A[3] * B[3] + A[4] * B[4] + A[5] * B[5])
 
 
 #: |r| above which principal_stresses hands a tensor to LAPACK (two principal stresses nearly equal)
 NEAR_REPEATED = 1.0 - 1e-6
+#: a plane of symmetry: (its two shears that vanish, its in-plane normal components and shear, the normal one)
+#: in Voigt indices (xx, yy, zz, yz, xz, xy)
+_PLANES = (((3, 4), (0, 1, 5), 2), ((3, 5), (0, 2, 4), 1), ((4, 5), (1, 2, 3), 0))
 
 
 def principal_stresses(T: np.ndarray) -> np.ndarray:
-    """(..., 3) principal stresses [Pa], largest first, of (..., 6) Voigt stresses. The roots of the
-    characteristic polynomial in closed form (the trigonometric solution, q + 2 p cos(phi + 2 pi k / 3) with
-    r = det((T - q I) / p) / 2 = cos 3 phi), 20x faster than LAPACK's eigvalsh on 3 x 3 tensors, which the field
-    output runs at every vertex of every frame; where two principal stresses nearly coincide (|r| > NEAR_REPEATED,
-    e.g. sigma_rr = sigma_thetatheta on the axis) the closed form loses digits (an error of sqrt(machine epsilon)
-    |T|), so those tensors go to eigvalsh. Agreement with eigvalsh: tests/test_derived_fields.py."""
+    """(..., 3) principal stresses [Pa], largest first, of (..., 6) Voigt stresses (:func:`principal_of_parts`).
+    Agreement with LAPACK's eigvalsh: tests/test_derived_fields.py."""
     T = np.asarray(T, dtype=float)
-    a, b, c, d, e, f = (T[..., i] for i in range(6))         # xx, yy, zz, yz, xz, xy
+    return np.stack(principal_of_parts(voigt_parts(T)), axis=-1)
+
+
+def principal_of_parts(parts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(largest, middle, smallest) principal stress [Pa] of the Voigt components ``parts`` (:func:`voigt_parts`),
+    arrays of one shape, 0.0 for a component zero everywhere. Closed forms, not LAPACK's eigvalsh (20x slower on
+    3 x 3 tensors, which the field output would run at every vertex of every frame):
+
+    - where two shears are zero at every point (a model of revolution or a plane model: one principal direction
+      is normal to the plane), the in-plane pair m +- sqrt(((x - y) / 2)^2 + s^2) with m = (x + y) / 2 and the normal
+      stress, sorted: exact to a few machine epsilons of |T| at any spread, repeated values included (the axis of
+      a model of revolution, sigma_rr = sigma_thetatheta);
+    - else the roots of the characteristic polynomial (the trigonometric solution, q + 2 p cos(phi + 2 pi k / 3)
+      with r = det((T - q I) / p) / 2 = cos 3 phi); where two principal stresses nearly coincide
+      (|r| > NEAR_REPEATED) it loses digits (an error of sqrt(machine epsilon) |T|), so those tensors go to
+      eigvalsh."""
+    shape = np.broadcast_shapes(*(np.shape(p) for p in parts))
+    for zero, (x, y, s), normal in _PLANES:
+        if all(not np.any(parts[i]) for i in zero):
+            x, y, s, n = parts[x], parts[y], parts[s], parts[normal]
+            h = 0.5 * (x - y)
+            m, r = 0.5 * (x + y), np.sqrt(h * h + s * s)
+            hi, lo = m + r, m - r
+            return tuple(np.broadcast_to(v, shape) for v in
+                         (np.maximum(hi, n), np.maximum(lo, np.minimum(hi, n)), np.minimum(lo, n)))
+    a, b, c, d, e, f = parts         # xx, yy, zz, yz, xz, xy
     q = (a + b + c) / 3.0
     A, B, C = a - q, b - q, c - q
     p = np.sqrt((A * A + B * B + C * C + 2.0 * (d * d + e * e + f * f)) / 6.0)
@@ -150,13 +189,14 @@ def principal_stresses(T: np.ndarray) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         r = np.where(p > 0, det / (2.0 * p ** 3), 0.0)
     phi = np.arccos(np.clip(r, -1.0, 1.0)) / 3.0
-    s1 = q + 2.0 * p * np.cos(phi)
-    s3 = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
-    out = np.stack([s1, 3.0 * q - s1 - s3, s3], axis=-1)
-    near = np.abs(r) > NEAR_REPEATED
+    s1 = np.broadcast_to(q + 2.0 * p * np.cos(phi), shape).copy()
+    s3 = np.broadcast_to(q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0), shape).copy()
+    s2 = np.broadcast_to(3.0 * q - s1 - s3, shape).copy()
+    near = np.abs(np.broadcast_to(r, shape)) > NEAR_REPEATED
     if near.any():
-        out[near] = np.linalg.eigvalsh(voigt_tensor(T[near]))[..., ::-1]
-    return out
+        T = np.stack([np.broadcast_to(v, shape)[near] for v in parts], axis=-1)
+        s3[near], s2[near], s1[near] = np.linalg.eigvalsh(voigt_tensor(T)).T
+    return s1, s2, s3
 
 
 def _cycle_max(a, b, c) -> np.ndarray:
@@ -317,29 +357,33 @@ def _rows_of(pair_region: np.ndarray, tag: int):
     return rows
 
 
-def frame_region_peaks(values: np.ndarray, pair_region: np.ndarray, regions, columns: dict = RAW,
+def frame_region_peaks(values: np.ndarray | None, pair_region: np.ndarray, regions, columns: dict = RAW,
                        known: dict | None = None) -> list[dict]:
     """:func:`region_peaks` of each of a batch of real frames, (frames, pairs, 18) region-wise averaged values,
     computed for all the frames at once (the field output's batches). ``columns``: where stress and E are in the
-    last axis (:func:`raw_columns`); ``known``: the batch's von Mises and principal stresses at every pair
-    (frames, pairs[, 3]) by file name (``von_mises_Pa``, ``principal_stress_Pa``), when the vertex fields
-    computed them already."""
+    last axis (:func:`raw_columns`); ``known``: the quantities whose maxima the peaks are, at every pair (frames,
+    pairs), by peak key (:data:`PEAK_KEYS`: the von Mises stress, the largest principal stress, |E|), when the
+    caller formed them already (``values`` may then be None)."""
     known = known or {}
-    vm_all, principal_all = known.get(field_name("von_mises")), known.get(field_name("principal_stress"))
-    out: list[dict] = [{} for _ in range(values.shape[0])]
+    frames = next(iter(known.values())).shape[0] if values is None else values.shape[0]
+    out: list[dict] = [{} for _ in range(frames)]
     for region in regions:
         rows = _rows_of(pair_region, region.tag)
         if isinstance(rows, np.ndarray) and not rows.size:
             continue
-        re = values[:, rows]
-        T = re[..., columns["stress"]]
-        peaks = {"von_mises_Pa": (vm_all[:, rows] if vm_all is not None else von_mises(T)).max(axis=1)}
-        if region.e is not None:
-            principal = principal_all[:, rows] if principal_all is not None else principal_stresses(T)
-            peaks["max_principal_stress_Pa"] = principal[..., 0].max(axis=1)
-            peaks["electric_field_V_per_m"] = np.linalg.norm(re[..., columns["electric_field"]], axis=-1).max(axis=1)
+        keys = PEAK_KEYS if region.e is not None else PEAK_KEYS[:1]
+        peaks = {}
+        for key in keys:
+            if key in known:
+                at_pairs = known[key][:, rows]
+            elif key == "electric_field_V_per_m":
+                at_pairs = np.linalg.norm(values[:, rows][..., columns["electric_field"]], axis=-1)
+            else:
+                T = values[:, rows][..., columns["stress"]]
+                at_pairs = von_mises(T) if key == "von_mises_Pa" else principal_stresses(T)[..., 0]
+            peaks[key] = at_pairs.max(axis=1).tolist()
         for k, frame in enumerate(out):
-            frame[region.name] = {key: float(v[k]) for key, v in peaks.items()}
+            frame[region.name] = {key: v[k] for key, v in peaks.items()}
     return out
 
 

@@ -805,8 +805,11 @@ class ReducedVertexFields:
     Every field is linear in q, so each basis vector's fields are laid out once, transposed (coordinates x
     values: a batch's product is frames x values, each frame's values contiguous): the vertex values, and of
     the region-wise averaged derived values (app.fe.derived.RegionAveraging) only the columns the derived fields
-    and the peaks need (app.fe.derived.raw_columns; 9 of 18 for the default fields), their (region, vertex)
-    pairs ordered by region so each region's peaks read a slice."""
+    and the peaks need (app.fe.derived.raw_columns; 9 of 18 for the default fields), component by component,
+    their (region, vertex) pairs ordered by region so each region's peaks read a slice. Components that are
+    zero for every basis vector (a model of revolution's u_theta, the potential of its metal parts, its shears
+    yz and xy, its E_theta: a third of the product) are not formed; the expansion writes zeros for them and its
+    invariants (von Mises, principal stresses: app.fe.derived.principal_of_parts, |E|) take them as 0.0."""
 
     def __init__(self, model: ReducedModel, comm, derived=()):
         self.comm = comm
@@ -833,7 +836,11 @@ class ReducedVertexFields:
         from app.fe.derived import RAW_COLUMNS, raw_columns
 
         model = self.model
-        self._vertex_T = np.ascontiguousarray(model.vertex_basis.T)
+        # components zero at every vertex for every basis vector (a model of revolution's u_theta) are not formed:
+        # the product covers the others and the expansion puts zeros
+        rows = np.flatnonzero(np.any(model.vertex_basis != 0, axis=1))
+        self._vertex_rows = None if rows.size == model.vertex_basis.shape[0] else rows
+        self._vertex_T = np.ascontiguousarray(model.vertex_basis[rows].T)
         if not self.derived:
             return
         indices, self._columns = raw_columns(self.derived, any(r.piezoelectric for r in self.regions))
@@ -844,7 +851,12 @@ class ReducedVertexFields:
         self._pair_region = a.pair_region[order]
         self._vertex_pair = rank[a.vertex_pair]
         basis = model.derived_basis.reshape(a.size, RAW_COLUMNS, -1)[order[:, None], indices[None, :]]
-        self._derived_T = np.ascontiguousarray(basis.reshape(-1, basis.shape[-1]).T)
+        # component by component (each component of a frame contiguous over the pairs), without the components
+        # zero everywhere (a plane or axisymmetric model's out-of-plane shears and E): None in _formed_of
+        basis = basis.transpose(1, 0, 2)
+        formed = [j for j in range(basis.shape[0]) if np.any(basis[j])]
+        self._formed_of = [formed.index(j) if j in formed else None for j in range(basis.shape[0])]
+        self._derived_T = np.ascontiguousarray(basis[formed].reshape(-1, basis.shape[-1]).T)
 
     def prepare(self) -> None:
         """Lay out the per-basis-vector fields now (set-up) instead of at the first batch (rank 0)."""
@@ -861,8 +873,9 @@ class ReducedVertexFields:
     def expand(self, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, dict, dict | None]]:
         """The frames of the coordinates ``q`` (size, frames) on rank 0: [(displacement (n, 3) [m], potential (n,)
         [V], derived vertex fields, peaks per region or None)], one per column. One product of the vertex basis
-        (and of the derived basis) with all the columns: the basis is read once per batch, not once per frame."""
-        from app.fe.derived import frame_region_peaks, node_fields
+        (and of the derived basis) with all the columns: the basis is read once per batch, not once per frame;
+        the invariants (von Mises, principal stresses, |E|) of all the frames at once, component by component."""
+        from app.fe.derived import RAW, field_name, frame_region_peaks, principal_of_parts, von_mises_of_parts
 
         if self._vertex_T is None:
             self._layouts()
@@ -870,20 +883,47 @@ class ReducedVertexFields:
         n, frames = self.n_nodes, q.shape[1]
         q = np.ascontiguousarray(q.T)                 # (frames, coordinates)
         values = q @ self._vertex_T                   # (frames, 3 n + n): displacement, then potential
+        if self._vertex_rows is not None:
+            values, formed = np.zeros((frames, 4 * n)), values
+            values[:, self._vertex_rows] = formed
         fields: list[dict] = [{} for _ in range(frames)]
         peaks: list = [None] * frames
         if self.derived:
-            # (frames, pairs, columns): every frame's region-wise averaged values; the derived fields at every
-            # pair, then at the vertices and the peaks per region, of all the frames at once
+            # every frame's region-wise averaged values, component by component ((frames, pairs) each, 0.0 for
+            # one zero everywhere); the invariants at every pair, then at the vertices and the peaks per region
             n_pairs = self._pair_region.size
-            pairs = (q @ self._derived_T).reshape(frames, n_pairs, -1)
-            at_pairs = {key: v.reshape(frames, n_pairs, *v.shape[1:])
-                        for key, v in node_fields(pairs.reshape(frames * n_pairs, -1), self.derived,
-                                                  columns=self._columns).items()}
-            at_vertices = {key: v[:, self._vertex_pair] for key, v in at_pairs.items()}
+            formed = (q @ self._derived_T).reshape(frames, -1, n_pairs)
+            parts = [0.0 if j is None else formed[:, j] for j in self._formed_of]
+            columns = self._columns
+            stress = parts[columns["stress"]]
+            piezoelectric = any(r.piezoelectric for r in self.regions)
+            known = {"von_mises_Pa": von_mises_of_parts(stress)}
+            principal = None
+            if piezoelectric or "principal_stress" in self.derived:
+                principal = principal_of_parts(stress)
+                known["max_principal_stress_Pa"] = principal[0]
+            if piezoelectric:
+                E = parts[columns["electric_field"]]
+                known["electric_field_V_per_m"] = np.sqrt(E[0] * E[0] + E[1] * E[1] + E[2] * E[2])
+            at_vertices = {}
+            for name in self.derived:
+                if name in RAW:
+                    at_vertices[field_name(name)] = self._at_vertices(parts[columns[name]], frames)
+                elif name == "von_mises":
+                    at_vertices[field_name(name)] = known["von_mises_Pa"][:, self._vertex_pair]
+                elif name == "principal_stress":
+                    at_vertices[field_name(name)] = self._at_vertices(principal, frames)
             fields = [{key: v[k] for key, v in at_vertices.items()} for k in range(frames)]
-            peaks = frame_region_peaks(pairs, self._pair_region, self.regions, self._columns, known=at_pairs)
+            peaks = frame_region_peaks(None, self._pair_region, self.regions, known=known)
         return [(values[k, :3 * n].reshape(n, 3), values[k, 3 * n:], fields[k], peaks[k]) for k in range(frames)]
+
+    def _at_vertices(self, components, frames: int) -> np.ndarray:
+        """(frames, vertices, components) of (frames, pairs) components (0.0: zero everywhere) at the pairs."""
+        out = np.zeros((frames, self.n_nodes, len(components)))
+        for i, c in enumerate(components):
+            if np.ndim(c):
+                out[:, :, i] = c[:, self._vertex_pair]
+        return out
 
     def derived_frame(self, q: np.ndarray):
         """(derived vertex fields, peaks per region) of the frame (rank 0; (None, None) elsewhere): the basis's

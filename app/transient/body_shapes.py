@@ -226,23 +226,30 @@ class BodyMeshes:
 
     def displacement(self, z) -> np.ndarray:
         """(N, 3) displacement [m] of every vertex at the packed coordinates ``z`` (None: the start)."""
-        out = np.zeros_like(self.points)
         if z is None:
-            return out
+            return np.zeros_like(self.points)
+        return self.displacements(np.asarray(z, dtype=float)[None])[0]
+
+    def displacements(self, z: np.ndarray) -> np.ndarray:
+        """(frames, N, 3) displacements [m] of every vertex at each row of the packed coordinates ``z`` (frames,
+        coordinates): all the frames at once (a batch of field frames)."""
         z = np.asarray(z, dtype=float)
+        frames = z.shape[0]
+        out = np.zeros((frames, *self.points.shape))
         for vertices, (reference, angle0), axes, sl in zip(self._vertices, self._start, self._axes, self._slices):
-            q = z[sl]
-            position = np.zeros(3)
-            position[:self.gdim] = q[:self.gdim]
-            rotation = np.eye(3)
-            for axis, angle in zip(axes, q[self.gdim:] - angle0):
+            q = z[:, sl]
+            position = np.zeros((frames, 3))
+            position[:, :self.gdim] = q[:, :self.gdim]
+            rotation = np.broadcast_to(np.eye(3), (frames, 3, 3))
+            for axis, angle in zip(axes, (q[:, self.gdim:] - angle0).T):
                 rotation = _rotation(axis, angle) @ rotation
             local = self.points[vertices] - reference
-            out[vertices] = position + local @ rotation.T - self.points[vertices]
+            out[:, vertices] = position[:, None, :] + local @ rotation.transpose(0, 2, 1) - self.points[vertices]
         return out
 
 
-def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues: the rotation by ``angle`` [rad] about the unit ``axis``."""
+def _rotation(axis: np.ndarray, angle) -> np.ndarray:
+    """Rodrigues: the rotation by ``angle`` [rad] about the unit ``axis``; (frames, 3, 3) for (frames,) angles."""
     k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    angle = np.asarray(angle, dtype=float)[..., None, None]
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
