@@ -104,12 +104,17 @@ def main() -> None:
     parser.add_argument("--chain", choices=("up", "down"), default=None,
                         help="warm starts: each load point from the previous one's end state, from the held rotor "
                              "down, or from the no-load point up (default: every point from the case's start)")
+    parser.add_argument("--grid-stall-N-m", nargs="*", type=float, default=None, metavar="T",
+                        help="per preload, the held torque [N m] the load grid k / points x T is taken from (default: "
+                             "this run's held rotor): a published curve's own, to rerun it at its loads")
     args = parser.parse_args()
+    if args.grid_stall_N_m is not None and len(args.grid_stall_N_m) != len(args.preloads):
+        parser.error("--grid-stall-N-m: give one torque per preload")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     start = time.perf_counter()
-    for preload in args.preloads:
+    for i, preload in enumerate(args.preloads):
         base = [f"transient.bodies[0].applied_force_N=[0.0, 0.0, {-preload!r}]"] + args.set
         stall = point(out / f"P{preload}_stall", base + ['transient.bodies[0].rotations[0].motion="fixed"'],
                       case=args.case)
@@ -118,7 +123,7 @@ def main() -> None:
         print(f"P = {preload} N: stall torque {stall_torque * 1e3:.4g} mN m ({stall['wall_s']:.0f} s)", flush=True)
         previous = out / f"P{preload}_stall" if args.chain == "down" else None
         for k in (reversed(range(args.points)) if args.chain == "down" else range(args.points)):
-            load = stall_torque * k / args.points
+            load = (stall_torque if args.grid_stall_N_m is None else args.grid_stall_N_m[i]) * k / args.points
             sets = base + [f"transient.bodies[0].rotations[0].torque_N_m={-load!r}"]
             row = point(out / f"P{preload}_T{k}", sets, previous, args.case)
             if args.chain is not None:
