@@ -40,7 +40,11 @@ LAPACK and BLAS routines numba's np.linalg.solve, np.linalg.inv and np.dot call 
 so the numbers are the same to the bit. ``_nrt``, ``numba.np.linalg._LAPACK`` and its ``numba_xx*`` symbols are
 numba's private names (numba 0.56.4, as Debian bookworm ships it): should a later numba drop them, the decorators'
 ``_nrt=False`` and these bindings give way to plain ``njit`` and np.linalg / np.dot, with the same results and
-the reference counts' cost back.
+the reference counts' cost back. Of the motor's step what remained (issue 27, BENCHMARKS.md "the contact law on the
+sites that can touch"): the contact law runs only on the sites that can touch (:func:`_surely_open`, a bound on
+each site's gap from its last evaluation: exact), and the row updates of the Woodbury matrix and of G f are 1-D
+loops of their own (:func:`_subtract_scaled`), which LLVM vectorises where, written inline on rows of the 2-D work
+arrays, it did not (the same numbers).
 """
 
 from __future__ import annotations
@@ -317,6 +321,24 @@ def dense_compliance(H: np.ndarray) -> Compliance:
     """The compliance of sites that are the coordinates themselves (R_F = I, K_eff^-1 = H symmetric): for tests of
     the condensed step with a given H."""
     return compliance_of(H, H.T, np.eye(H.shape[0]))
+
+
+@njit(cache=True, _nrt=False)
+def _subtract_scaled(n, a, x, y):
+    """y[:n] -= a x[:n]. A loop on its own 1-D arguments: the compiler vectorises it (the same loop written inline
+    on rows of 2-D work arrays it does not), each entry's result unchanged."""
+    for j in range(n):
+        y[j] -= a * x[j]
+
+
+@njit(cache=True, _nrt=False)
+def _combine_rows(n, gdim, F, G, out):
+    """out[:n] = sum_c F[c] G[c, :n], the terms added in the order of c from 0.0 (the loop it replaces)."""
+    for j in range(n):
+        value = 0.0
+        for c in range(gdim):
+            value += F[c] * G[c, j]
+        out[j] = value
 
 
 @njit(cache=True, _nrt=False)
@@ -901,24 +923,6 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos,
     for q in range(nfb):
         for q2 in range(nfb):
             S[ns + q, ns + q2] = body_rows[q, n_active * gdim + q2]
-
-
-@njit(cache=True, _nrt=False)
-def _subtract_scaled(n, a, x, y):
-    """y[:n] -= a x[:n]. A loop on its own 1-D arguments: the compiler vectorises it (the same loop written inline
-    on rows of 2-D work arrays it does not), each entry's result unchanged."""
-    for j in range(n):
-        y[j] -= a * x[j]
-
-
-@njit(cache=True, _nrt=False)
-def _combine_rows(n, gdim, F, G, out):
-    """out[:n] = sum_c F[c] G[c, :n], the terms added in the order of c from 0.0 (the loop it replaces)."""
-    for j in range(n):
-        value = 0.0
-        for c in range(gdim):
-            value += F[c] * G[c, j]
-        out[j] = value
 
 
 @njit(cache=True, _nrt=False)
