@@ -333,12 +333,12 @@ def _subtract_scaled(n, a, x, y):
 
 @njit(cache=True, _nrt=False)
 def _combine_rows(n, gdim, F, G, out):
-    """out[:n] = sum_c F[c] G[c, :n], the terms added in the order of c from 0.0 (the loop it replaces)."""
+    """out[:n] = sum_c F[c] G[c, :n], the terms added in the order of c from 0.0 (as the loop it replaces: each
+    entry's sum the same), a row at a time (vectorised)."""
     for j in range(n):
-        value = 0.0
-        for c in range(gdim):
-            value += F[c] * G[c, j]
-        out[j] = value
+        out[j] = 0.0
+    for c in range(gdim):
+        _subtract_scaled(n, -F[c], G[c], out)          # out + F[c] G[c] exactly
 
 
 @njit(cache=True, _nrt=False)
