@@ -423,7 +423,8 @@ class StepWork(NamedTuple):
     link_M: np.ndarray        # (3, 3, 3) its dF/ds, the tangential projector, their product
     link_dF: np.ndarray       # (3, m) its dF / d coordinates
     d_ref: np.ndarray         # (ns, 3) each site's relative position d of its last evaluation by the law [m]
-    clear: np.ndarray         # (ns,) how far d may move from d_ref with the site surely open [m] (<= 0: not known)
+    clear: np.ndarray         # (ns,) how far d may move from d_ref with the site surely open [m] (<= 0: not known);
+    #                           d_ref and clear belong to the sites of one model (a new work record per call)
 
 
 @njit(cache=True)
