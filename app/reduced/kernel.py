@@ -40,7 +40,11 @@ LAPACK and BLAS routines numba's np.linalg.solve, np.linalg.inv and np.dot call 
 so the numbers are the same to the bit. ``_nrt``, ``numba.np.linalg._LAPACK`` and its ``numba_xx*`` symbols are
 numba's private names (numba 0.56.4, as Debian bookworm ships it): should a later numba drop them, the decorators'
 ``_nrt=False`` and these bindings give way to plain ``njit`` and np.linalg / np.dot, with the same results and
-the reference counts' cost back.
+the reference counts' cost back. Of the motor's step what remained (issue 27, BENCHMARKS.md "the contact law on the
+sites that can touch"): the contact law runs only on the sites that can touch (:func:`_surely_open`, a bound on
+each site's gap from its last evaluation: exact), and the row updates of the Woodbury matrix and of G f are 1-D
+loops of their own (:func:`_subtract_scaled`), which LLVM vectorises where, written inline on rows of the 2-D work
+arrays, it did not (the same numbers).
 """
 
 from __future__ import annotations
@@ -110,6 +114,9 @@ SITE_RTOL = 1e-9
 #: than the contact-space LU ((gdim n_active)^3 / 3)
 WOODBURY_FACTOR = 1.5
 FORCE_RTOL = 1e-10
+#: a gap's round-off relative to the size of its terms (|d|, the radius, the excluded reference gap): the margin by
+#: which a site must be clear of its obstacle to be skipped (:func:`_open_bound`; the rounding is ~1e-16 of them)
+GAP_ROUND_OFF = 1e-12
 EPS = 2.220446049250313e-16
 #: LAPACK's dgesv as numba's np.linalg.solve calls it (numba's binding of SciPy's LAPACK; a symbol, so the compiled
 #: functions that call it stay cacheable)
@@ -317,6 +324,24 @@ def dense_compliance(H: np.ndarray) -> Compliance:
 
 
 @njit(cache=True, _nrt=False)
+def _subtract_scaled(n, a, x, y):
+    """y[:n] -= a x[:n]. A loop on its own 1-D arguments: the compiler vectorises it (the same loop written inline
+    on rows of 2-D work arrays it does not), each entry's result unchanged."""
+    for j in range(n):
+        y[j] -= a * x[j]
+
+
+@njit(cache=True, _nrt=False)
+def _combine_rows(n, gdim, F, G, out):
+    """out[:n] = sum_c F[c] G[c, :n], the terms added in the order of c from 0.0 (as the loop it replaces: each
+    entry's sum the same), a row at a time (vectorised)."""
+    for j in range(n):
+        out[j] = 0.0
+    for c in range(gdim):
+        _subtract_scaled(n, -F[c], G[c], out)          # out + F[c] G[c] exactly
+
+
+@njit(cache=True, _nrt=False)
 def _respond(compliance, active, n_active, gdim, x, out):
     """out = G x (nf) for site forces ``x`` (n_sites, 3) on the active sites (the rest carry none); H x = R_F out."""
     GT = compliance.GT
@@ -328,9 +353,7 @@ def _respond(compliance, active, n_active, gdim, x, out):
         for k in range(gdim):
             xk = x[i, k]
             if xk != 0.0:
-                row = GT[i * gdim + k]
-                for j in range(nf):
-                    out[j] += row[j] * xk
+                _subtract_scaled(nf, -xk, GT[i * gdim + k], out)     # out + xk row, exactly (vectorised)
 
 
 @njit(cache=True, _nrt=False)
@@ -399,10 +422,15 @@ class StepWork(NamedTuple):
     link_v: np.ndarray        # (3, 3) its dF/dN, slip, relative velocity
     link_M: np.ndarray        # (3, 3, 3) its dF/ds, the tangential projector, their product
     link_dF: np.ndarray       # (3, m) its dF / d coordinates
+    d_ref: np.ndarray         # (ns, 3) each site's relative position d of its last evaluation by the law [m]
+    clear: np.ndarray         # (ns,) how far d may move from d_ref with the site surely open [m] (<= 0: not known);
+    #                           d_ref and clear belong to the sites of one model (a new work record per call)
 
 
 @njit(cache=True)
 def step_work(ns, gdim, m, kmax, n_links):
+    """A :class:`StepWork` (its site references :func:`_open_bound` unknown: every site's first evaluation is the
+    law's)."""
     return StepWork(np.zeros((ns, 3)), np.zeros((ns, 3)), np.zeros((ns, 3)), np.zeros(ns * gdim),
                     np.zeros(ns * gdim), np.zeros(ns * gdim), np.zeros((ns, 3)), np.zeros(ns), np.zeros(ns),
                     np.zeros((ns, 3)), np.zeros((ns, 3, 3)), np.zeros((ns, 3, max(kmax, 1))), np.zeros((ns, 3)),
@@ -410,7 +438,8 @@ def step_work(ns, gdim, m, kmax, n_links):
                     np.zeros(m), np.zeros((m, m)), np.zeros(3), np.zeros(3), site_work(kmax), np.zeros(3),
                     np.zeros((3, max(m, 1))), np.zeros(max(n_links, 1)), np.zeros(max(ns, 1), np.int64), np.zeros(m),
                     np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(3), np.zeros((5, 3)), np.zeros(m),
-                    np.zeros((3, 3)), np.zeros((3, 3, 3)), np.zeros((3, max(m, 1))))
+                    np.zeros((3, 3)), np.zeros((3, 3, 3)), np.zeros((3, max(m, 1))), np.zeros((ns, 3)),
+                    np.full(ns, -1.0))
 
 
 @njit(cache=True, _nrt=False)
@@ -434,6 +463,71 @@ def _body_kinematics(xi, state, dt, model, wk):
         z1[j] = z0[j] + dz
         z_mid[j] = z0[j] + (1.0 - af) * dz
         zd_mid[j] = (1.0 - af) * zd1[j] + af * zd0[j]
+
+
+@njit(cache=True, _nrt=False)
+def _open_bound(i, gap, d, sites, contacts, wk):
+    """Site i's reference for :func:`_surely_open` after an evaluation by the law at the relative position ``d``
+    (site_force's, [m]) where its gap was ``gap`` [m]: wk.d_ref[i] = d and wk.clear[i] = (gap - margin) / L, L the
+    Lipschitz constant of the gap in d (:func:`_gap_lipschitz`), margin the gap's round-off (GAP_ROUND_OFF of the
+    size of its terms); -1 (no bound) for a site not clear of the obstacle by that margin."""
+    c = sites.contact[i]
+    scale = abs(d[0]) + abs(d[1]) + abs(d[2]) + abs(contacts.radius[c]) + abs(sites.gap_ref[i])
+    margin = GAP_ROUND_OFF * scale
+    for k in range(3):
+        wk.d_ref[i, k] = d[k]
+    lipschitz = _gap_lipschitz(contacts, c)
+    wk.clear[i] = (gap - margin) / lipschitz if gap > margin and lipschitz < np.inf else -1.0
+
+
+@njit(cache=True, _nrt=False)
+def _gap_lipschitz(contacts, c):
+    """A Lipschitz constant of contact c's gap as a function of the site's relative position d (app/contact/law.py
+    shape_gap, site_force): |g(d) - g(d')| <= L |d - d'|. A plane's and a node's gap n.d (minus constants): |n|.
+    A sphere's |d| - R, or with a unit pole p, (|d|^2 + 2 R p.d) / (|d + R p| + R) = |d + R p| - R: 1. A cone's
+    (rho - R - h tan a) cos a = rho cos a - h sin a - R cos a about a unit axis: rho = |d - h axis| and h = d.axis
+    are the lengths of orthogonal parts of d, so |dg| <= sqrt(cos^2 + sin^2) |dd| = |dd|: 1. Inf (no bound) where
+    a formula needs a unit vector it was not given; times 1 + 1e-9 against the rounding of these numbers."""
+    v = contacts.vector[c]
+    norm = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    unit = abs(norm - 1.0) <= 1e-12
+    if contacts.kind[c] == NODE or contacts.shape[c] == PLANE:
+        return norm * (1.0 + 1e-9)
+    if contacts.shape[c] == SPHERE:
+        return 1.0 + 1e-9 if norm == 0.0 or unit else np.inf
+    return 1.0 + 1e-9 if unit else np.inf
+
+
+@njit(cache=True, _nrt=False)
+def _surely_open(i, y_mid, z_mid, sites, contacts, bodies, wk):
+    """Whether site i is open at the site displacement ``y_mid`` and the bodies' ``z_mid`` by its reference
+    (:func:`_open_bound`): its relative position d (as site_force forms it) within wk.clear[i] of wk.d_ref[i], so its
+    gap is at least L (clear - |d - d_ref|) + margin > 0 and the law would give no force (issue 27: the law is
+    evaluated only on the sites that can touch). If so, writes what the law gives an open site (no force, no slip,
+    its lever arm) and, in wk.gap, clear - |d - d_ref| (> 0, below its gap)."""
+    c = sites.contact[i]
+    b = contacts.body[c]
+    s0 = bodies.start[b]
+    gdim = bodies.gdim
+    distance2 = 0.0
+    for k in range(3):
+        dk = sites.rel[i, k]
+        if k < gdim:
+            dk += y_mid[k] - (z_mid[s0 + k] - bodies.reference[b, k])
+        e = dk - wk.d_ref[i, k]
+        distance2 += e * e
+    clear = wk.clear[i]
+    if not distance2 < clear * clear:
+        return False
+    wk.fn[i] = 0.0
+    wk.gap[i] = clear - math.sqrt(distance2)
+    for k in range(3):
+        wk.slip[i, k] = 0.0
+        wk.f[i, k] = 0.0
+        wk.lever[i, k] = sites.lever[i, k]
+    for k in range(gdim):
+        wk.lever[i, k] += y_mid[k] - (z_mid[s0 + k] - bodies.reference[b, k])
+    return True
 
 
 @njit(cache=True, _nrt=False)
@@ -465,10 +559,13 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
             wk.y_mid[k] = 0.0
             wk.v_mid[k] = 0.0
         for k in range(gdim):
+            wk.y_mid[k] = wk.y0[i, k] + w_f * dd[i * gdim + k]
+        if wk.clear[i] > 0.0 and _surely_open(i, wk.y_mid, z_mid, sites, contacts, bodies, wk):
+            continue            # no force, no slip: what the law gives an open site (wk.gap: a lower bound)
+        for k in range(gdim):
             inc = dd[i * gdim + k]
             a1 = (inc - dt * wk.v0[i, k]) * c_acc - (1.0 / (2.0 * beta) - 1.0) * wk.a0[i, k]
             v1 = wk.v0[i, k] + dt * ((1.0 - gamma) * wk.a0[i, k] + gamma * a1)
-            wk.y_mid[k] = wk.y0[i, k] + w_f * inc
             wk.v_mid[k] = w_f * v1 + af * wk.v0[i, k]
         fn, gap, s1, s2, speed = site_force(i, wk.y_mid, wk.v_mid, z_mid, zd_mid, sites, contacts, bodies, c_vel,
                                             w_f, want, sw)
@@ -480,6 +577,7 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
         for k in range(3):
             wk.f[i, k] = sw.f[k]
             wk.lever[i, k] = sw.lever[k]
+        _open_bound(i, gap, sw.d, sites, contacts, wk)
         if fn <= 0.0:
             continue
         wk.active[n_active] = i
@@ -766,7 +864,7 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False):
     S = np.empty((k, k))
     D = np.empty((n_active, 3, 3))
     _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols[:n], col_pos, S, D,
-                   np.empty(wk.xi.size, np.int64), np.empty((3, n)))
+                   np.empty(wk.xi.size, np.int64), np.empty((6, n)))
     return np.linalg.inv(S), D, cols[:n].copy(), col_pos
 
 
@@ -774,7 +872,9 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False):
 def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG):
     """:func:`_woodbury`'s matrix on the coordinates ``cols`` (their places ``col_pos``) into ``S`` (k x k,
     k = cols.size + nfb) and the sites' derivatives into ``D`` (n_active, 3, 3); ``pos`` (m,) int64 and ``FG``
-    (3, >= cols.size) work."""
+    (6, >= cols.size) work: a site's rows of G^T on S gathered (rows 3-5), D_k times them (rows 0-2), so every
+    update of S is a whole row of contiguous numbers (:func:`_subtract_scaled`, which the compiler vectorises: issue
+    27, BENCHMARKS.md), each entry's terms added in the order of the loops they replace (the same numbers)."""
     bodies, contacts, sites = model.bodies, model.contacts, model.sites
     gdim = bodies.gdim
     GT, RF = cp.GT, cp.RF
@@ -793,25 +893,25 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos,
         for r in range(3):
             for c in range(3):
                 D[a, r, c] = 0.0
+    G = FG[3:]
     for a in range(n_active):
         k = wk.active[a]
         s0, n_rot = _body_rotations(bodies, contacts.body[sites.contact[k]])
+        for cc in range(gdim):
+            row = GT[k * gdim + cc]
+            g = G[cc]
+            for j in range(ns):
+                g[j] = row[cols[j]]
         for r in range(gdim):
             for cc in range(gdim):
                 D[a, r, cc] = wk.Fd[k, r, cc]
-            for j in range(ns):
-                col = cols[j]
-                value = 0.0
-                for cc in range(gdim):
-                    value += wk.Fd[k, r, cc] * GT[k * gdim + cc, col]
-                FG[r, j] = value
+            _combine_rows(ns, gdim, wk.Fd[k, r], G, FG[r])
         for r in range(gdim):
             row = k * gdim + r
             for e in range(RF.count[row]):
                 idx = col_pos[RF.index[row, e]]
                 val = RF.value[row, e]
-                for j in range(ns):
-                    S[idx, j] -= val * FG[r, j]
+                _subtract_scaled(ns, val, FG[r], S[idx])
                 for kk in range(gdim + n_rot):
                     q = pos[s0 + kk]
                     if q >= 0:
@@ -820,9 +920,7 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos,
             for cc in range(gdim):
                 p = body_rows[q, a * gdim + cc]
                 if p != 0.0:
-                    row = GT[k * gdim + cc]
-                    for j in range(ns):
-                        S[ns + q, j] += p * row[cols[j]]
+                    _subtract_scaled(ns, -p, G[cc], S[ns + q])      # y - (-p) x = y + p x exactly
     for q in range(nfb):
         for q2 in range(nfb):
             S[ns + q, ns + q2] = body_rows[q, n_active * gdim + q2]
@@ -924,7 +1022,7 @@ class NewtonWork(NamedTuple):
     S: np.ndarray             # (k * k,) the Woodbury matrix, k = |S| + m, |S| at most newton_work's s_max
     S_LU: np.ndarray          # (k * k,) its inverse in Fortran order (getrf and getri in place)
     S_ipiv: np.ndarray        # (k,) int32
-    FG: np.ndarray            # (3, s_max) work
+    FG: np.ndarray            # (6, s_max) work (:func:`_fill_woodbury`)
     small: np.ndarray         # (k,) work
     sol: np.ndarray           # (k,) work
     scalars: np.ndarray       # (2,) work: gemv's alpha and beta
@@ -953,7 +1051,7 @@ def newton_work(ns, gdim, m, nf, RF):
                       np.zeros(nr + m), np.zeros(nr + m), np.zeros(nr + m), np.zeros(m), np.zeros(m, np.int64),
                       np.zeros(max(ns, 1), np.int64), np.zeros(nr), np.zeros((ns, 3)), np.zeros(m),
                       np.zeros(k * k), np.zeros(k * k), np.zeros(k, np.int32),
-                      np.zeros((3, s_max if woodbury else 0)), np.zeros(k), np.zeros(k), np.zeros(2),
+                      np.zeros((6, s_max if woodbury else 0)), np.zeros(k), np.zeros(k), np.zeros(2),
                       np.zeros((ns if woodbury else 0, 3, 3)), np.zeros(m * (nr + m) if woodbury else 0),
                       np.zeros(nf, np.int64), np.zeros(nf, np.int64))
 
