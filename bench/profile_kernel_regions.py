@@ -39,14 +39,14 @@ REGIONS = (
                              "nw.body_pos)", 1),
     (2, "Newton: Woodbury matrix", "_fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, nw.col_pos,",
      2),
-    (3, "Newton: its inverse", "_invert(k, nw.S[:k * k].reshape((k, k)), nw.S_LU, nw.S_ipiv)", 1),
-    (4, "Newton: Woodbury solve", "_woodbury_solve_into(S_inv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp, "
-                                  "body_rows, rhs, dy,", 2),
+    (3, "Newton: its LU factors", "_factor(k_s, nw.S[:k_s * k_s].reshape((k_s, k_s)), nw.S_LU, nw.S_ipiv)", 1),
+    (4, "Newton: Woodbury solve", "_woodbury_solve_into(k_s, nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, "
+                                  "n_active, gdim, cp,", 2),
     (5, "Newton: separated sites' corrections", "_respond(cp, wk.active, n_active, gdim, df, cp.du)", 3),
     (6, "Newton: contact-space LU", "_lu_solve(N, J, nw.LU, nw.ipiv, dy)", 1),
     (7, "Newton: trial evaluations", "n_trial = _evaluate(wk.dd_try, wk.xi_try, wk, cp, state, dt, model, True)", 1),
-    (8, "Newton: trial solves", "_woodbury_solve_into(S_inv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp, "
-                                "body_rows, trial,", 2),
+    (8, "Newton: trial solves", "_woodbury_solve_into(k_s, nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, "
+                                "n_active, gdim, cp,", 2, 1),      # its second call (the first is region 4)
     (9, "Newton (all)", "converged, its = _newton(wk, nw, cp, state, dt_try, model, free_body)", 1),
     (10, "record (outputs, site diagnostics)", "_record(rows, t1, dt_try, q1, pq, wk, state, model, out, closed_new, "
                                                "y_end, record_power, record_seen,", 2),
@@ -68,12 +68,13 @@ def instrumented(text: str) -> tuple[str, list[str]]:
     text = text.replace("    return NewtonWork(", "    return NewtonWork(np.zeros(16), ", 1)
     lines = text.split("\n")
     missing = []
-    for slot, name, first, span in REGIONS:
+    for slot, name, first, span, *which in REGIONS:
         at = [i for i, line in enumerate(lines) if line.strip() == first or line.strip().startswith(first)]
-        if not at:
+        occurrence = which[0] if which else 0       # a region whose first line the kernel has more than once
+        if len(at) <= occurrence:
             missing.append(name)
             continue
-        i = at[0]
+        i = at[occurrence]
         indent = lines[i][:len(lines[i]) - len(lines[i].lstrip())]
         lines[i + span:i + span] = [f"{indent}nw.timers[{slot}] += _clock()"]
         lines[i:i] = [f"{indent}nw.timers[{slot}] -= _clock()"]
@@ -163,7 +164,7 @@ def main() -> None:
           f"{1e3 * cpu / steps:.3f} ms CPU per step (the call), {1e-3 * timers[LOOP] / steps:.3f} ms (the loop, "
           "by clock())")
     print("| region | CPU ms/step |\n|---|---|")
-    for slot, name, _, _ in REGIONS:
+    for slot, name, *_ in REGIONS:
         value = "absent" if name in missing else f"{1e-3 * timers[slot] / steps:.3f}"
         print(f"| {name} | {value} |")
 

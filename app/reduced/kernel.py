@@ -122,7 +122,6 @@ EPS = 2.220446049250313e-16
 #: functions that call it stay cacheable)
 _xgesv = _LAPACK().numba_xgesv(types.float64)
 _xgetrf = _LAPACK().numba_xxgetrf(types.float64)
-_xgetri = _LAPACK().numba_ez_xxgetri(types.float64)
 #: BLAS's gemv as numba's np.dot(matrix, vector) calls it (np.dot returns its output: not in a function compiled
 #: without reference counts)
 _xgemv = types.ExternalFunction("numba_xxgemv", types.intc(
@@ -849,7 +848,8 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False):
     (``body_rows`` = [P, Q]), of size nf + nfb instead of gdim n_active + nfb. Every R_A^T x lives on the
     coordinates S the active rows touch (:func:`_woodbury_columns`), so y does and G_A^T y needs G^T's columns S
     alone: the same system restricted to S (size |S| + nfb, ``full``: all nf coordinates) is exact. Returns that
-    matrix's inverse, the active sites' D (the next evaluation overwrites wk.Fd), S's columns and positions."""
+    matrix's LU factors ((LU, ipiv): :func:`_factor`), the active sites' D (the next evaluation overwrites wk.Fd),
+    S's columns and positions."""
     nf = cp.GT.shape[1]
     cols = np.empty(nf, np.int64)
     col_pos = np.empty(nf, np.int64)
@@ -865,7 +865,9 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False):
     D = np.empty((n_active, 3, 3))
     _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols[:n], col_pos, S, D,
                    np.empty(wk.xi.size, np.int64), np.empty((6, n)))
-    return np.linalg.inv(S), D, cols[:n].copy(), col_pos
+    LU, ipiv = np.empty(k * k), np.empty(k, np.int32)
+    _factor(k, S, LU, ipiv)
+    return (LU, ipiv), D, cols[:n].copy(), col_pos
 
 
 @njit(cache=True, _nrt=False)
@@ -939,34 +941,63 @@ def _fortran_copy(k, A, out):
 
 
 @njit(cache=True, _nrt=False)
-def _invert(k, S, LU, ipiv):
-    """LU (k * k) <- S^-1 in Fortran order (``LU[:k * k].reshape((k, k)).T`` is S^-1) by LAPACK's getrf and getri
-    on a Fortran-order copy of S: the routines, the copy and the order of np.linalg.inv's result (so a product
-    with it takes the same BLAS path), without its allocations."""
+def _factor(k, S, LU, ipiv):
+    """LU (k * k) <- the LU factors of S (P S = L U, L unit lower) in Fortran order, ipiv (k, int32) LAPACK's row
+    interchanges, by getrf on a Fortran-order copy of S. Each Newton iteration solves with its matrix once plus
+    once per line-search trial, so the factors (2/3 k^3) and a pair of triangular solves per right side (2 k^2,
+    :func:`_lu_apply`) cost less than an explicit inverse (getri: another 4/3 k^3, the larger part of a collapsed
+    rotor's step, k ~ 220)."""
     _fortran_copy(k, S, LU)
     if k > 0:
         if _xgetrf(_XGESV_KIND, k, k, LU.ctypes, k, ipiv.ctypes) != 0:
             raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
-        if _xgetri(_XGESV_KIND, k, LU.ctypes, k, ipiv.ctypes) != 0:
-            raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
+
+
+@njit(cache=True, _nrt=False)
+def _lu_apply(k, LU, ipiv, b, x):
+    """x (k) <- S^-1 b from :func:`_factor`'s LU and ipiv (x may be b): LAPACK getrs' steps (the row interchanges
+    in order, then L y = P b forward and U x = y backward), column by column over the Fortran-order factors so the
+    inner loops run over contiguous memory."""
+    for i in range(k):
+        x[i] = b[i]
+    for i in range(k):
+        p = ipiv[i] - 1
+        if p != i:
+            value = x[i]
+            x[i] = x[p]
+            x[p] = value
+    for j in range(k):
+        xj = x[j]
+        if xj != 0.0:
+            base = j * k
+            for i in range(j + 1, k):
+                x[i] -= LU[base + i] * xj
+    for j in range(k - 1, -1, -1):
+        base = j * k
+        x[j] /= LU[base + j]
+        xj = x[j]
+        if xj != 0.0:
+            for i in range(j):
+                x[i] -= LU[base + i] * xj
 
 
 @njit(cache=True)
-def _woodbury_solve(S_inv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs):
-    """x of J x = rhs through :func:`_woodbury`'s matrix (its inverse ``S_inv``, the sites' ``D``, its
-    coordinates ``cols`` and their places ``col_pos``)."""
-    k = S_inv.shape[0]
+def _woodbury_solve(factors, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs):
+    """x of J x = rhs through :func:`_woodbury`'s matrix (its LU ``factors``, the sites' ``D``, its coordinates
+    ``cols`` and their places ``col_pos``)."""
+    LU, ipiv = factors
+    k = ipiv.size
     x = np.empty(rhs.size)
-    _woodbury_solve_into(S_inv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, np.empty(k),
-                         np.empty(k), np.empty(2))
+    _woodbury_solve_into(k, LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x,
+                         np.empty(k), np.empty(k))
     return x
 
 
 @njit(cache=True, _nrt=False)
-def _woodbury_solve_into(S_inv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, small, sol,
-                         scalars):
-    """:func:`_woodbury_solve` into ``x`` (may be ``rhs``), ``small`` and ``sol`` (|S| + nfb) and ``scalars`` (2)
-    work."""
+def _woodbury_solve_into(size, LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, small,
+                         sol):
+    """:func:`_woodbury_solve` into ``x`` (may be ``rhs``) with the ``size`` x ``size`` matrix's factors (``LU``,
+    ``ipiv``: :func:`_factor`); ``small`` and ``sol`` (>= size) work."""
     GT, RF = cp.GT, cp.RF
     ns = cols.size
     na = n_active * gdim
@@ -987,7 +1018,7 @@ def _woodbury_solve_into(S_inv, D, cols, col_pos, active, n_active, gdim, cp, bo
         for col in range(na):
             value -= body_rows[q, col] * rhs[col]
         small[ns + q] = value
-    _matvec(S_inv, small, sol, scalars)
+    _lu_apply(size, LU, ipiv, small, sol)
     for a in range(n_active):
         k = active[a]
         for r in range(gdim):
@@ -1020,7 +1051,7 @@ class NewtonWork(NamedTuple):
     df: np.ndarray            # (ns, 3) the active sites' force corrections
     dxi: np.ndarray           # (m,) the body corrections
     S: np.ndarray             # (k * k,) the Woodbury matrix, k = |S| + m, |S| at most newton_work's s_max
-    S_LU: np.ndarray          # (k * k,) its inverse in Fortran order (getrf and getri in place)
+    S_LU: np.ndarray          # (k * k,) its LU factors in Fortran order (getrf in place: _factor)
     S_ipiv: np.ndarray        # (k,) int32
     FG: np.ndarray            # (6, s_max) work (:func:`_fill_woodbury`)
     small: np.ndarray         # (k,) work
@@ -1133,19 +1164,18 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
         NJ = 0 if woodbury else N          # the contact-space matrix (its buffer holds no larger one)
         J = nw.J[:NJ * NJ].reshape((NJ, NJ))
         # the Woodbury system's views (empty when it is not taken: its buffers may be)
-        k = n_cols + nfb if woodbury else 0
+        k_s = n_cols + nfb if woodbury else 0       # the Woodbury matrix's size (k is a site below)
         cols = nw.cols[:n_cols if woodbury else 0]
-        S_inv = nw.S_LU[:k * k].reshape((k, k)).T         # Fortran order, as np.linalg.inv returns it
         D = nw.D[:n_active if woodbury else 0]
         body_rows = nw.body_rows[:nfb * N if woodbury else 0].reshape((nfb if woodbury else 0, N))
         if woodbury:
             rhs = nw.rhs[:N]
             _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, False, body_rows, rhs, nw.body_pos)
             _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, nw.col_pos,
-                           nw.S[:k * k].reshape((k, k)), D, nw.body_pos, nw.FG)
-            _invert(k, nw.S[:k * k].reshape((k, k)), nw.S_LU, nw.S_ipiv)
-            _woodbury_solve_into(S_inv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp, body_rows, rhs, dy,
-                                 nw.small, nw.sol, nw.scalars)
+                           nw.S[:k_s * k_s].reshape((k_s, k_s)), D, nw.body_pos, nw.FG)
+            _factor(k_s, nw.S[:k_s * k_s].reshape((k_s, k_s)), nw.S_LU, nw.S_ipiv)
+            _woodbury_solve_into(k_s, nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp,
+                                 body_rows, rhs, dy, nw.small, nw.sol)
         else:
             rhs = nw.rhs[:N]
             _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, True, J, rhs, nw.body_pos)
@@ -1208,8 +1238,8 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
             for q in range(nfb):
                 trial[n_active * gdim + q] = -wk.rz[free_body[q]]
             if woodbury:
-                _woodbury_solve_into(S_inv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp, body_rows, trial,
-                                     trial, nw.small, nw.sol, nw.scalars)
+                _woodbury_solve_into(k_s, nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp,
+                                     body_rows, trial, trial, nw.small, nw.sol)
             else:
                 _lu_solve(N, J, nw.LU, nw.ipiv, trial)
             if _scaled_norm(trial, scale, N) <= (1.0 - 0.5 * lam) * size0 + 1e-300:
