@@ -30,6 +30,7 @@ def main() -> None:
     import numpy as np
     from mpi4py import MPI
 
+    from app.reduced import kernel as lk
     from app.reduced.engine import ModalEngine
     from app.runner import load_for_run
 
@@ -40,7 +41,8 @@ def main() -> None:
     engine.advance(args.end_s, 10**9, np.inf)
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
     steps = engine.steps
-    print(json.dumps({"root": args.root, "steps": steps, "newton": int(engine.istate[4]), "cpu_s": cpu, "wall_s": wall,
+    print(json.dumps({"root": args.root, "steps": steps, "newton": int(engine.istate[lk.I_NEWTON]), "cpu_s": cpu,
+                      "wall_s": wall,
                       "cpu_ms_per_step": 1e3 * cpu / steps, "wall_ms_per_step": 1e3 * wall / steps,
                       "final_q_sum": float(np.sum(engine.q)), "final_z": engine.z.tolist()}))
 

@@ -209,9 +209,9 @@ def test_motor_resume_errors_are_one_line(capsys, one_go, tmp_path):
 # ------------------------------------------------------------------ the trend rule and warm starts
 @pytest.mark.mpi
 @pytest.mark.parametrize("rule", ["trend", "orbit"])
-def test_motor_trend_rule_resume_equals_one_run(shared_tmp, rule):
-    """The trend steady-state rule (app/loop/steady.py) decides from the cycle means the checkpoint holds: a run
-    split at 6 periods and resumed equals the run in one go bit for bit, its last fit included (fitted over
+def test_motor_steady_rule_resume_equals_one_run(shared_tmp, rule):
+    """The trend and orbit steady-state rules (app/loop/steady.py) decide from the cycle means the checkpoint holds:
+    a run split at 6 periods and resumed equals the run in one go bit for bit, its last fit included (fitted over
     periods on both sides of the split). In 12 periods the rotor is still spinning up (cycle means 0.05 to 3.4
     rad/s), which the window rule at SETS' loose tolerance takes for steady at period 10 and the trend rule does
     not: the fit's change still to come exceeds the tolerance (measured: 5 to 28 times the means' scale). The stop

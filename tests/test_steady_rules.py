@@ -252,3 +252,19 @@ def test_watch_restored_from_a_snapshot_decides_as_the_uninterrupted_one(rule):
 def test_unknown_rule_is_refused_by_the_watch():
     with pytest.raises(ValueError, match="rule"):
         SteadyStateWatch("rotor", "w", [], True, 1000.0, WINDOW, TOLERANCE, MIN_CYCLES, rule="fit")
+
+
+def test_a_period_end_a_round_off_short_still_closes_the_period_and_gives_its_return():
+    """A clock summed step by step lands a round-off short of a period's end: the step at (1 - 1e-11) of it (up to period 100
+    within PERIOD_END_TOLERANCE, 1e-9 of a period) closes the period and gives the state there, so every return is
+    known, as with exact times. With the former closing test (1e-12 relative) such a step left every return unknown
+    and the orbit rule would never stop (measured: this test fails with it)."""
+    frequency_Hz = 1000.0
+    watch = SteadyStateWatch("rotor", "w", [], True, frequency_Hz, WINDOW, TOLERANCE, MIN_CYCLES, rule="orbit")
+    for t, speed, torque in _samples(lambda t: 5.0, 60):
+        t_short = t * (1 - 1e-11)
+        k = t_short * frequency_Hz
+        watch.update(t_short, speed, torque, lambda k=k: np.array([math.cos(2 * math.pi * k), 1 + math.exp(-k)]))
+    returns = watch.results()["period_returns"]
+    assert len(returns) == 59 and all(r is not None for r in returns)
+    assert watch.results()["orbit"]["unknown_returns"] == 0

@@ -318,9 +318,10 @@ class SteadyStateSection:
                       "of the cycle means leaves a change still to come within the tolerance (a drift with no "
                       "levelling-off is extrapolated over three times the run's age; the test must also have held at "
                       "1/1.1 of the run's age), so plateaus and turning points do not stop the run; 'orbit' (the "
-                      "modal tier): that, and the structure's state returns after each period to within the "
-                      "tolerance and that return does not grow over the window (a plateau on an orbit the run is "
-                      "leaving does not stop it) (docs/transient.md, 'Steady-state stop')")
+                      "modal tier): the structure's state at each period end too: steady when its return per period "
+                      "does not grow over the window (by more than 1.1x: the run is not leaving an orbit, a plateau "
+                      "on one it is leaving does not stop it) and the trend test holds on the cycle means since it "
+                      "last did (docs/transient.md, 'Steady-state stop')")
     window_cycles: int = param(20, ge=2, doc="periods over which the cycle mean may change by the tolerance")
     relative_tolerance: float = param(0.005, gt=0, lt=1, doc="largest relative change of the cycle mean")
     min_cycles: int = param(40, ge=1, doc="periods always run before the test applies")

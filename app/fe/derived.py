@@ -242,20 +242,30 @@ def largest_principal_cycle_max(T_re: np.ndarray, T_im: np.ndarray, phases: int 
 
 
 # ------------------------------------------------------------------------------------- fields and peaks
+def fields_of(names, raw, von_mises_values, principal_values) -> dict[str, np.ndarray]:
+    """The file fields (file name -> array) of the derived quantities ``names`` (``output.derived``) of a real
+    solution, however the caller forms them: ``raw(name)`` a tensor's or vector's components (RAW's names),
+    ``von_mises_values()`` and ``principal_values()`` the invariants (called only when asked for). Both tiers'
+    real fields go through it (:func:`node_fields`, the modal tier's frames), so a new derived quantity is named
+    once."""
+    out = {}
+    for derived in names:
+        if derived in RAW:
+            out[field_name(derived)] = raw(derived)
+        elif derived == "von_mises":
+            out[field_name(derived)] = von_mises_values()
+        elif derived == "principal_stress":
+            out[field_name(derived)] = principal_values()
+    return out
+
+
 def node_fields(averaged: np.ndarray, names, kind: str = "real", columns: dict = RAW) -> dict[str, np.ndarray]:
     """File fields (name -> array) from averaged raw vertex values (n, 18) of a real solution; ``columns``: where
     strain, stress, E and D are in the last axis (another than RAW when only some were formed, see
     :func:`raw_columns`)."""
-    out = {}
     stress = averaged[:, columns["stress"]]
-    for derived in names:
-        if derived in RAW:
-            out[field_name(derived)] = averaged[:, columns[derived]]
-        elif derived == "von_mises":
-            out[field_name(derived)] = von_mises(stress)
-        elif derived == "principal_stress":
-            out[field_name(derived)] = principal_stresses(stress)
-    return out
+    return fields_of(names, lambda name: averaged[:, columns[name]], lambda: von_mises(stress),
+                     lambda: principal_stresses(stress))
 
 
 def harmonic_node_fields(re: np.ndarray, im: np.ndarray, names) -> dict[str, np.ndarray]:

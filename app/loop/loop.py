@@ -37,7 +37,7 @@ from app import series as S
 from app.errors import CaseError
 from app.killpoint import kill_point
 from app.loop.checkpoint import POINTER, CheckpointWriter, Found, case_digest, mark_started, read_checkpoint
-from app.loop.steady import SteadyStateWatch
+from app.loop.steady import PERIOD_END_TOLERANCE, SteadyStateWatch
 from app.progress import SimulatedTimeProgress
 from app.series import TimeSeriesWriter
 
@@ -219,7 +219,8 @@ def run_transient(make_engine, case, out_dir: Path, comm, log, resume: bool = Fa
             if fields is not None and getattr(fields, "engine_frames", None) is None:    # else the engine takes them
                 stop_at = fields.next_s - FIELD_TIME_TOLERANCE * fields.interval_s
             if period is not None:       # the steady test runs at period ends: stop there
-                stop_at = min(stop_at, (math.floor(engine.t / period + 1e-9) + 1) * period * (1 - 1e-12))
+                stop_at = min(stop_at, (math.floor(engine.t / period + PERIOD_END_TOLERANCE) + 1 - PERIOD_END_TOLERANCE)
+                              * period)
             stop_at = min(stop_at, engine.t + progress_step)     # progress lines on time
             rows = engine.advance(end, checkpoint.steps_to_next(engine.steps), stop_at)
             if rows and len(rows[S.TIME]):

@@ -21,7 +21,8 @@ about a level (a beat between modes) is not mistaken for steady. Everything the 
 open period's partial integrals and every closed period's means) is in :meth:`snapshot`, which the
 stepper puts into the checkpoint: a resumed run decides exactly as the uninterrupted one.
 
-Two rules (``rule``), both on the closed cycle means only, so a resumed run decides as an uninterrupted one:
+Three rules (``rule``), on the closed cycle means (and, "orbit", the structure's state at the period ends), so a
+resumed run decides as an uninterrupted one:
 
 * ``"window"`` (:func:`window_is_steady`): the window test above. A plateau that drifts slowly (0.1 % per 60
   periods, docs/motor-studies.md "Plateaus") passes it, so the curve benches used to add a 500-period minimum.
@@ -71,8 +72,9 @@ def window_is_steady(means, window_cycles: int, relative_tolerance: float, min_c
 
 #: the steady-state rules of ``[transient.steady_state]`` (``rule``)
 RULES = ("window", "trend", "orbit")
-#: the orbit rule: a state is taken at a period end when the step ends there to this fraction of a period
-RETURN_TIME_TOLERANCE = 1e-6
+#: a step within this fraction of a period before a period's end closes the period (the run loop stops the engine
+#: there, and the orbit rule takes the state there): a clock summed step by step lands a round-off short of it
+PERIOD_END_TOLERANCE = 1e-9
 #: the orbit rule: the largest growth of the relative return over the window (log-linear fit) that counts as holding
 #: an orbit (a saturated, non-periodic state's returns scatter a few % about their level)
 ORBIT_GROWTH = 1.1
@@ -124,6 +126,12 @@ def trend_fit(means, age_periods: int, window_cycles: int) -> dict:
             "tau_periods": float(tau), "rms": math.sqrt(residual / span)}
 
 
+def trend_span(n: int, window_cycles: int) -> int:
+    """The trend rule's fitted span after n closed periods: the latest TREND_FIT_FRACTION of them, at least
+    window_cycles + 1."""
+    return max(window_cycles + 1, int(math.ceil(TREND_FIT_FRACTION * n)))
+
+
 def trend_is_steady(means, window_cycles: int, relative_tolerance: float, min_cycles: int,
                     floor: float = 0.0) -> bool:
     """The trend rule on a list of cycle means: :func:`window_is_steady`, and :func:`trend_fit` of the latest
@@ -132,7 +140,7 @@ def trend_is_steady(means, window_cycles: int, relative_tolerance: float, min_cy
     ``relative_tolerance`` of the larger of the span's largest magnitude and ``floor``."""
     if not window_is_steady(means, window_cycles, relative_tolerance, min_cycles, floor):
         return False
-    span = max(window_cycles + 1, int(math.ceil(TREND_FIT_FRACTION * len(means))))
+    span = trend_span(len(means), window_cycles)
     recent = np.asarray(means[-span:], dtype=float)
     scale = max(float(np.max(np.abs(recent))), floor)
     return trend_fit(recent, len(means), window_cycles)["remaining"] <= relative_tolerance * scale
@@ -178,8 +186,9 @@ def orbit_rule_is_steady(means, returns, window_cycles: int, relative_tolerance:
 
 
 def orbit_held_since(returns, window_cycles: int) -> int | None:
-    """The closed periods before the run last was leaving a periodic orbit (0: never; see
-    :func:`orbit_rule_is_steady`), None if it is leaving one now (or its last return is unknown)."""
+    """The index (among the closed periods) of the first period after the last one in which the run was leaving a
+    periodic orbit (0: it never was; see :func:`orbit_rule_is_steady`), None if it is leaving one now (or its last
+    return is unknown)."""
     growth = return_growth(returns, window_cycles)
     holding = growth <= ORBIT_GROWTH
     if not holding.size or not holding[-1]:
@@ -189,18 +198,25 @@ def orbit_held_since(returns, window_cycles: int) -> int | None:
     return int(np.flatnonzero(leaving)[-1]) + 1 if leaving.any() else 0
 
 
+def rule_is_steady(rule: str, means, returns, window_cycles: int, relative_tolerance: float, min_cycles: int,
+                   floor: float = 0.0) -> bool:
+    """The test of ``rule`` (one of RULES) after period n = len(means) closes; ``returns``: the relative returns
+    (rule "orbit"; the other rules do not read them)."""
+    if rule == "orbit":
+        if returns is None:
+            raise ValueError("the orbit rule needs the relative returns (returns=...)")
+        return orbit_rule_is_steady(means, returns, window_cycles, relative_tolerance, min_cycles, floor)
+    test = {"window": window_is_steady, "trend": trend_rule_is_steady}[rule]
+    return test(means, window_cycles, relative_tolerance, min_cycles, floor)
+
+
 def stop_period(rule: str, means, window_cycles: int, relative_tolerance: float, min_cycles: int,
                 floor: float = 0.0, returns=None) -> int | None:
     """The number of closed periods after which a run whose cycle means are ``means`` (and, rule "orbit", relative
     returns ``returns``) stops under ``rule``, as :class:`SteadyStateWatch` decides; None: not within them."""
     for n in range(1, len(means) + 1):
-        if rule == "orbit":
-            steady = orbit_rule_is_steady(means[:n], returns[:n], window_cycles, relative_tolerance, min_cycles,
-                                          floor)
-        else:
-            test = {"window": window_is_steady, "trend": trend_rule_is_steady}[rule]
-            steady = test(means[:n], window_cycles, relative_tolerance, min_cycles, floor)
-        if steady:
+        if rule_is_steady(rule, means[:n], None if returns is None else returns[:n], window_cycles,
+                          relative_tolerance, min_cycles, floor):
             return n
     return None
 
@@ -214,7 +230,7 @@ class SteadyStateWatch:
         """``speed_column``: the time-series column of the body's angular velocities (its first axis is watched);
         ``torque_columns``: the torque columns of the contacts acting on the body (their first axis, summed);
         ``free``: watch the speed (else the torque); ``floor``: the scale below which a change of the watched
-        quantity counts as noise (rad/s or N m, see :func:`window_is_steady`); ``rule``: "window" or "trend"."""
+        quantity counts as noise (rad/s or N m, see :func:`window_is_steady`); ``rule``: one of RULES."""
         if rule not in RULES:
             raise ValueError(f"unknown steady-state rule {rule!r} (rules: {', '.join(RULES)})")
         self.rule = rule
@@ -269,7 +285,7 @@ class SteadyStateWatch:
         t0, y0 = self.last[0], np.array(self.last[1:])
         while True:
             boundary = (self.cycle + 1) * self.period_s
-            if t1 < boundary * (1 - 1e-12):
+            if t1 < boundary - PERIOD_END_TOLERANCE * self.period_s:
                 self.integral += 0.5 * (t1 - t0) * (y0 + y1)
                 break
             # close the period at its boundary: interpolate the sample there
@@ -289,9 +305,10 @@ class SteadyStateWatch:
 
     def _period_state(self, t_s: float, boundary: int, state) -> float | None:
         """Take the engine's state at period end ``boundary`` (index: its time is boundary x T) if ``state`` is given
-        and ``t_s`` is that time (to RETURN_TIME_TOLERANCE of a period); returns the relative return
-        ||x(b T) - x((b - 1) T)|| / ||x(b T)|| of the period ending there, None when either state is not known."""
-        if state is None or abs(t_s - boundary * self.period_s) > RETURN_TIME_TOLERANCE * self.period_s:
+        and ``t_s`` is that time (to PERIOD_END_TOLERANCE of a period, either side); returns the relative return
+        ||x(b T) - x((b - 1) T)|| / ||x(b T)|| of the period ending there, None when either state is not known (a
+        step that ends past the period's end: the summary counts them, ``orbit.unknown_returns``)."""
+        if state is None or abs(t_s - boundary * self.period_s) > PERIOD_END_TOLERANCE * self.period_s:
             return None
         x = np.asarray(state(), dtype=float)
         returned = None
@@ -305,13 +322,8 @@ class SteadyStateWatch:
     def _test(self) -> None:
         if not self.steady:
             column = 0 if self.free else 1
-            means = [m[column] for m in self.means]
-            if self.rule == "orbit":
-                self.steady = orbit_rule_is_steady(means, self.returns, self.window_cycles, self.relative_tolerance,
-                                                   self.min_cycles, self.floor)
-            else:
-                test = window_is_steady if self.rule == "window" else trend_rule_is_steady
-                self.steady = test(means, self.window_cycles, self.relative_tolerance, self.min_cycles, self.floor)
+            self.steady = rule_is_steady(self.rule, [m[column] for m in self.means], self.returns,
+                                         self.window_cycles, self.relative_tolerance, self.min_cycles, self.floor)
 
     # ------------------------------------------------------------ checkpoints and results
     def snapshot(self) -> dict:
@@ -349,10 +361,11 @@ class SteadyStateWatch:
             since = orbit_held_since(self.returns, self.window_cycles)
             growth = return_growth(self.returns, self.window_cycles)
             out["orbit"] = {"held_since_period": since,
-                            "return_growth": float(growth[-1]) if growth.size and np.isfinite(growth[-1]) else None}
+                            "return_growth": float(growth[-1]) if growth.size and np.isfinite(growth[-1]) else None,
+                            "unknown_returns": sum(r is None for r in self.returns)}
             fitted = means[since or 0:]
         if self.rule in ("trend", "orbit") and len(fitted) > self.window_cycles:
             # the last fit (of the periods the stop, or the end, saw): what the rule extrapolated
-            span = max(self.window_cycles + 1, int(math.ceil(TREND_FIT_FRACTION * len(fitted))))
+            span = trend_span(len(fitted), self.window_cycles)
             out["trend"] = {"fit_periods": span, **trend_fit(fitted[-span:], len(fitted), self.window_cycles)}
         return out

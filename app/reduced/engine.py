@@ -49,6 +49,7 @@ class ModalEngine:
         self.checkpoint_interval_steps = cfg.checkpoint_interval_steps
         start = time.perf_counter()
         self._warm = None
+        self._period_factor = None     # period_state's factor of M_FF, formed at its first call
         if found is None and cfg.start_from is not None:
             # read before the model is built or loaded, and before a fresh run clears its directory (which may be
             # the one it starts from): a bad directory costs nothing
@@ -678,7 +679,7 @@ class ModalEngine:
         block is positive definite also for a structure with rigid-body freedom. The bodies' state is left out (the
         rotor's speed is the watched quantity; its angle grows)."""
         F = self.structure.free
-        if getattr(self, "_period_factor", None) is None:
+        if self._period_factor is None:
             # M_FF = L L^T: ||L^T x||^2 = x^T M_FF x
             self._period_factor = np.linalg.cholesky(self.model.M[np.ix_(F, F)]).T
         omega = 2 * math.pi * self.cfg.drive.frequency_Hz
@@ -875,7 +876,7 @@ class ReducedVertexFields:
         [V], derived vertex fields, peaks per region or None)], one per column. One product of the vertex basis
         (and of the derived basis) with all the columns: the basis is read once per batch, not once per frame;
         the invariants (von Mises, principal stresses, |E|) of all the frames at once, component by component."""
-        from app.fe.derived import RAW, field_name, frame_region_peaks, principal_of_parts, von_mises_of_parts
+        from app.fe.derived import fields_of, frame_region_peaks, principal_of_parts, von_mises_of_parts
 
         if self._vertex_T is None:
             self._layouts()
@@ -905,14 +906,9 @@ class ReducedVertexFields:
             if piezoelectric:
                 E = parts[columns["electric_field"]]
                 known["electric_field_V_per_m"] = np.sqrt(E[0] * E[0] + E[1] * E[1] + E[2] * E[2])
-            at_vertices = {}
-            for name in self.derived:
-                if name in RAW:
-                    at_vertices[field_name(name)] = self._at_vertices(parts[columns[name]], frames)
-                elif name == "von_mises":
-                    at_vertices[field_name(name)] = known["von_mises_Pa"][:, self._vertex_pair]
-                elif name == "principal_stress":
-                    at_vertices[field_name(name)] = self._at_vertices(principal, frames)
+            at_vertices = fields_of(self.derived, lambda name: self._at_vertices(parts[columns[name]], frames),
+                                    lambda: known["von_mises_Pa"][:, self._vertex_pair],
+                                    lambda: self._at_vertices(principal, frames))
             fields = [{key: v[k] for key, v in at_vertices.items()} for k in range(frames)]
             peaks = frame_region_peaks(None, self._pair_region, self.regions, known=known)
         return [(values[k, :3 * n].reshape(n, 3), values[k, 3 * n:], fields[k], peaks[k]) for k in range(frames)]

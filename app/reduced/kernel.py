@@ -30,22 +30,23 @@ Every argument travels as a structured record (NamedTuple of arrays, :func:`make
 arrays (q, v, a, z, zd, zdd, istate, fstate, sums, site_force) hold everything the next call needs, so where a
 run is split into calls (checkpoints, field outputs) does not change it.
 
-Cost (issue 27, BENCHMARKS.md): numba reference-counts every array a compiled function receives, member by member
-of each record, with an atomic operation on entry and exit, and every array it allocates. With records of ~150
-arrays passed to the per-step functions, that was ~70 % of a drill step. So the functions below the loop are
-compiled without reference counting (``_nrt=False``: they may neither allocate nor return arrays; numba refuses
-to compile one that does), their work arrays allocated once per call (:class:`StepWork`, :class:`NewtonWork`),
-and the loop fills its vectors index by index in the order of the array expressions they replace and calls the
-LAPACK and BLAS routines numba's np.linalg.solve, np.linalg.inv and np.dot call (numba's bindings of SciPy's),
-so the numbers are the same to the bit. ``_nrt``, ``numba.np.linalg._LAPACK`` and its ``numba_xx*`` symbols are
-numba's private names (numba 0.56.4, as Debian bookworm ships it): should a later numba drop them, the decorators'
-``_nrt=False`` and these bindings give way to plain ``njit`` and np.linalg / np.dot, with the same results and
-the reference counts' cost back. Of the motor's step what remained (issue 27, BENCHMARKS.md "the contact law on the
-sites that can touch"): the contact law runs only on the sites that can touch (:func:`_surely_open`, a bound on
-each site's gap from its last evaluation: exact), and the row updates of the Woodbury matrix and of G f are 1-D
-loops of their own (:func:`_subtract_scaled`), which LLVM vectorises where, written inline on rows of the 2-D work
-arrays, it did not (the same numbers).
-"""
+Cost (issue 27, BENCHMARKS.md): numba reference-counts every array a compiled function receives, member by member of
+each record, with an atomic operation on entry and exit, and every array it allocates. With records of ~150 arrays
+passed to the per-step functions, that was ~70 % of a drill step. So the functions below the loop are compiled
+without reference counting (``_nrt=False``: they may neither allocate nor return arrays; numba refuses to compile
+one that does), their work arrays allocated once per call (:class:`StepWork`, :class:`NewtonWork`), and the loop
+fills its vectors index by index in the order of the array expressions they replace and calls the LAPACK and BLAS
+routines numba's np.linalg.solve, np.linalg.inv and np.dot call (numba's bindings of SciPy's), so the numbers are
+the same to the bit. (The Woodbury system is since factored and solved by triangular sweeps written here,
+:func:`_factor` and :func:`_lu_apply`, instead of np.linalg.inv's explicit inverse: a motor's series moved by 5e-11,
+BENCHMARKS.md "the Woodbury system by its LU factors".) ``_nrt``, ``numba.np.linalg._LAPACK`` and its ``numba_xx*``
+symbols are numba's private names (numba 0.56.4, as Debian bookworm ships it): should a later numba drop them, the
+decorators' ``_nrt=False`` and these bindings give way to plain ``njit`` and np.linalg / np.dot, with the same
+results and the reference counts' cost back. Of the motor's step what remained (issue 27, BENCHMARKS.md "the contact
+law on the sites that can touch"): the contact law runs only on the sites that can touch (:func:`_surely_open`, a
+bound on each site's gap from its last evaluation: exact), and the row updates of the Woodbury matrix and of G f are
+1-D loops of their own (:func:`_subtract_scaled`), which LLVM vectorises where, written inline on rows of the 2-D
+work arrays, it did not (the same numbers). """
 
 from __future__ import annotations
 
@@ -110,8 +111,9 @@ RATE_SCALE_RAD_PER_S = 1e-4
 SITE_TOL_M = 1e-14
 SITE_RTOL = 1e-9
 #: the Newton system goes to the structure's coordinates (Woodbury) when gdim x active sites exceed this multiple
-#: of the free coordinates their rows touch (S, :func:`_woodbury_columns`): there its inverse (|S|^3) costs less
-#: than the contact-space LU ((gdim n_active)^3 / 3)
+#: of the free coordinates their rows touch (S, :func:`_woodbury_columns`). Set when that system was inverted
+#: (|S|^3 against the contact-space LU's (gdim n_active)^3 / 3); its LU factors (2/3 |S|^3) move the break-even of
+#: the factorisations alone to about 1.26, not measured: the switch stays where it was measured
 WOODBURY_FACTOR = 1.5
 FORCE_RTOL = 1e-10
 #: a gap's round-off relative to the size of its terms (|d|, the radius, the excluded reference gap): the margin by
