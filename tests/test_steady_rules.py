@@ -257,8 +257,8 @@ def test_unknown_rule_is_refused_by_the_watch():
 def test_a_period_end_a_round_off_short_still_closes_the_period_and_gives_its_return():
     """A clock summed step by step lands a round-off short of a period's end: the step at (1 - 1e-11) of it (within
     PERIOD_END_TOLERANCE, 1e-9 of a period, up to period 100) closes the period and gives the state there, so every
-    return is known, as with exact times. With the former closing test (1e-12 relative) such a step left every return unknown
-    and the orbit rule would never stop (measured: this test fails with it)."""
+    return is known, as with exact times. With the former closing test (1e-12 relative) such a step left every
+    return unknown and the orbit rule would never stop (measured: this test fails with it)."""
     frequency_Hz = 1000.0
     watch = SteadyStateWatch("rotor", "w", [], True, frequency_Hz, WINDOW, TOLERANCE, MIN_CYCLES, rule="orbit")
     for t, speed, torque in _samples(lambda t: 5.0, 60):
