@@ -40,12 +40,12 @@ REGIONS = (
     (2, "Newton: Woodbury matrix", "_fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, nw.col_pos,",
      2),
     (3, "Newton: its LU factors", "_factor(k_s, nw.S[:k_s * k_s].reshape((k_s, k_s)), nw.S_LU, nw.S_ipiv)", 1),
-    (4, "Newton: Woodbury solve", "_woodbury_solve_into(k_s, nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, "
+    (4, "Newton: Woodbury solve", "_woodbury_solve_into(nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, "
                                   "n_active, gdim, cp,", 2),
     (5, "Newton: separated sites' corrections", "_respond(cp, wk.active, n_active, gdim, df, cp.du)", 3),
     (6, "Newton: contact-space LU", "_lu_solve(N, J, nw.LU, nw.ipiv, dy)", 1),
     (7, "Newton: trial evaluations", "n_trial = _evaluate(wk.dd_try, wk.xi_try, wk, cp, state, dt, model, True)", 1),
-    (8, "Newton: trial solves", "_woodbury_solve_into(k_s, nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, "
+    (8, "Newton: trial solves", "_woodbury_solve_into(nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, "
                                 "n_active, gdim, cp,", 2, 1),      # its second call (the first is region 4)
     (9, "Newton (all)", "converged, its = _newton(wk, nw, cp, state, dt_try, model, free_body)", 1),
     (10, "record (outputs, site diagnostics)", "_record(rows, t1, dt_try, q1, pq, wk, state, model, out, closed_new, "

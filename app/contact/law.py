@@ -175,6 +175,22 @@ def friction_tangent(T, dT_dfn, dT_dspeed, s, reg, speed, A, b):
 
 
 @njit(cache=True, _nrt=False)
+def site_position(i, y, z_mid, sites, b, bodies, d, lever):
+    """Site i's position relative to its body b's obstacle, ``d`` (3) [m], and its lever arm from the body's reference
+    point, ``lever`` (3) [m], at the site's displacement ``y`` and the bodies' mid-point coordinates: the reference
+    ones (sites.rel, sites.lever) moved by the site's displacement less the body's translation. Both the law
+    (:func:`site_force`) and the modal kernel's test of a surely open site form them here."""
+    s0 = bodies.start[b]
+    for k in range(3):
+        d[k] = sites.rel[i, k]
+        lever[k] = sites.lever[i, k]
+    for k in range(bodies.gdim):
+        du = y[k] - (z_mid[s0 + k] - bodies.reference[b, k])
+        d[k] += du
+        lever[k] += du
+
+
+@njit(cache=True, _nrt=False)
 def site_force(i, y, v_site, z_mid, zd_mid, sites, contacts, bodies, c_vel, w_f, want, out):
     """Force of site i on the structure (``out.f``, 3) at the mid-point state: the site's displacement ``y`` and
     velocity ``v_site`` (3-vectors), the bodies' mid-point coordinates and rates. With ``want``, the
@@ -189,13 +205,7 @@ def site_force(i, y, v_site, z_mid, zd_mid, sites, contacts, bodies, c_vel, w_f,
     n_rot = (bodies.start[b + 1] if b + 1 < bodies.start.size else bodies.mass.size) - s0 - gdim
     d = out.d
     lever = out.lever
-    for k in range(3):
-        d[k] = sites.rel[i, k]
-        lever[k] = sites.lever[i, k]
-    for k in range(gdim):
-        du = y[k] - (z_mid[s0 + k] - bodies.reference[b, k])
-        d[k] += du
-        lever[k] += du
+    site_position(i, y, z_mid, sites, b, bodies, d, lever)
     omega = out.omega
     omega[0] = omega[1] = omega[2] = 0.0
     for r in range(n_rot):

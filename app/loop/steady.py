@@ -189,7 +189,11 @@ def orbit_held_since(returns, window_cycles: int) -> int | None:
     """The index (among the closed periods) of the first period after the last one in which the run was leaving a
     periodic orbit (0: it never was; see :func:`orbit_rule_is_steady`), None if it is leaving one now (or its last
     return is unknown)."""
-    growth = return_growth(returns, window_cycles)
+    return _held_since(return_growth(returns, window_cycles), window_cycles)
+
+
+def _held_since(growth: np.ndarray, window_cycles: int) -> int | None:
+    """:func:`orbit_held_since` from the returns' growth per period (:func:`return_growth`)."""
     holding = growth <= ORBIT_GROWTH
     if not holding.size or not holding[-1]:
         return None
@@ -358,8 +362,8 @@ class SteadyStateWatch:
         fitted = means
         if self.rule == "orbit":
             # since the state last was leaving a periodic orbit (all of it when it is leaving one at the end)
-            since = orbit_held_since(self.returns, self.window_cycles)
             growth = return_growth(self.returns, self.window_cycles)
+            since = _held_since(growth, self.window_cycles)
             out["orbit"] = {"held_since_period": since,
                             "return_growth": float(growth[-1]) if growth.size and np.isfinite(growth[-1]) else None,
                             "unknown_returns": sum(r is None for r in self.returns)}

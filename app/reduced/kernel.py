@@ -82,6 +82,7 @@ from app.contact.law import (
     link_force,
     shape_gap,
     site_force,
+    site_position,
     site_work,
     stick_speed,
 )
@@ -500,22 +501,18 @@ def _gap_lipschitz(contacts, c):
 
 
 @njit(cache=True, _nrt=False)
-def _surely_open(i, y_mid, z_mid, sites, contacts, bodies, wk):
+def _surely_open(i, y_mid, z_mid, sites, contacts, bodies, wk, sw):
     """Whether site i is open at the site displacement ``y_mid`` and the bodies' ``z_mid`` by its reference
-    (:func:`_open_bound`): its relative position d (as site_force forms it) within wk.clear[i] of wk.d_ref[i], so its
-    gap is at least L (clear - |d - d_ref|) + margin > 0 and the law would give no force (issue 27: the law is
-    evaluated only on the sites that can touch). If so, writes what the law gives an open site (no force, no slip,
-    its lever arm) and, in wk.gap, clear - |d - d_ref| (> 0, below its gap)."""
-    c = sites.contact[i]
-    b = contacts.body[c]
-    s0 = bodies.start[b]
-    gdim = bodies.gdim
+    (:func:`_open_bound`): its relative position d (app/contact/law.py site_position, into the site work ``sw``, as
+    the law forms it) within wk.clear[i] of wk.d_ref[i], so its gap is at least L (clear - |d - d_ref|) + margin > 0
+    and the law would give no force (issue 27: the law is evaluated only on the sites that can touch). If so, writes
+    what the law gives an open site (no force, no slip, its lever arm) and, in wk.gap, clear - |d - d_ref| (> 0,
+    below its gap)."""
+    d, lever = sw.d, sw.lever
+    site_position(i, y_mid, z_mid, sites, contacts.body[sites.contact[i]], bodies, d, lever)
     distance2 = 0.0
     for k in range(3):
-        dk = sites.rel[i, k]
-        if k < gdim:
-            dk += y_mid[k] - (z_mid[s0 + k] - bodies.reference[b, k])
-        e = dk - wk.d_ref[i, k]
+        e = d[k] - wk.d_ref[i, k]
         distance2 += e * e
     clear = wk.clear[i]
     if not distance2 < clear * clear:
@@ -525,9 +522,7 @@ def _surely_open(i, y_mid, z_mid, sites, contacts, bodies, wk):
     for k in range(3):
         wk.slip[i, k] = 0.0
         wk.f[i, k] = 0.0
-        wk.lever[i, k] = sites.lever[i, k]
-    for k in range(gdim):
-        wk.lever[i, k] += y_mid[k] - (z_mid[s0 + k] - bodies.reference[b, k])
+        wk.lever[i, k] = lever[k]
     return True
 
 
@@ -561,7 +556,7 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
             wk.v_mid[k] = 0.0
         for k in range(gdim):
             wk.y_mid[k] = wk.y0[i, k] + w_f * dd[i * gdim + k]
-        if wk.clear[i] > 0.0 and _surely_open(i, wk.y_mid, z_mid, sites, contacts, bodies, wk):
+        if wk.clear[i] > 0.0 and _surely_open(i, wk.y_mid, z_mid, sites, contacts, bodies, wk, sw):
             continue            # no force, no slip: what the law gives an open site (wk.gap: a lower bound)
         for k in range(gdim):
             inc = dd[i * gdim + k]
@@ -990,16 +985,15 @@ def _woodbury_solve(factors, D, cols, col_pos, active, n_active, gdim, cp, body_
     LU, ipiv = factors
     k = ipiv.size
     x = np.empty(rhs.size)
-    _woodbury_solve_into(k, LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x,
-                         np.empty(k), np.empty(k))
+    _woodbury_solve_into(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, np.empty(k),
+                         np.empty(k))
     return x
 
 
 @njit(cache=True, _nrt=False)
-def _woodbury_solve_into(size, LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, small,
-                         sol):
-    """:func:`_woodbury_solve` into ``x`` (may be ``rhs``) with the ``size`` x ``size`` matrix's factors (``LU``,
-    ``ipiv``: :func:`_factor`); ``small`` and ``sol`` (>= size) work."""
+def _woodbury_solve_into(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, small, sol):
+    """:func:`_woodbury_solve` into ``x`` (may be ``rhs``) with the matrix's factors (``LU``, ``ipiv``:
+    :func:`_factor`; its size |S| + nfb); ``small`` and ``sol`` (>= that size) work."""
     GT, RF = cp.GT, cp.RF
     ns = cols.size
     na = n_active * gdim
@@ -1020,7 +1014,7 @@ def _woodbury_solve_into(size, LU, ipiv, D, cols, col_pos, active, n_active, gdi
         for col in range(na):
             value -= body_rows[q, col] * rhs[col]
         small[ns + q] = value
-    _lu_apply(size, LU, ipiv, small, sol)
+    _lu_apply(ns + nfb, LU, ipiv, small, sol)
     for a in range(n_active):
         k = active[a]
         for r in range(gdim):
@@ -1176,7 +1170,7 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
             _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, nw.col_pos,
                            nw.S[:k_s * k_s].reshape((k_s, k_s)), D, nw.body_pos, nw.FG)
             _factor(k_s, nw.S[:k_s * k_s].reshape((k_s, k_s)), nw.S_LU, nw.S_ipiv)
-            _woodbury_solve_into(k_s, nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp,
+            _woodbury_solve_into(nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp,
                                  body_rows, rhs, dy, nw.small, nw.sol)
         else:
             rhs = nw.rhs[:N]
@@ -1240,7 +1234,7 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
             for q in range(nfb):
                 trial[n_active * gdim + q] = -wk.rz[free_body[q]]
             if woodbury:
-                _woodbury_solve_into(k_s, nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp,
+                _woodbury_solve_into(nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp,
                                      body_rows, trial, trial, nw.small, nw.sol)
             else:
                 _lu_solve(N, J, nw.LU, nw.ipiv, trial)

@@ -549,9 +549,9 @@ class FieldSeriesExport:
                        **{key: (v, None) for key, v in derived.items()}} for u, phi, derived, _ in expanded]
         datasets, attrs = batch_index(first, [frame.t for frame in frames])
         frame_peaks = {}
+        # the bodies of all the batch's frames displaced at once: frame index -> displacement
         moved = [k for k, frame in enumerate(frames) if frame.z is not None] if self.bodies is not None else []
-        if moved:               # the bodies of all the batch's frames displaced at once
-            moved = dict(zip(moved, self.bodies.displacements(np.array([frames[k].z for k in moved]))))
+        moved = dict(zip(moved, self.bodies.displacements(np.array([frames[k].z for k in moved])))) if moved else {}
         for k, (frame, values_of, peaks_k) in enumerate(zip(frames, fields, peaks), start=first):
             step = f"step_{k:06d}"
             for key, (values, units) in {**values_of, **frame.scalars}.items():
@@ -560,7 +560,7 @@ class FieldSeriesExport:
                     attrs[key] = {"units": units}
             if peaks_k is not None:
                 frame_peaks[step] = peaks_k
-            bodies = moved[k - first] if moved and frame.z is not None else frame.bodies
+            bodies = moved.get(k - first, frame.bodies)
             if bodies is not None:
                 datasets[f"bodies/displacement/{step}"] = bodies
                 attrs["bodies/displacement"] = {"units": "m"}
