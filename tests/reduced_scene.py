@@ -114,8 +114,9 @@ def sites_record(points, weight, contact, rows, contacts: law.Contacts, bodies: 
 
 
 def run(K, M, C, q, v, a, bodies: list[Body], gdim: int, sites: law.Sites | None, contacts: list[Contact],
-        links: list[Link], scheme, sizes, t_end: float, cap: int = 400000, load=None):
-    """Step the scene to ``t_end``: (records as the FE tier's run_scene gives them, istate)."""
+        links: list[Link], scheme, sizes, t_end: float, cap: int = 400000, load=None, final: list | None = None):
+    """Step the scene to ``t_end``: (records as the FE tier's run_scene gives them, istate); ``final`` (a list) gets
+    the loop's final state."""
     n = K.shape[0]
     B = bodies_record(bodies, gdim)
     Cr = contacts_record(contacts)
@@ -155,7 +156,10 @@ def run(K, M, C, q, v, a, bodies: list[Body], gdim: int, sites: law.Sites | None
     for i in range(rows):
         records.append({"time_s": out.time[i], "position_m": out.z[i].copy(), "velocity_m_per_s": out.zd[i].copy(),
                         "contact_force_N": {f"c{c}": out.force[i, c, :gdim].copy() for c in range(n_c + n_l)},
-                        "contact_closed": out.closed[i].astype(int)})
+                        "contact_closed": out.closed[i].astype(int),
+                        "dissipated_J": {f"c{c}": float(out.dissipated[i, c]) for c in range(n_c + n_l)}})
+    if final is not None:
+        final.append(state)
     return records, istate
 
 

@@ -427,6 +427,8 @@ class StepWork(NamedTuple):
     d_ref: np.ndarray         # (ns, 3) each site's relative position d of its last evaluation by the law [m]
     clear: np.ndarray         # (ns,) how far d may move from d_ref with the site surely open [m] (<= 0: not known);
     #                           d_ref and clear belong to the sites of one model (a new work record per call)
+    rate: np.ndarray          # (ns,) each site's gap rate dg/dt at its last evaluation by the law [m/s] (the
+    #                           damping's dissipation, also while a clipped pressure holds no force)
 
 
 @njit(cache=True)
@@ -441,7 +443,7 @@ def step_work(ns, gdim, m, kmax, n_links):
                     np.zeros((3, max(m, 1))), np.zeros(max(n_links, 1)), np.zeros(max(ns, 1), np.int64), np.zeros(m),
                     np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(3), np.zeros((5, 3)), np.zeros(m),
                     np.zeros((3, 3)), np.zeros((3, 3, 3)), np.zeros((3, max(m, 1))), np.zeros((ns, 3)),
-                    np.full(ns, -1.0))
+                    np.full(ns, -1.0), np.zeros(ns))
 
 
 @njit(cache=True, _nrt=False)
@@ -567,6 +569,7 @@ def _evaluate(dd, xi, wk, cp, state, dt, model, want):
                                             w_f, want, sw)
         wk.fn[i] = fn
         wk.gap[i] = gap
+        wk.rate[i] = _dot3(sw.n, sw.vrel)
         wk.slip[i, 0] = s1
         wk.slip[i, 1] = s2
         wk.slip[i, 2] = speed
@@ -1699,6 +1702,9 @@ def _record(row, t1, dt, q1, pq, wk, state, model, out, closed, y_end, power, se
             out.area[row, c] += sites.weight[i]
         fn = wk.fn[i]
         if fn <= 0.0:
+            if wk.gap[i] < 0.0:     # penetrated, its pressure k d - c dd/dt clipped to zero: the elastic energy the
+                #                     penalty holds is lost as the gap opens, (0 - elastic) times the closing rate
+                power[c] += _elastic_force(i, c, wk.gap[i], sites, contacts) * wk.rate[i]
             if diagnose:        # an open site: its displacement's harmonic and its time in the wave-frame bins
                 accumulate_site(i, SiteSample(0.0, 0.0, 0.0, 0.0, 0.0, -_dot3(sites.frame[i, 0], y_end[i]),
                                               sites.weight[i], 0.0), clock, acc)
@@ -1712,12 +1718,8 @@ def _record(row, t1, dt, q1, pq, wk, state, model, out, closed, y_end, power, se
         out.normal[row, c] += fn
         if contacts.kind[c] != NODE:
             out.peak[row, c] = max(out.peak[row, c], fn / sites.weight[i])
-        # dissipated power: damping (pressure beyond its elastic part times the closing rate) and friction
-        if contacts.kind[c] == NODE:
-            elastic = contacts.stiffness[c] * (-wk.gap[i]) ** contacts.exponent[c]
-        else:
-            elastic = sites.weight[i] * _penalty_pressure(wk.gap[i], 0.0, contacts.stiffness[c], 0.0,
-                                                          contacts.rounding[c])[0]
+        # dissipated power: damping (the force beyond its elastic part times the closing rate) and friction
+        elastic = _elastic_force(i, c, wk.gap[i], sites, contacts)
         tangential = 0.0            # -f_t . s = T |s|^2 / reg
         T = 0.0
         if contacts.mu[c] > 0.0:
@@ -1731,8 +1733,7 @@ def _record(row, t1, dt, q1, pq, wk, state, model, out, closed, y_end, power, se
             accumulate_site(i, SiteSample(fn, wk.slip[i, 0], wk.slip[i, 1], wk.slip[i, 2], T / sites.weight[i],
                                           -_dot3(sites.frame[i, 0], y_end[i]), sites.weight[i],
                                           stick_speed(contacts, c)), clock, acc)
-        power[c] += (fn - elastic) * _closing_rate(fn, elastic, contacts.damping[c], contacts.kind[c],
-                                                    sites.weight[i]) + tangential
+        power[c] += (fn - elastic) * -wk.rate[i] + tangential
     for l in range(n_l):
         f = wk.link_fn[l]
         if f > 0.0:
@@ -1786,8 +1787,12 @@ def _record_energy(row, dt, q1, v1, v0, structure, bodies, sites, contacts, wk, 
     out.energy[row, 4] = sums.damping[0]
 
 
-@njit(cache=True)
-def _closing_rate(fn, elastic, damping, kind, weight):
-    """The closing rate -dg/dt behind the damping part (fn - elastic) of a site's normal force."""
-    c = damping if kind == NODE else damping * weight
-    return (fn - elastic) / c if c > 0.0 else 0.0
+@njit(cache=True, _nrt=False)
+def _elastic_force(i, c, gap, sites, contacts):
+    """The elastic part of site i's normal force [N] at ``gap`` < 0 (contact c's law without its damping). Its
+    damping's dissipation is (force - this) times the closing rate -dg/dt, the rate the law saw: a closing rate
+    recovered from the force, (force - this) / c, misses the clipped part (the force zero while still penetrated,
+    as a Kelvin-Voigt contact lets go), as the FE tier's form (app/transient/contact.py) does not."""
+    if contacts.kind[c] == NODE:
+        return contacts.stiffness[c] * (-gap) ** contacts.exponent[c]
+    return sites.weight[i] * _penalty_pressure(gap, 0.0, contacts.stiffness[c], 0.0, contacts.rounding[c])[0]
