@@ -309,8 +309,8 @@ def test_newton_matrix_equals_differences_of_the_residual():
     its, woodbury, gathered = newton_both_ways(local, GT, RF)
     assert woodbury == (True, False)
     assert its[0] == its[1]
-    # ... and through K_eff^-1 (the compliance carries it; 6 x 6 + 36 < 18 x 6 products a solve:
-    # tests/test_reduced_kernel_inv.py checks those products one by one)
+    # ... the solves through K_eff^-1 (the compliance carries it; 6 x 6 + 3 x 36 < 3 x 18 x 6 weighted products a
+    # solve, kernel.GATHER_COST = 3: tests/test_reduced_kernel_inv.py checks those products one by one)
     assert gathered == 6
 
 

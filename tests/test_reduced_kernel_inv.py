@@ -72,13 +72,14 @@ def _scene(n_sites):
 
 @pytest.mark.parametrize("symmetric", [True, False])
 def test_respond_through_the_inverse_equals_the_rows_of_G(symmetric):
-    """u = G x for forces on a few of 16 sites and on all of them: through K_eff^-1 on the scatter's support
+    """u = G x for forces on one of 240 sites and on all of them: through K_eff^-1 on the scatter's support
     (_scatter_rows, _respond_inverse) against G^T's rows (_respond_rows) and numpy's G^T x, to 1e-12 relative; the
-    choosing _respond takes K_eff^-1 where it is cheaper (all sites: 48 rows on |S| = 20 of 30, 160 + 600 < 1 440
-    products) and G^T's rows where it is not (one site: 10 + 4 x 30 > 3 x 30), bit for bit as the way it takes."""
+    choosing _respond takes K_eff^-1 where it is cheaper (all sites: 720 rows on |S| = 240 of 260,
+    8 x 2 400 + 240 x 260 < 720 x 260, kernel.INDEXED_COST = 8) and G^T's rows where it is not (one site:
+    8 x 10 + 4 x 260 > 3 x 260), bit for bit as the way it takes."""
     rng = np.random.default_rng(27 + symmetric)
-    n_sites, nf, gdim = 16, 30, 3
-    RF = _site_rows(rng, n_sites, nf, 20)
+    n_sites, nf, gdim = 240, 260, 3
+    RF = _site_rows(rng, n_sites, nf, 240)
     invT = _inverse(rng, nf, symmetric).T
     GT = RF @ invT
     cp = kr.compliance_of(GT @ RF.T, GT, RF, invT)
@@ -129,22 +130,23 @@ def _woodbury_reference(RF, invT, Fd, Fz, body_rows, active, cols, free_body, s0
 
 @pytest.mark.parametrize("symmetric", [True, False])
 def test_woodbury_through_the_inverse_equals_the_rows_of_G(symmetric):
-    """The Woodbury matrix and solve on S, 16 active sites (48 rows) on |S| = 20 of 30 coordinates and the rotor's z
-    translation and spin: through K_eff^-1 (B = R_A^T D R_A summed site by site, then B W; the body rows through
-    R_A^T; the solve as R_A (W sol)) against G^T's rows gathered on S (_fill_woodbury_rows, _woodbury_solve_rows)
-    and against the matrix formed densely by numpy, to 1e-12 relative; the choosing _fill_woodbury and
-    _woodbury_solve_into take K_eff^-1 here (~5 400 against ~9 000 products; 560 against 960 a solve), bit for bit as
-    that way. The solution also satisfies the dense Woodbury system (its residual at round-off)."""
+    """The Woodbury matrix and solve on S, 236 of 240 sites active (708 rows) on |S| ~ 240 of 260 coordinates and the
+    rotor's z translation and spin (a collapsed rotor's proportions: the motor's 1 482 rows on 192 of 221): through
+    K_eff^-1 (B = R_A^T D R_A summed site by site, then B W; the body rows through R_A^T; the solve as R_A (W sol))
+    against G^T's rows gathered on S (_fill_woodbury_rows, _woodbury_solve_rows) and against the Woodbury system
+    formed densely by numpy, to 1e-12 relative; the choosing _fill_woodbury and _woodbury_solve_into take K_eff^-1
+    here (the kernel's weighted counts: ~1.4 M against ~1.9 M; a solve ~64 k against ~510 k), bit for bit as that
+    way."""
     rng = np.random.default_rng(41 + symmetric)
-    n_sites, nf, gdim = 16, 30, 3
+    n_sites, nf, gdim = 240, 260, 3
     model, free_body = _scene(n_sites)
-    RF = _site_rows(rng, n_sites, nf, 20)
+    RF = _site_rows(rng, n_sites, nf, 240)
     invT = _inverse(rng, nf, symmetric).T
     GT = RF @ invT
     cp = kr.compliance_of(GT @ RF.T, GT, RF, invT)
     m = model.bodies.mass.size
     wk = kr.step_work(n_sites, gdim, m, 4, 0)
-    active = rng.permutation(n_sites)[:14]          # 14 of the 16 in an iteration's order: 42 rows
+    active = rng.permutation(n_sites)[:236]          # 236 of the 240 in an iteration's order
     n_active = active.size
     wk.active[:n_active] = active
     wk.Fd[:] = rng.normal(size=wk.Fd.shape)

@@ -125,6 +125,13 @@ SITE_RTOL = 1e-9
 #: the factorisations alone to about 1.26, not measured: the switch stays where it was measured
 WOODBURY_FACTOR = 1.5
 FORCE_RTOL = 1e-10
+#: the cost rules' weights (:func:`_respond`, :func:`_fill_woodbury`, :func:`_woodbury_solve_into`; issue 27), against
+#: one multiply-add of a vectorised row update (:func:`_subtract_scaled`): an element read through an index list
+#: (``row[cols[j]]``, a branchy scan) and an indexed scalar update (``y[index] += a x``). Measured on the collapsed
+#: motor's Woodbury matrix, each part timed in isolation inside numba: 0.17 ns a row update's multiply-add, 0.57 ns a
+#: gathered element, ~1.5 ns an indexed update (BENCHMARKS.md "the products through K_eff^-1")
+GATHER_COST = 3
+INDEXED_COST = 8
 #: a gap's round-off relative to the size of its terms (|d|, the radius, the excluded reference gap): the margin by
 #: which a site must be clear of its obstacle to be skipped (:func:`_open_bound`; the rounding is ~1e-16 of them)
 GAP_ROUND_OFF = 1e-12
@@ -361,11 +368,11 @@ def _combine_rows(n, gdim, F, G, out):
 def _respond(compliance, active, n_active, gdim, x, out):
     """out = G x (nf) for site forces ``x`` (n_sites, 3) on the active sites (the rest carry none); H x = R_F out.
     The cheaper of two ways (issue 27): G^T's rows, one dense row of nf per loaded site row (:func:`_respond_rows`:
-    n_rows x nf), or K_eff^-1 on the support S of the scatter g = R_F^T x (:func:`_respond_inverse`: nnz of the loaded
-    rows + |S| x nf). A collapsed rotor's ~1 480 loaded rows touch 192 coordinates: ~7x fewer products. Dense rows (a
-    model in its free modes: nnz = n_rows x nf) never pay for the scatter, so they keep the first way and its
-    numbers. |S| is at least the widest loaded row's count: the scatter is formed only where that bound leaves the
-    second way cheaper."""
+    n_rows x nf), or K_eff^-1 on the support S of the scatter g = R_F^T x (:func:`_respond_inverse`: nnz indexed
+    updates, weighted INDEXED_COST, + |S| x nf). A collapsed rotor's ~1 480 loaded rows touch 192 coordinates: ~7x
+    fewer products. Dense rows (a model in its free modes: nnz = n_rows x nf) never pay for the scatter, so they keep
+    the first way and its numbers. |S| is at least the widest loaded row's count: the scatter is formed only where
+    that bound leaves the second way cheaper."""
     RF = compliance.RF
     nf = compliance.GT.shape[1]
     n_rows = 0
@@ -380,9 +387,9 @@ def _respond(compliance, active, n_active, gdim, x, out):
                 nnz += count
                 widest = max(widest, count)
     cost_rows = n_rows * nf
-    if compliance.invT.shape[0] == nf and nnz + widest * nf < cost_rows:
+    if compliance.invT.shape[0] == nf and INDEXED_COST * nnz + widest * nf < cost_rows:
         support = _scatter_rows(RF, active, n_active, gdim, x, compliance.g)
-        if nnz + support * nf < cost_rows:
+        if INDEXED_COST * nnz + support * nf < cost_rows:
             _respond_inverse(compliance.invT, compliance.g, out)
             return
     _respond_rows(compliance.GT, active, n_active, gdim, x, out)
@@ -990,15 +997,16 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False, way=WOO
 @njit(cache=True, _nrt=False)
 def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG, iw):
     """:func:`_woodbury`'s matrix on the coordinates ``cols`` into ``S`` and the sites' derivatives into ``D``, the
-    cheaper of two ways (issue 27): G^T's rows of every active site row gathered on S (:func:`_fill_woodbury_rows`:
-    n_rows x |S| x (gdim + 1) for the gathers and D_k G_k^T, nnz_A x |S| for the updates of S, nfb x n_rows x |S| for
-    the body rows), or K_eff^-1: its block W on S gathered (|S|^2), B = R_A^T D R_A summed site by site
-    (:func:`_site_products`: each site's few touched coordinates, ~nnz_A x the site's count), then S = I - B W
-    (nnz(B) x |S|) and the body rows through R_A^T (nfb x (nnz_A + |S|^2); :func:`_fill_woodbury_inverse`).
-    A collapsed rotor (1 482 rows, |S| = 192, nnz(B) ~ 4 000): ~4.4 M against ~0.9 M multiply-adds. nnz(B) is known
-    once B is summed: B is formed where the other terms leave K_eff^-1 cheaper (dense rows never: their sum alone
-    costs what G^T's rows do), then kept or dropped by the whole count. Also gathers W (``iw``, :class:`InverseWork`)
-    where :func:`_woodbury_solve_into` will take K_eff^-1 (|S|^2 + nnz_A against n_rows x |S| a solve)."""
+    cheaper of two ways (issue 27), by their counts weighted as GATHER_COST and INDEXED_COST say: G^T's rows of every
+    active site row gathered on S (:func:`_fill_woodbury_rows`: n_rows x |S| gathers, n_rows x |S| x gdim for
+    D_k G_k^T, nnz_A x |S| for the updates of S, nfb x n_rows x |S| for the body rows), or K_eff^-1: its block W on S
+    gathered (|S|^2), B = R_A^T D R_A summed site by site (:func:`_site_products`: indexed updates on each site's few
+    touched coordinates, ~nnz_A x their count), then S = I - B W (nnz(B) x |S|) and the body rows through R_A^T
+    (nfb x (nnz_A + |S|^2); :func:`_fill_woodbury_inverse`). The collapsed rotor (1 482 rows, |S| = 192, nnz(B)
+    ~ 4 000): ~3.9 M against ~2.2 M weighted; the seated one (216 rows on 84) keeps G^T's rows (~0.27 M against
+    ~0.4 M, as measured). nnz(B) is known once B is summed: B is formed where a lower bound (|S| x the widest row)
+    leaves K_eff^-1 cheaper (dense rows never), then kept or dropped by the whole count. Also gathers W (``iw``,
+    :class:`InverseWork`) where :func:`_woodbury_solve_into` will take K_eff^-1."""
     gdim = model.bodies.gdim
     RF = cp.RF
     ns = cols.size
@@ -1015,10 +1023,15 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos,
     if cp.invT.shape[0] != cp.GT.shape[1]:
         _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG)
         return
-    cost_rows = n_rows * ns * (gdim + 1) + nnz * ns + nfb * n_rows * ns
-    cost_inverse = ns * ns + nnz * (gdim + widest) + nfb * (nnz + ns * ns)       # without nnz(B) x |S|
+    # G^T's rows: the gathers, D_k G_k^T, the updates of S's site rows, the body rows
+    cost_rows = n_rows * ns * (GATHER_COST + gdim) + nnz * ns + nfb * n_rows * ns
+    # K_eff^-1: W gathered, B zeroed and counted, its rows scanned; B's sum (indexed updates, >= nnz x widest); the
+    # body rows' scatters and products; then nnz(B) x |S| for B W, at least |S| x widest (each row of B holds a
+    # site's whole block) before B is summed
+    cost_inverse = 4 * GATHER_COST * ns * ns + INDEXED_COST * nnz * (gdim + widest) \
+        + nfb * (INDEXED_COST * nnz + ns * ns)
     W = iw.W[:ns * ns].reshape((ns, ns))
-    if cost_inverse < cost_rows:
+    if cost_inverse + ns * widest * ns < cost_rows:
         _gather_block(cols, cp.invT, W)
         iw.gathered[0] = ns
         nnz_B = _site_products(n_active, wk, RF, gdim, col_pos, ns, D, iw)
@@ -1026,7 +1039,7 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos,
             _fill_woodbury_inverse(n_active, wk, RF, model, free_body, body_rows, cols, col_pos, S, pos, iw)
             return
     _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG)
-    if iw.gathered[0] < 0 and ns * ns + nnz < n_rows * ns:
+    if iw.gathered[0] < 0 and ns * ns + GATHER_COST * nnz < GATHER_COST * n_rows * ns:
         _gather_block(cols, cp.invT, W)
         iw.gathered[0] = ns
 
@@ -1292,15 +1305,16 @@ def _woodbury_solve_into(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp,
     """:func:`_woodbury_solve` into ``x`` (may be ``rhs``) with the matrix's factors (``LU``, ``ipiv``:
     :func:`_factor`; its size |S| + nfb); ``small`` and ``sol`` (>= that size) work. The active rows' part
     x_A = rhs_A + G_A^T[:, S] sol the cheaper of two ways (issue 27): G^T's rows gathered on S
-    (:func:`_woodbury_solve_rows`: n_rows x |S|), or R_A (W sol) with K_eff^-1's block W on S
-    (:func:`_woodbury_solve_inverse`: |S|^2 + nnz_A), where :func:`_fill_woodbury` gathered W (``iw``)."""
+    (:func:`_woodbury_solve_rows`: n_rows x |S| gathered elements), or R_A (W sol) with K_eff^-1's block W on S
+    (:func:`_woodbury_solve_inverse`: |S|^2 by gemv + nnz_A gathered), where :func:`_fill_woodbury` gathered W
+    (``iw``)."""
     ns = cols.size
     if iw.gathered[0] == ns:
         nnz = 0
         for a in range(n_active):
             for r in range(gdim):
                 nnz += cp.RF.count[active[a] * gdim + r]
-        if ns * ns + nnz < n_active * gdim * ns:
+        if ns * ns + GATHER_COST * nnz < GATHER_COST * n_active * gdim * ns:
             _woodbury_solve_inverse(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp.RF, body_rows, rhs, x,
                                     small, sol, iw)
             return
