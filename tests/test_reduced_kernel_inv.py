@@ -1,7 +1,7 @@
 """The modal kernel's products through K_eff^-1 (app/reduced/kernel.py, issue 27: "modal tier at its floor") against
 the same products by G^T's rows, formed here with numpy from their definitions.
 
-With many active sites whose rows R_F touch few coordinates S (a collapsed rotor: ~1 480 active rows on 192
+With many active sites whose rows R_F touch few coordinates S (a collapsed rotor: 1 536 active rows on 192
 coordinates), G x = K_eff^-1 (R_F^T x), the Woodbury matrix I - R_A^T D G_A^T = I - (R_A^T D R_A) K_eff^-T and the
 solve's G_A^T[:, S] sol = R_A (K_eff^-T[S, S] sol) cost nnz + |S| x nf, nnz(B) x |S| and |S|^2 + nnz instead of a
 dense row of G^T per active row. The kernel takes the cheaper way per call; here each way is called by name and the
@@ -131,7 +131,7 @@ def _woodbury_reference(RF, invT, Fd, Fz, body_rows, active, cols, free_body, s0
 @pytest.mark.parametrize("symmetric", [True, False])
 def test_woodbury_through_the_inverse_equals_the_rows_of_G(symmetric):
     """The Woodbury matrix and solve on S, 236 of 240 sites active (708 rows) on |S| ~ 240 of 260 coordinates and the
-    rotor's z translation and spin (a collapsed rotor's proportions: the motor's 1 482 rows on 192 of 221): through
+    rotor's z translation and spin (a collapsed rotor's proportions: the motor's 1 536 rows on 192 of 221): through
     K_eff^-1 (B = R_A^T D R_A summed site by site, then B W; the body rows through R_A^T; the solve as R_A (W sol))
     against G^T's rows gathered on S (_fill_woodbury_rows, _woodbury_solve_rows) and against the Woodbury system
     formed densely by numpy, to 1e-12 relative; the choosing _fill_woodbury and _woodbury_solve_into take K_eff^-1

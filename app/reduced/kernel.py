@@ -46,15 +46,17 @@ results and the reference counts' cost back. Of the motor's step what remained (
 law on the sites that can touch"): the contact law runs only on the sites that can touch (:func:`_surely_open`, a
 bound on each site's gap from its last evaluation: exact), and the row updates of the Woodbury matrix and of G f are
 1-D loops of their own (:func:`_subtract_scaled`), which LLVM vectorises where, written inline on rows of the 2-D
-work arrays, it did not (the same numbers). With the rotor lying on the whole ring (~1 480 active site rows on 192 of
+work arrays, it did not (the same numbers). With the rotor lying on the whole ring (1 536 active site rows on 192 of
 the 221 free coordinates: S) the products with G^T's rows, dense although each site row R_F touches ~12 coordinates,
 were then most of the step (BENCHMARKS.md "the products through K_eff^-1"): G x, the Woodbury matrix and its solves
-go through K_eff^-1 itself (kept transposed per step size, :class:`Cache` invT) wherever that costs fewer
-multiply-adds, chosen per call by counting them: G x = K_eff^-1 (R_F^T x), nnz + |S| nf against n_rows nf
-(:func:`_respond`); I - R_A^T D G_A^T = I - (R_A^T D R_A) K_eff^-T on S, nnz(R_A^T D R_A) |S| against
-n_rows |S| (gdim + 1) + nnz |S| (:func:`_fill_woodbury`); the solves' G_A^T[:, S] sol = R_A (K_eff^-T[S, S] sol),
-|S|^2 + nnz against n_rows |S| (:func:`_woodbury_solve_into`). Dense rows (a model in its free modes: the drill) keep
-G^T's rows and their numbers to the bit; where K_eff^-1 is taken the sums run in another order (round-off). """
+go through K_eff^-1 itself (kept transposed per step size, :class:`Cache` invT) wherever that costs less, chosen per
+call by counting the operations (gathered elements and indexed updates weighted as measured: GATHER_COST,
+INDEXED_COST): G x = K_eff^-1 (R_F^T x), nnz + |S| nf against n_rows nf (:func:`_respond`); I - R_A^T D G_A^T =
+I - (R_A^T D R_A) K_eff^-T on S, ~nnz x 12 + nnz(R_A^T D R_A) |S| against n_rows |S| (gdim + 1) + nnz |S|
+(:func:`_fill_woodbury`); the solves' G_A^T[:, S] sol = R_A (K_eff^-T[S, S] sol), |S|^2 + nnz against n_rows |S|
+(:func:`_woodbury_solve_into`). The collapsing run's loop: 9.1 -> 6.1 ms a step. Dense rows (a model in its free
+modes: the drill) keep G^T's rows and their numbers to the bit; where K_eff^-1 is taken the sums run in another order
+(round-off). """
 
 from __future__ import annotations
 
@@ -369,10 +371,10 @@ def _respond(compliance, active, n_active, gdim, x, out):
     """out = G x (nf) for site forces ``x`` (n_sites, 3) on the active sites (the rest carry none); H x = R_F out.
     The cheaper of two ways (issue 27): G^T's rows, one dense row of nf per loaded site row (:func:`_respond_rows`:
     n_rows x nf), or K_eff^-1 on the support S of the scatter g = R_F^T x (:func:`_respond_inverse`: nnz indexed
-    updates, weighted INDEXED_COST, + |S| x nf). A collapsed rotor's ~1 480 loaded rows touch 192 coordinates: ~7x
-    fewer products. Dense rows (a model in its free modes: nnz = n_rows x nf) never pay for the scatter, so they keep
-    the first way and its numbers. |S| is at least the widest loaded row's count: the scatter is formed only where
-    that bound leaves the second way cheaper."""
+    updates, weighted INDEXED_COST, + |S| x nf). A collapsed rotor's 1 536 loaded rows touch 192 coordinates: ~6x
+    fewer multiply-adds. Dense rows (a model in its free modes: nnz = n_rows x nf) never pay for the scatter, so they
+    keep the first way and its numbers. |S| is at least the widest loaded row's count: the scatter is formed only
+    where that bound leaves the second way cheaper."""
     RF = compliance.RF
     nf = compliance.GT.shape[1]
     n_rows = 0
@@ -1002,11 +1004,12 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos,
     D_k G_k^T, nnz_A x |S| for the updates of S, nfb x n_rows x |S| for the body rows), or K_eff^-1: its block W on S
     gathered (|S|^2), B = R_A^T D R_A summed site by site (:func:`_site_products`: indexed updates on each site's few
     touched coordinates, ~nnz_A x their count), then S = I - B W (nnz(B) x |S|) and the body rows through R_A^T
-    (nfb x (nnz_A + |S|^2); :func:`_fill_woodbury_inverse`). The collapsed rotor (1 482 rows, |S| = 192, nnz(B)
-    ~ 4 000): ~3.9 M against ~2.2 M weighted; the seated one (216 rows on 84) keeps G^T's rows (~0.27 M against
-    ~0.4 M, as measured). nnz(B) is known once B is summed: B is formed where a lower bound (|S| x the widest row)
-    leaves K_eff^-1 cheaper (dense rows never), then kept or dropped by the whole count. Also gathers W (``iw``,
-    :class:`InverseWork`) where :func:`_woodbury_solve_into` will take K_eff^-1."""
+    (nfb x (nnz_A + |S|^2); :func:`_fill_woodbury_inverse`). The collapsed rotor (1 536 rows, |S| = 192, nnz(B)
+    = 4 032): ~4.0 M against ~2.2 M weighted; the seated one (207 rows on 72) keeps G^T's rows (0.22 M against
+    >= 0.26 M; taken through K_eff^-1 it cost 0.39 against 0.26 ms a step). nnz(B) is known once B is summed: B is
+    formed where a lower bound (|S| x the widest row) leaves K_eff^-1 cheaper (dense rows never), then kept or dropped
+    by the whole count. Also gathers W (``iw``, :class:`InverseWork`) where :func:`_woodbury_solve_into` will take
+    K_eff^-1."""
     gdim = model.bodies.gdim
     RF = cp.RF
     ns = cols.size
