@@ -226,15 +226,15 @@ def test_newton_matrix_equals_differences_of_the_residual():
     B_ = rng.normal(size=(nf, nf))
     K_inv = 1e-9 * (B_ @ B_.T / nf + np.eye(nf))
     GT = RF @ K_inv
-    sparse = kr.compliance_of(GT @ RF.T, GT, RF)
+    sparse = kr.compliance_of(GT @ RF.T, GT, RF, K_inv)
     n_active = kr._evaluate(dd0, xi0, wk, sparse, state, dt, model, True)
     assert 0 < n_active < n_sites
     J, rhs = kr._newton_matrix(n_active, wk, sparse, model, free_body, dt)
     body_rows, rhs_b = kr._newton_matrix(n_active, wk, sparse, model, free_body, dt, False)
     np.testing.assert_array_equal(body_rows, J[n_active * gdim:])
-    factors, D, cols, col_pos = kr._woodbury(n_active, wk, sparse, model, free_body, body_rows, True)
+    factors, D, cols, col_pos, iw = kr._woodbury(n_active, wk, sparse, model, free_body, body_rows, True)
     x = kr._woodbury_solve(factors, D, cols, col_pos, wk.active[:n_active].copy(), n_active, gdim, sparse, body_rows,
-                           rhs_b)
+                           rhs_b, iw)
     reference = np.linalg.solve(J, rhs)
     scale = np.concatenate([np.full(n_active * gdim, np.abs(reference[:n_active * gdim]).max()),
                             np.abs(reference[n_active * gdim:])])
@@ -244,7 +244,7 @@ def test_newton_matrix_equals_differences_of_the_residual():
         """The whole Newton iteration with every site pressed in, on ``compliance_`` and on the same H given densely
         (the contact-space LU): (iterations of each, whether each took the Woodbury system), the solutions checked
         equal to the iteration's tolerances (1e-14 m or 1e-9 of a site increment, 1e-10 of the body's force scale;
-        1e-6 catches a wrong or stale system, order one)."""
+        1e-6 catches a wrong or stale system, order one), and |S| of the K_eff^-1 block the last matrix gathered."""
         wk.y0[:] = -3e-8 * normals
         solutions = []
         for c in (compliance_, kr.dense_compliance(GT @ RF.T)):
@@ -253,11 +253,13 @@ def test_newton_matrix_equals_differences_of_the_residual():
             wk.xi[:] = 0.0
             converged, its = kr._newton(wk, nw, c, state, dt, model, free_body)
             assert converged and its > 1
-            solutions.append((wk.dd.copy(), wk.xi.copy(), bool(np.any(nw.S_LU != 0.0)), its))
-        (dd_w, xi_w, woodbury, its_w), (dd_c, xi_c, dense_woodbury, its_c) = solutions
+            solutions.append((wk.dd.copy(), wk.xi.copy(), bool(np.any(nw.S_LU != 0.0)), its,
+                              int(nw.inverse.gathered[0]) if nw.inverse.gathered.size else -1))
+        (dd_w, xi_w, woodbury, its_w, gathered), (dd_c, xi_c, dense_woodbury, its_c, _) = solutions
         np.testing.assert_allclose(dd_w, dd_c, rtol=1e-6, atol=1e-13)
         np.testing.assert_allclose(xi_w, xi_c, rtol=1e-6, atol=1e-16)
-        return (its_w, its_c), (woodbury, dense_woodbury)
+        # gathered: |S| where the last Woodbury matrix gathered K_eff^-1's block for the solves (-1: not)
+        return (its_w, its_c), (woodbury, dense_woodbury), gathered
 
     # The whole Newton iteration (app/reduced/kernel.py:_newton, compiled without reference counts, its arrays in a
     # NewtonWork) with every site pressed in: on the sparse compliance it takes the Woodbury path (3 x 6 active
@@ -265,7 +267,7 @@ def test_newton_matrix_equals_differences_of_the_residual():
     # coordinates) the contact-space LU. The same equations, so the same solution to the iteration's tolerances
     # (1e-14 m or 1e-9 of a site increment, 1e-10 of the body's force scale); 1e-6 catches a wrong or stale system
     # (order one).
-    its, woodbury = newton_both_ways(sparse, GT, RF)
+    its, woodbury, _ = newton_both_ways(sparse, GT, RF)
     assert woodbury == (True, False)
 
     # The Woodbury system restricted to the coordinates S the active sites' rows touch (_woodbury_columns): exact,
@@ -280,8 +282,9 @@ def test_newton_matrix_equals_differences_of_the_residual():
     for i in range(n_sites):
         RF[3 * i:3 * i + 3, [ring[i], ring[(i + 1) % n_sites]]] = rng.normal(size=(3, 2))
     B_ = rng.normal(size=(nf, nf))
-    GT = RF @ (1e-9 * (B_ @ B_.T / nf + np.eye(nf)))
-    local = kr.compliance_of(GT @ RF.T, GT, RF)
+    K_inv = 1e-9 * (B_ @ B_.T / nf + np.eye(nf))
+    GT = RF @ K_inv
+    local = kr.compliance_of(GT @ RF.T, GT, RF, K_inv)      # G x, the Woodbury system through K_inv where cheaper
     wk.y0[:] = depth[:, None] * normals
     n_active = kr._evaluate(dd0, xi0, wk, local, state, dt, model, True)
     assert 0 < n_active < n_sites
@@ -293,19 +296,22 @@ def test_newton_matrix_equals_differences_of_the_residual():
     active = wk.active[:n_active].copy()
     touched = np.flatnonzero(np.any(RF[np.concatenate([np.r_[3 * i:3 * i + 3] for i in active])] != 0.0, axis=0))
     for full in (False, True):
-        factors, D, cols, col_pos = kr._woodbury(n_active, wk, local, model, free_body, body_rows, full)
+        factors, D, cols, col_pos, iw = kr._woodbury(n_active, wk, local, model, free_body, body_rows, full)
         np.testing.assert_array_equal(cols, np.arange(nf) if full else touched)
         assert factors[1].size == cols.size + free_body.size
-        x = kr._woodbury_solve(factors, D, cols, col_pos, active, n_active, gdim, local, body_rows, rhs_b)
+        x = kr._woodbury_solve(factors, D, cols, col_pos, active, n_active, gdim, local, body_rows, rhs_b, iw)
         assert np.max(np.abs(x - reference) / scale) < 1e-9
 
     # And the whole Newton iteration with every site pressed in: 18 active rows on |S| = 6 coordinates take the
     # restricted system (18 > 1.5 x 6, where the full one, 18 > 1.5 x 40, was not taken), against the contact-space
     # LU of the same H given densely; the tolerances as above. The same Newton steps to round-off, so the same
     # iterations too (a wrong matrix still converges, by the residual, but not in Newton's count).
-    its, woodbury = newton_both_ways(local, GT, RF)
+    its, woodbury, gathered = newton_both_ways(local, GT, RF)
     assert woodbury == (True, False)
     assert its[0] == its[1]
+    # ... the solves through K_eff^-1 (the compliance carries it; 6 x 6 + 3 x 36 < 3 x 18 x 6 weighted products a
+    # solve, kernel.GATHER_COST = 3: tests/test_reduced_kernel_inv.py checks those products one by one)
+    assert gathered == 6
 
 
 @pytest.mark.parametrize("size", [1, 2, 7, 64, 221])

@@ -46,7 +46,17 @@ results and the reference counts' cost back. Of the motor's step what remained (
 law on the sites that can touch"): the contact law runs only on the sites that can touch (:func:`_surely_open`, a
 bound on each site's gap from its last evaluation: exact), and the row updates of the Woodbury matrix and of G f are
 1-D loops of their own (:func:`_subtract_scaled`), which LLVM vectorises where, written inline on rows of the 2-D
-work arrays, it did not (the same numbers). """
+work arrays, it did not (the same numbers). With the rotor lying on the whole ring (1 536 active site rows on 192 of
+the 221 free coordinates: S) the products with G^T's rows, dense although each site row R_F touches ~12 coordinates,
+were then most of the step (BENCHMARKS.md "the products through K_eff^-1"): G x, the Woodbury matrix and its solves
+go through K_eff^-1 itself (kept transposed per step size, :class:`Cache` invT) wherever that costs less, chosen per
+call by counting the operations (gathered elements and indexed updates weighted as measured: GATHER_COST,
+INDEXED_COST): G x = K_eff^-1 (R_F^T x), nnz + |S| nf against n_rows nf (:func:`_respond`); I - R_A^T D G_A^T =
+I - (R_A^T D R_A) K_eff^-T on S, ~nnz x 12 + nnz(R_A^T D R_A) |S| against n_rows |S| (gdim + 1) + nnz |S|
+(:func:`_fill_woodbury`); the solves' G_A^T[:, S] sol = R_A (K_eff^-T[S, S] sol), |S|^2 + nnz against n_rows |S|
+(:func:`_woodbury_solve_into`). The collapsing run's loop: 9.1 -> 6.1 ms a step. Dense rows (a model in its free
+modes: the drill) keep G^T's rows and their numbers to the bit; where K_eff^-1 is taken the sums run in another order
+(round-off). """
 
 from __future__ import annotations
 
@@ -117,6 +127,13 @@ SITE_RTOL = 1e-9
 #: the factorisations alone to about 1.26, not measured: the switch stays where it was measured
 WOODBURY_FACTOR = 1.5
 FORCE_RTOL = 1e-10
+#: the cost rules' weights (:func:`_respond`, :func:`_fill_woodbury`, :func:`_woodbury_solve_into`; issue 27), against
+#: one multiply-add of a vectorised row update (:func:`_subtract_scaled`): an element read through an index list
+#: (``row[cols[j]]``, a branchy scan) and an indexed scalar update (``y[index] += a x``). Measured on the collapsed
+#: motor's Woodbury matrix, each part timed in isolation inside numba: 0.17 ns a row update's multiply-add, 0.57 ns a
+#: gathered element, ~1.5 ns an indexed update (BENCHMARKS.md "the products through K_eff^-1")
+GATHER_COST = 3
+INDEXED_COST = 8
 #: a gap's round-off relative to the size of its terms (|d|, the radius, the excluded reference gap): the margin by
 #: which a site must be clear of its obstacle to be skipped (:func:`_open_bound`; the rounding is ~1e-16 of them)
 GAP_ROUND_OFF = 1e-12
@@ -272,13 +289,17 @@ class SparseRows(NamedTuple):
 class Compliance(NamedTuple):
     """The contact space of one step size: H = R_F K_eff^-1 R_F^T (site increments per unit site force), its
     factor G^T = R_F K_eff^-1 (nr x nf) and the site rows on the free coordinates, so a force on a few active
-    sites costs n_active x nf + nnz(R_F) (u = G f, H f = R_F u) instead of n_active x nr of H's columns."""
+    sites costs n_active x nf + nnz(R_F) (u = G f, H f = R_F u) instead of n_active x nr of H's columns; and
+    K_eff^-1 itself, transposed (``invT``: G^T = R_F invT, G x = invT^T (R_F^T x)), so a force on many active sites
+    whose rows touch few coordinates S costs nnz + |S| x nf instead (:func:`_respond`)."""
 
     H: np.ndarray             # (nr, nr)
     GT: np.ndarray            # (nr, nf)
     RF: SparseRows            # the site rows on the free coordinates (free numbering)
     u: np.ndarray             # (nf,) K_eff^-1 R_F^T f of the last evaluation: the structure's response
     du: np.ndarray            # (nf,) work
+    invT: np.ndarray          # (nf, nf) K_eff^-T (row l: K_eff^-1's column l); (0, 0): not given, G^T's rows alone
+    g: np.ndarray             # (nf,) work: R_F^T x
 
 
 @njit(cache=True)
@@ -312,17 +333,19 @@ def _row_dot(rows, r, x):
     return value
 
 
-def compliance_of(H: np.ndarray, GT: np.ndarray, RF: np.ndarray) -> Compliance:
-    """The compliance record of H = R_F G, G^T and dense site rows R_F (nr x nf): for tests of the condensed step."""
+def compliance_of(H: np.ndarray, GT: np.ndarray, RF: np.ndarray, invT: np.ndarray | None = None) -> Compliance:
+    """The compliance record of H = R_F G, G^T and dense site rows R_F (nr x nf), and K_eff^-T with G^T = R_F invT
+    (None: not given, the products by G^T's rows alone): for tests of the condensed step."""
     nf = RF.shape[1]
+    invT = np.zeros((0, 0)) if invT is None else np.ascontiguousarray(invT, dtype=float)
     return Compliance(np.ascontiguousarray(H), np.ascontiguousarray(GT), sparse_rows(RF, np.arange(nf, dtype=np.int64)),
-                      np.zeros(nf), np.zeros(nf))
+                      np.zeros(nf), np.zeros(nf), invT, np.zeros(nf))
 
 
 def dense_compliance(H: np.ndarray) -> Compliance:
     """The compliance of sites that are the coordinates themselves (R_F = I, K_eff^-1 = H symmetric): for tests of
     the condensed step with a given H."""
-    return compliance_of(H, H.T, np.eye(H.shape[0]))
+    return compliance_of(H, H.T, np.eye(H.shape[0]), H.T)
 
 
 @njit(cache=True, _nrt=False)
@@ -345,8 +368,38 @@ def _combine_rows(n, gdim, F, G, out):
 
 @njit(cache=True, _nrt=False)
 def _respond(compliance, active, n_active, gdim, x, out):
-    """out = G x (nf) for site forces ``x`` (n_sites, 3) on the active sites (the rest carry none); H x = R_F out."""
-    GT = compliance.GT
+    """out = G x (nf) for site forces ``x`` (n_sites, 3) on the active sites (the rest carry none); H x = R_F out.
+    The cheaper of two ways (issue 27): G^T's rows, one dense row of nf per loaded site row (:func:`_respond_rows`:
+    n_rows x nf), or K_eff^-1 on the support S of the scatter g = R_F^T x (:func:`_respond_inverse`: nnz indexed
+    updates, weighted INDEXED_COST, + |S| x nf). A collapsed rotor's 1 536 loaded rows touch 192 coordinates: ~6x
+    fewer multiply-adds. Dense rows (a model in its free modes: nnz = n_rows x nf) never pay for the scatter, so they
+    keep the first way and its numbers. |S| is at least the widest loaded row's count: the scatter is formed only
+    where that bound leaves the second way cheaper."""
+    RF = compliance.RF
+    nf = compliance.GT.shape[1]
+    n_rows = 0
+    nnz = 0
+    widest = 0
+    for a in range(n_active):
+        i = active[a]
+        for k in range(gdim):
+            if x[i, k] != 0.0:
+                count = RF.count[i * gdim + k]
+                n_rows += 1
+                nnz += count
+                widest = max(widest, count)
+    cost_rows = n_rows * nf
+    if compliance.invT.shape[0] == nf and INDEXED_COST * nnz + widest * nf < cost_rows:
+        support = _scatter_rows(RF, active, n_active, gdim, x, compliance.g)
+        if INDEXED_COST * nnz + support * nf < cost_rows:
+            _respond_inverse(compliance.invT, compliance.g, out)
+            return
+    _respond_rows(compliance.GT, active, n_active, gdim, x, out)
+
+
+@njit(cache=True, _nrt=False)
+def _respond_rows(GT, active, n_active, gdim, x, out):
+    """:func:`_respond` by G^T's rows: out = sum over the loaded site rows r of x_r G^T[r] (n_rows x nf)."""
     nf = GT.shape[1]
     for j in range(nf):
         out[j] = 0.0
@@ -356,6 +409,41 @@ def _respond(compliance, active, n_active, gdim, x, out):
             xk = x[i, k]
             if xk != 0.0:
                 _subtract_scaled(nf, -xk, GT[i * gdim + k], out)     # out + xk row, exactly (vectorised)
+
+
+@njit(cache=True, _nrt=False)
+def _scatter_rows(RF, active, n_active, gdim, x, g):
+    """g (nf) <- R_F^T x for site forces ``x`` (n_sites, 3) on the active sites: the loaded rows' entries scattered
+    (nnz), the rows in the order of ``active``. Returns the count of nonzero entries of g (its support S)."""
+    for j in range(g.size):
+        g[j] = 0.0
+    for a in range(n_active):
+        i = active[a]
+        for k in range(gdim):
+            xk = x[i, k]
+            if xk != 0.0:
+                row = i * gdim + k
+                for e in range(RF.count[row]):
+                    g[RF.index[row, e]] += RF.value[row, e] * xk
+    support = 0
+    for j in range(g.size):
+        if g[j] != 0.0:
+            support += 1
+    return support
+
+
+@njit(cache=True, _nrt=False)
+def _respond_inverse(invT, g, out):
+    """:func:`_respond` through K_eff^-1: out = K_eff^-1 g = sum over the support of g of g_l invT[l] (|S| x nf; invT's
+    rows are K_eff^-1's columns, contiguous), g = R_F^T x from :func:`_scatter_rows`. K_eff^-1 as G^T was formed from
+    it (G = K_eff^-1 R_F^T): it is symmetric to round-off only."""
+    nf = out.size
+    for j in range(nf):
+        out[j] = 0.0
+    for l in range(nf):
+        gl = g[l]
+        if gl != 0.0:
+            _subtract_scaled(nf, -gl, invT[l], out)          # out + gl row, exactly (vectorised)
 
 
 @njit(cache=True, _nrt=False)
@@ -839,17 +927,46 @@ def _woodbury_columns(n_active, active, gdim, RF, col_pos, cols):
     return n
 
 
+class InverseWork(NamedTuple):
+    """Work of the Woodbury system's products through K_eff^-1 on S (:func:`_fill_woodbury_inverse`,
+    :func:`_woodbury_solve_inverse`; issue 27): K_eff^-T's block on S and R_A^T D R_A, each |S| x |S| in C order in
+    the first |S|^2 entries, and one site's block on the coordinates its rows touch."""
+
+    W: np.ndarray             # (s_max * s_max,) W[l, j] = invT[cols[l], cols[j]]: G_A^T's columns S = R_A W
+    B: np.ndarray             # (s_max * s_max,) R_A^T D R_A on S (D the active sites' Fd)
+    t: np.ndarray             # (s_max,) work: W sol, a body row's R_A^T p
+    site: np.ndarray          # (3, u_max) a site's D_k R_k on the coordinates of S its rows touch
+    local: np.ndarray         # (u_max,) int64 those coordinates' places in S
+    mark: np.ndarray          # (nf,) int64 a place in S -> its place among the site's (-1: none)
+    gathered: np.ndarray      # (1,) int64 |S| of the W gathered for the iteration's matrix (-1: none)
+    scalars: np.ndarray       # (2,) work: gemv's alpha and beta
+
+
 @njit(cache=True)
-def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False):
+def inverse_work(s_max, gdim, nf, RF):
+    """:class:`InverseWork` for S of at most ``s_max`` coordinates (of ``nf``) and the site rows ``RF``
+    (:class:`SparseRows`: a site touches at most gdim x its width)."""
+    u_max = max(gdim * RF.index.shape[1], 1)
+    return InverseWork(np.zeros(s_max * s_max), np.zeros(s_max * s_max), np.zeros(s_max), np.zeros((3, u_max)),
+                       np.zeros(u_max, np.int64), np.full(nf, -1, np.int64), np.full(1, -1, np.int64), np.zeros(2))
+
+
+#: the ways of the Woodbury matrix and solve: the cheaper (:func:`_fill_woodbury`), G^T's rows, K_eff^-1
+WOODBURY_AUTO, WOODBURY_ROWS, WOODBURY_INVERSE = 0, 1, 2
+
+
+@njit(cache=True)
+def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False, way=WOODBURY_AUTO):
     """The Newton system of many active sites in the structure's free coordinates (Woodbury): with the site
     block I - H_AA D - H_AA E = I - G_A^T R_A^T (D, E) (G^T = R_F K_eff^-1, R_A the active rows; D, E the
     sites' derivatives), y = R_A^T (D x_A + E x_b) and x_A = rhs_A + G_A^T y turn it into
     [[I - R_A^T D G_A^T, -R_A^T E], [P G_A^T, Q]] [y, x_b] = [R_A^T D rhs_A, rhs_b - P rhs_A]
     (``body_rows`` = [P, Q]), of size nf + nfb instead of gdim n_active + nfb. Every R_A^T x lives on the
     coordinates S the active rows touch (:func:`_woodbury_columns`), so y does and G_A^T y needs G^T's columns S
-    alone: the same system restricted to S (size |S| + nfb, ``full``: all nf coordinates) is exact. Returns that
-    matrix's LU factors ((LU, ipiv): :func:`_factor`), the active sites' D (the next evaluation overwrites wk.Fd),
-    S's columns and positions."""
+    alone: the same system restricted to S (size |S| + nfb, ``full``: all nf coordinates) is exact. ``way``: the
+    cheaper of G^T's rows and K_eff^-1 (:func:`_fill_woodbury`), or the one named. Returns that matrix's LU factors
+    ((LU, ipiv): :func:`_factor`), the active sites' D (the next evaluation overwrites wk.Fd), S's columns and
+    positions, and the :class:`InverseWork` (its W gathered where the solve may take K_eff^-1)."""
     nf = cp.GT.shape[1]
     cols = np.empty(nf, np.int64)
     col_pos = np.empty(nf, np.int64)
@@ -863,18 +980,207 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False):
     k = n + free_body.size
     S = np.empty((k, k))
     D = np.empty((n_active, 3, 3))
-    _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols[:n], col_pos, S, D,
-                   np.empty(wk.xi.size, np.int64), np.empty((6, n)))
+    pos = np.empty(wk.xi.size, np.int64)
+    iw = inverse_work(n, model.bodies.gdim, nf, cp.RF)
+    if way == WOODBURY_AUTO:
+        _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols[:n], col_pos, S, D, pos, np.empty((6, n)),
+                       iw)
+    elif way == WOODBURY_ROWS:
+        iw.gathered[0] = -1
+        _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols[:n], col_pos, S, D, pos,
+                            np.empty((6, n)))
+    else:
+        _gather_block(cols[:n], cp.invT, iw.W[:n * n].reshape((n, n)))
+        iw.gathered[0] = n
+        _site_products(n_active, wk, cp.RF, model.bodies.gdim, col_pos, n, D, iw)
+        _fill_woodbury_inverse(n_active, wk, cp.RF, model, free_body, body_rows, cols[:n], col_pos, S, pos, iw)
     LU, ipiv = np.empty(k * k), np.empty(k, np.int32)
     _factor(k, S, LU, ipiv)
-    return (LU, ipiv), D, cols[:n].copy(), col_pos
+    return (LU, ipiv), D, cols[:n].copy(), col_pos, iw
 
 
 @njit(cache=True, _nrt=False)
-def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG):
-    """:func:`_woodbury`'s matrix on the coordinates ``cols`` (their places ``col_pos``) into ``S`` (k x k,
-    k = cols.size + nfb) and the sites' derivatives into ``D`` (n_active, 3, 3); ``pos`` (m,) int64 and ``FG``
-    (6, >= cols.size) work: a site's rows of G^T on S gathered (rows 3-5), D_k times them (rows 0-2), so every
+def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG, iw):
+    """:func:`_woodbury`'s matrix on the coordinates ``cols`` into ``S`` and the sites' derivatives into ``D``, the
+    cheaper of two ways (issue 27), by their counts weighted as GATHER_COST and INDEXED_COST say: G^T's rows of every
+    active site row gathered on S (:func:`_fill_woodbury_rows`: n_rows x |S| gathers, n_rows x |S| x gdim for
+    D_k G_k^T, nnz_A x |S| for the updates of S, nfb x n_rows x |S| for the body rows), or K_eff^-1: its block W on S
+    gathered (|S|^2), B = R_A^T D R_A summed site by site (:func:`_site_products`: indexed updates on each site's few
+    touched coordinates, ~nnz_A x their count), then S = I - B W (nnz(B) x |S|) and the body rows through R_A^T
+    (nfb x (nnz_A + |S|^2); :func:`_fill_woodbury_inverse`). The collapsed rotor (1 536 rows, |S| = 192, nnz(B)
+    = 4 032): ~4.0 M against ~2.2 M weighted; the seated one (207 rows on 72) keeps G^T's rows (0.22 M against
+    >= 0.26 M; taken through K_eff^-1 it cost 0.39 against 0.26 ms a step). nnz(B) is known once B is summed: B is
+    formed where a lower bound (|S| x the widest row) leaves K_eff^-1 cheaper (dense rows never), then kept or dropped
+    by the whole count. Also gathers W (``iw``, :class:`InverseWork`) where :func:`_woodbury_solve_into` will take
+    K_eff^-1."""
+    gdim = model.bodies.gdim
+    RF = cp.RF
+    ns = cols.size
+    nfb = free_body.size
+    n_rows = n_active * gdim
+    nnz = 0
+    widest = 0
+    for a in range(n_active):
+        for r in range(gdim):
+            count = RF.count[wk.active[a] * gdim + r]
+            nnz += count
+            widest = max(widest, count)
+    iw.gathered[0] = -1
+    if cp.invT.shape[0] != cp.GT.shape[1]:
+        _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG)
+        return
+    # G^T's rows: the gathers, D_k G_k^T, the updates of S's site rows, the body rows
+    cost_rows = n_rows * ns * (GATHER_COST + gdim) + nnz * ns + nfb * n_rows * ns
+    # K_eff^-1: W gathered, B zeroed and counted, its rows scanned; B's sum (indexed updates, >= nnz x widest); the
+    # body rows' scatters and products; then nnz(B) x |S| for B W, at least |S| x widest (each row of B holds a
+    # site's whole block) before B is summed
+    cost_inverse = 4 * GATHER_COST * ns * ns + INDEXED_COST * nnz * (gdim + widest) \
+        + nfb * (INDEXED_COST * nnz + ns * ns)
+    W = iw.W[:ns * ns].reshape((ns, ns))
+    if cost_inverse + ns * widest * ns < cost_rows:
+        _gather_block(cols, cp.invT, W)
+        iw.gathered[0] = ns
+        nnz_B = _site_products(n_active, wk, RF, gdim, col_pos, ns, D, iw)
+        if cost_inverse + nnz_B * ns < cost_rows:
+            _fill_woodbury_inverse(n_active, wk, RF, model, free_body, body_rows, cols, col_pos, S, pos, iw)
+            return
+    _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG)
+    if iw.gathered[0] < 0 and ns * ns + GATHER_COST * nnz < GATHER_COST * n_rows * ns:
+        _gather_block(cols, cp.invT, W)
+        iw.gathered[0] = ns
+
+
+@njit(cache=True, _nrt=False)
+def _gather_block(cols, A, W):
+    """W[l, j] = A[cols[l], cols[j]] (|S|^2): with A = K_eff^-T, G^T[r, cols[j]] = sum_l R_F[r, cols[l]] W[l, j]."""
+    n = cols.size
+    for l in range(n):
+        row = A[cols[l]]
+        target = W[l]
+        for j in range(n):
+            target[j] = row[cols[j]]
+
+
+@njit(cache=True, _nrt=False)
+def _site_products(n_active, wk, RF, gdim, col_pos, ns, D, iw):
+    """B = R_A^T D R_A on S (``iw.B``, ns x ns) summed over the active sites k of R_k^T (D_k R_k), D_k = wk.Fd[k]
+    (copied into ``D``: the next evaluation overwrites wk.Fd), each on the coordinates of S site k's rows touch (its
+    union, ``iw.local``, u of them): D_k R_k is gdim x u (gdim x its rows' nnz), its product with R_k^T is the rows'
+    nnz x u, scattered into B. Returns nnz(B)."""
+    B = iw.B[:ns * ns].reshape((ns, ns))
+    for i in range(ns):
+        for j in range(ns):
+            B[i, j] = 0.0
+    mark, local, site = iw.mark, iw.local, iw.site
+    for a in range(n_active):
+        k = wk.active[a]
+        for r in range(3):
+            for c in range(3):
+                D[a, r, c] = 0.0
+        for r in range(gdim):
+            for c in range(gdim):
+                D[a, r, c] = wk.Fd[k, r, c]
+        u = 0
+        for c in range(gdim):
+            row = k * gdim + c
+            for e in range(RF.count[row]):
+                place = col_pos[RF.index[row, e]]
+                if mark[place] < 0:
+                    mark[place] = u
+                    local[u] = place
+                    u += 1
+        for r in range(gdim):
+            for t in range(u):
+                site[r, t] = 0.0
+        for c in range(gdim):
+            row = k * gdim + c
+            for e in range(RF.count[row]):
+                t = mark[col_pos[RF.index[row, e]]]
+                value = RF.value[row, e]
+                for r in range(gdim):
+                    site[r, t] += D[a, r, c] * value
+        for r in range(gdim):
+            row = k * gdim + r
+            for e in range(RF.count[row]):
+                Bi = B[col_pos[RF.index[row, e]]]
+                value = RF.value[row, e]
+                for t in range(u):
+                    Bi[local[t]] += value * site[r, t]
+        for t in range(u):
+            mark[local[t]] = -1
+    nnz = 0
+    for i in range(ns):
+        for j in range(ns):
+            if B[i, j] != 0.0:
+                nnz += 1
+    return nnz
+
+
+@njit(cache=True, _nrt=False)
+def _fill_woodbury_inverse(n_active, wk, RF, model, free_body, body_rows, cols, col_pos, S, pos, iw):
+    """:func:`_fill_woodbury` through K_eff^-1, with ``iw.W`` gathered and ``iw.B`` summed (:func:`_site_products`):
+    S's site block I - R_A^T D G_A^T on S = I - B W (row i: the nonzeros l of B's row i, W's rows l, vectorised:
+    :func:`_subtract_scaled`), the body columns -R_A^T E as :func:`_fill_woodbury_rows` has them, the body rows
+    P G_A^T on S = (R_A^T p_q)^T W (p_q: row q of ``body_rows``' site part)."""
+    bodies, contacts, sites = model.bodies, model.contacts, model.sites
+    gdim = bodies.gdim
+    ns = cols.size
+    nfb = free_body.size
+    W = iw.W[:ns * ns].reshape((ns, ns))
+    B = iw.B[:ns * ns].reshape((ns, ns))
+    h = iw.t
+    for r in range(ns + nfb):
+        for c in range(ns + nfb):
+            S[r, c] = 0.0
+    for j in range(ns):
+        S[j, j] = 1.0
+    for j in range(pos.size):
+        pos[j] = -1
+    for q in range(nfb):
+        pos[free_body[q]] = q
+    for i in range(ns):
+        Bi = B[i]
+        for l in range(ns):
+            value = Bi[l]
+            if value != 0.0:
+                _subtract_scaled(ns, value, W[l], S[i])
+    for a in range(n_active):
+        k = wk.active[a]
+        s0, n_rot = _body_rotations(bodies, contacts.body[sites.contact[k]])
+        for r in range(gdim):
+            row = k * gdim + r
+            for e in range(RF.count[row]):
+                idx = col_pos[RF.index[row, e]]
+                val = RF.value[row, e]
+                for kk in range(gdim + n_rot):
+                    q = pos[s0 + kk]
+                    if q >= 0:
+                        S[idx, ns + q] -= val * wk.Fz[k, r, kk]
+    for q in range(nfb):
+        for j in range(ns):
+            h[j] = 0.0
+        for a in range(n_active):
+            k = wk.active[a]
+            for cc in range(gdim):
+                p = body_rows[q, a * gdim + cc]
+                if p != 0.0:
+                    row = k * gdim + cc
+                    for e in range(RF.count[row]):
+                        h[col_pos[RF.index[row, e]]] += p * RF.value[row, e]
+        target = S[ns + q]
+        for l in range(ns):
+            if h[l] != 0.0:
+                _subtract_scaled(ns, -h[l], W[l], target)          # + h_l W[l], exactly
+    for q in range(nfb):
+        for q2 in range(nfb):
+            S[ns + q, ns + q2] = body_rows[q, n_active * gdim + q2]
+
+
+@njit(cache=True, _nrt=False)
+def _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG):
+    """:func:`_woodbury`'s matrix by G^T's rows: on the coordinates ``cols`` (their places ``col_pos``) into ``S``
+    (k x k, k = cols.size + nfb) and the sites' derivatives into ``D`` (n_active, 3, 3); ``pos`` (m,) int64 and
+    ``FG`` (6, >= cols.size) work: a site's rows of G^T on S gathered (rows 3-5), D_k times them (rows 0-2), so every
     update of S is a whole row of contiguous numbers (:func:`_subtract_scaled`, which the compiler vectorises: issue
     27, BENCHMARKS.md), each entry's terms added in the order of the loops they replace (the same numbers)."""
     bodies, contacts, sites = model.bodies, model.contacts, model.sites
@@ -982,23 +1288,48 @@ def _lu_apply(k, LU, ipiv, b, x):
 
 
 @njit(cache=True)
-def _woodbury_solve(factors, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs):
+def _woodbury_solve(factors, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, iw, way=WOODBURY_AUTO):
     """x of J x = rhs through :func:`_woodbury`'s matrix (its LU ``factors``, the sites' ``D``, its coordinates
-    ``cols`` and their places ``col_pos``)."""
+    ``cols`` and their places ``col_pos``, its :class:`InverseWork` ``iw``); ``way`` as :func:`_woodbury`'s."""
     LU, ipiv = factors
     k = ipiv.size
     x = np.empty(rhs.size)
-    _woodbury_solve_into(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, np.empty(k),
-                         np.empty(k))
+    if way == WOODBURY_AUTO:
+        _woodbury_solve_into(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, np.empty(k),
+                             np.empty(k), iw)
+    elif way == WOODBURY_ROWS:
+        _woodbury_solve_rows(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, np.empty(k),
+                             np.empty(k))
+    else:
+        _woodbury_solve_inverse(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp.RF, body_rows, rhs, x,
+                                np.empty(k), np.empty(k), iw)
     return x
 
 
 @njit(cache=True, _nrt=False)
-def _woodbury_solve_into(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, small, sol):
+def _woodbury_solve_into(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, small, sol, iw):
     """:func:`_woodbury_solve` into ``x`` (may be ``rhs``) with the matrix's factors (``LU``, ``ipiv``:
-    :func:`_factor`; its size |S| + nfb); ``small`` and ``sol`` (>= that size) work."""
-    GT, RF = cp.GT, cp.RF
+    :func:`_factor`; its size |S| + nfb); ``small`` and ``sol`` (>= that size) work. The active rows' part
+    x_A = rhs_A + G_A^T[:, S] sol the cheaper of two ways (issue 27): G^T's rows gathered on S
+    (:func:`_woodbury_solve_rows`: n_rows x |S| gathered elements), or R_A (W sol) with K_eff^-1's block W on S
+    (:func:`_woodbury_solve_inverse`: |S|^2 by gemv + nnz_A gathered), where :func:`_fill_woodbury` gathered W
+    (``iw``)."""
     ns = cols.size
+    if iw.gathered[0] == ns:
+        nnz = 0
+        for a in range(n_active):
+            for r in range(gdim):
+                nnz += cp.RF.count[active[a] * gdim + r]
+        if ns * ns + GATHER_COST * nnz < GATHER_COST * n_active * gdim * ns:
+            _woodbury_solve_inverse(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp.RF, body_rows, rhs, x,
+                                    small, sol, iw)
+            return
+    _woodbury_solve_rows(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, small, sol)
+
+
+@njit(cache=True, _nrt=False)
+def _woodbury_right_side(D, col_pos, active, n_active, gdim, RF, body_rows, rhs, ns, small):
+    """The Woodbury system's right side [R_A^T D rhs_A, rhs_b - P rhs_A] into ``small`` (|S| + nfb)."""
     na = n_active * gdim
     nfb = rhs.size - na
     for j in range(ns + nfb):
@@ -1017,6 +1348,40 @@ def _woodbury_solve_into(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp,
         for col in range(na):
             value -= body_rows[q, col] * rhs[col]
         small[ns + q] = value
+
+
+@njit(cache=True, _nrt=False)
+def _woodbury_solve_inverse(LU, ipiv, D, cols, col_pos, active, n_active, gdim, RF, body_rows, rhs, x, small, sol,
+                            iw):
+    """:func:`_woodbury_solve_into` through K_eff^-1: G_A^T[:, S] = R_A W (W = iw.W, K_eff^-T on S x S), so
+    x_A = rhs_A + R_A t with t = W sol (gemv, |S|^2) and each active row's few entries of t (nnz_A)."""
+    ns = cols.size
+    na = n_active * gdim
+    nfb = rhs.size - na
+    _woodbury_right_side(D, col_pos, active, n_active, gdim, RF, body_rows, rhs, ns, small)
+    _lu_apply(ns + nfb, LU, ipiv, small, sol)
+    t = iw.t[:ns]
+    _matvec(iw.W[:ns * ns].reshape((ns, ns)), sol[:ns], t, iw.scalars)
+    for a in range(n_active):
+        k = active[a]
+        for r in range(gdim):
+            row = k * gdim + r
+            value = 0.0
+            for e in range(RF.count[row]):
+                value += RF.value[row, e] * t[col_pos[RF.index[row, e]]]
+            x[a * gdim + r] = rhs[a * gdim + r] + value
+    for q in range(nfb):
+        x[na + q] = sol[ns + q]
+
+
+@njit(cache=True, _nrt=False)
+def _woodbury_solve_rows(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, small, sol):
+    """:func:`_woodbury_solve_into` by G^T's rows gathered on S (n_rows x |S|)."""
+    GT, RF = cp.GT, cp.RF
+    ns = cols.size
+    na = n_active * gdim
+    nfb = rhs.size - na
+    _woodbury_right_side(D, col_pos, active, n_active, gdim, RF, body_rows, rhs, ns, small)
     _lu_apply(ns + nfb, LU, ipiv, small, sol)
     for a in range(n_active):
         k = active[a]
@@ -1060,6 +1425,7 @@ class NewtonWork(NamedTuple):
     body_rows: np.ndarray     # (m * (nr + m),) the body rows of J for it
     cols: np.ndarray          # (nf,) int64 the coordinates S the active rows touch (:func:`_woodbury_columns`)
     col_pos: np.ndarray       # (nf,) int64 each free coordinate's place in S (-1: none)
+    inverse: InverseWork      # the Woodbury system's products through K_eff^-1 (:func:`_fill_woodbury`)
 
 
 @njit(cache=True)
@@ -1083,7 +1449,8 @@ def newton_work(ns, gdim, m, nf, RF):
                       np.zeros(k * k), np.zeros(k * k), np.zeros(k, np.int32),
                       np.zeros((6, s_max if woodbury else 0)), np.zeros(k), np.zeros(k), np.zeros(2),
                       np.zeros((ns if woodbury else 0, 3, 3)), np.zeros(m * (nr + m) if woodbury else 0),
-                      np.zeros(nf, np.int64), np.zeros(nf, np.int64))
+                      np.zeros(nf, np.int64), np.zeros(nf, np.int64),
+                      inverse_work(s_max if woodbury else 0, gdim, nf, RF))
 
 
 @njit(cache=True, _nrt=False)
@@ -1171,10 +1538,10 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
             rhs = nw.rhs[:N]
             _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, False, body_rows, rhs, nw.body_pos)
             _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, nw.col_pos,
-                           nw.S[:k_s * k_s].reshape((k_s, k_s)), D, nw.body_pos, nw.FG)
+                           nw.S[:k_s * k_s].reshape((k_s, k_s)), D, nw.body_pos, nw.FG, nw.inverse)
             _factor(k_s, nw.S[:k_s * k_s].reshape((k_s, k_s)), nw.S_LU, nw.S_ipiv)
             _woodbury_solve_into(nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp,
-                                 body_rows, rhs, dy, nw.small, nw.sol)
+                                 body_rows, rhs, dy, nw.small, nw.sol, nw.inverse)
         else:
             rhs = nw.rhs[:N]
             _fill_newton_matrix(n_active, wk, cp, model, free_body, dt, True, J, rhs, nw.body_pos)
@@ -1238,7 +1605,7 @@ def _newton(wk, nw, cp, state, dt, model, free_body):
                 trial[n_active * gdim + q] = -wk.rz[free_body[q]]
             if woodbury:
                 _woodbury_solve_into(nw.S_LU, nw.S_ipiv, D, cols, nw.col_pos, active_rows, n_active, gdim, cp,
-                                     body_rows, trial, trial, nw.small, nw.sol)
+                                     body_rows, trial, trial, nw.small, nw.sol, nw.inverse)
             else:
                 _lu_solve(N, J, nw.LU, nw.ipiv, trial)
             if _scaled_norm(trial, scale, N) <= (1.0 - 0.5 * lam) * size0 + 1e-300:
@@ -1266,22 +1633,23 @@ def _scaled_norm(x, scale, N):
 
 # ------------------------------------------------------------------ the loop
 class Cache(NamedTuple):
-    """Per step size: K_eff^-1 of the free coordinates, G = K_eff^-1 R_F^T (kept as G^T: its rows are the sites')
-    and H = R_F G (kept between calls; a function of dt alone, so they change the cost of a call, never its
-    result)."""
+    """Per step size: K_eff^-1 of the free coordinates (also transposed: its columns as contiguous rows, for the
+    products through it, :func:`_respond`), G = K_eff^-1 R_F^T (kept as G^T: its rows are the sites') and H = R_F G
+    (kept between calls; a function of dt alone, so they change the cost of a call, never its result)."""
 
     dt: np.ndarray            # (slots,), -1 = empty
     inv: np.ndarray           # (slots, nf, nf)
     GT: np.ndarray            # (slots, nr, nf)
     H: np.ndarray             # (slots, nr, nr)
     next: np.ndarray          # (1,) the slot to fill next
+    invT: np.ndarray          # (slots, nf, nf) inv transposed: its rows are K_eff^-1's columns (Compliance.invT)
 
 
 def make_cache(nf: int, nr: int, budget_bytes: float = 3e8) -> Cache:
-    per_slot = 8.0 * (nf * nf + nf * nr + nr * nr) + 8
+    per_slot = 8.0 * (2 * nf * nf + nf * nr + nr * nr) + 8
     slots = int(max(2, min(24, budget_bytes // per_slot)))
     return Cache(np.full(slots, -1.0), np.zeros((slots, nf, nf)), np.zeros((slots, nr, nf)),
-                 np.zeros((slots, nr, nr)), np.zeros(1, np.int64))
+                 np.zeros((slots, nr, nr)), np.zeros(1, np.int64), np.zeros((slots, nf, nf)))
 
 
 @njit(cache=True, _nrt=False)
@@ -1315,6 +1683,9 @@ def _effective(structure, rows, dt, scheme, cache):
     cache.next[0] = (slot + 1) % cache.dt.size
     cache.dt[slot] = dt
     cache.inv[slot] = np.linalg.inv(A)
+    for i in range(nf):
+        for k in range(nf):
+            cache.invT[slot, k, i] = cache.inv[slot, i, k]
     RF = np.empty((rows.shape[0], nf))
     for r in range(rows.shape[0]):
         for i in range(nf):
@@ -1481,6 +1852,7 @@ def run(t_end, state, model, cache, out, track_energy, frames):
     nw = newton_work(ns, gdim, m, nf, free_rows)
     u = np.zeros(nf)
     u_work = np.zeros(nf)
+    g_work = np.zeros(nf)
     # the structure's step: increments, end-of-step rates and coordinates, the generalized mid-point arguments of
     # M, C and K and their products, the free residual and its contact-free correction (filled index by index, in
     # the order of the array expressions they replace, so the same numbers; no array allocated per step)
@@ -1543,7 +1915,7 @@ def run(t_end, state, model, cache, out, track_energy, frames):
             if slot < 0:
                 slot = _effective(structure, rows_R, dt_try, scheme, cache)
             A_inv = cache.inv[slot]
-            cp = Compliance(cache.H[slot], cache.GT[slot], free_rows, u, u_work)
+            cp = Compliance(cache.H[slot], cache.GT[slot], free_rows, u, u_work, cache.invT[slot], g_work)
             c_acc = 1.0 / (beta * dt_try * dt_try)
             input_values(t1, inputs, pq)
             # contact-free increments: predictor, the prescribed inputs at t1, w = -K_eff^-1 r0,
