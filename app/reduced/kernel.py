@@ -1122,40 +1122,20 @@ def _fill_woodbury_inverse(n_active, wk, RF, model, free_body, body_rows, cols, 
     S's site block I - R_A^T D G_A^T on S = I - B W (row i: the nonzeros l of B's row i, W's rows l, vectorised:
     :func:`_subtract_scaled`), the body columns -R_A^T E as :func:`_fill_woodbury_rows` has them, the body rows
     P G_A^T on S = (R_A^T p_q)^T W (p_q: row q of ``body_rows``' site part)."""
-    bodies, contacts, sites = model.bodies, model.contacts, model.sites
-    gdim = bodies.gdim
+    gdim = model.bodies.gdim
     ns = cols.size
     nfb = free_body.size
     W = iw.W[:ns * ns].reshape((ns, ns))
     B = iw.B[:ns * ns].reshape((ns, ns))
     h = iw.t
-    for r in range(ns + nfb):
-        for c in range(ns + nfb):
-            S[r, c] = 0.0
-    for j in range(ns):
-        S[j, j] = 1.0
-    for j in range(pos.size):
-        pos[j] = -1
-    for q in range(nfb):
-        pos[free_body[q]] = q
+    _woodbury_start(S, ns, free_body, pos)
     for i in range(ns):
         Bi = B[i]
         for l in range(ns):
             value = Bi[l]
             if value != 0.0:
                 _subtract_scaled(ns, value, W[l], S[i])
-    for a in range(n_active):
-        k = wk.active[a]
-        s0, n_rot = _body_rotations(bodies, contacts.body[sites.contact[k]])
-        for r in range(gdim):
-            row = k * gdim + r
-            for e in range(RF.count[row]):
-                idx = col_pos[RF.index[row, e]]
-                val = RF.value[row, e]
-                for kk in range(gdim + n_rot):
-                    q = pos[s0 + kk]
-                    if q >= 0:
-                        S[idx, ns + q] -= val * wk.Fz[k, r, kk]
+    _subtract_body_columns(n_active, wk, RF, model, col_pos, ns, pos, S)
     for q in range(nfb):
         for j in range(ns):
             h[j] = 0.0
@@ -1183,20 +1163,11 @@ def _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col
     ``FG`` (6, >= cols.size) work: a site's rows of G^T on S gathered (rows 3-5), D_k times them (rows 0-2), so every
     update of S is a whole row of contiguous numbers (:func:`_subtract_scaled`, which the compiler vectorises: issue
     27, BENCHMARKS.md), each entry's terms added in the order of the loops they replace (the same numbers)."""
-    bodies, contacts, sites = model.bodies, model.contacts, model.sites
-    gdim = bodies.gdim
+    gdim = model.bodies.gdim
     GT, RF = cp.GT, cp.RF
     ns = cols.size
     nfb = free_body.size
-    for r in range(ns + nfb):
-        for c in range(ns + nfb):
-            S[r, c] = 0.0
-    for j in range(ns):
-        S[j, j] = 1.0
-    for j in range(pos.size):
-        pos[j] = -1
-    for q in range(nfb):
-        pos[free_body[q]] = q
+    _woodbury_start(S, ns, free_body, pos)
     for a in range(n_active):
         for r in range(3):
             for c in range(3):
@@ -1204,7 +1175,6 @@ def _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col
     G = FG[3:]
     for a in range(n_active):
         k = wk.active[a]
-        s0, n_rot = _body_rotations(bodies, contacts.body[sites.contact[k]])
         for cc in range(gdim):
             row = GT[k * gdim + cc]
             g = G[cc]
@@ -1220,18 +1190,52 @@ def _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col
                 idx = col_pos[RF.index[row, e]]
                 val = RF.value[row, e]
                 _subtract_scaled(ns, val, FG[r], S[idx])
-                for kk in range(gdim + n_rot):
-                    q = pos[s0 + kk]
-                    if q >= 0:
-                        S[idx, ns + q] -= val * wk.Fz[k, r, kk]
         for q in range(nfb):
             for cc in range(gdim):
                 p = body_rows[q, a * gdim + cc]
                 if p != 0.0:
                     _subtract_scaled(ns, -p, G[cc], S[ns + q])      # y - (-p) x = y + p x exactly
+    _subtract_body_columns(n_active, wk, RF, model, col_pos, ns, pos, S)
     for q in range(nfb):
         for q2 in range(nfb):
             S[ns + q, ns + q2] = body_rows[q, n_active * gdim + q2]
+
+
+@njit(cache=True, _nrt=False)
+def _woodbury_start(S, ns, free_body, pos):
+    """The Woodbury matrix S (k x k, k = ns + nfb) set to I on its site block and 0 elsewhere, and ``pos`` (m,)
+    each body coordinate's place among the free ones (-1: not free)."""
+    k = ns + free_body.size
+    for r in range(k):
+        for c in range(k):
+            S[r, c] = 0.0
+    for j in range(ns):
+        S[j, j] = 1.0
+    for j in range(pos.size):
+        pos[j] = -1
+    for q in range(free_body.size):
+        pos[free_body[q]] = q
+
+
+@njit(cache=True, _nrt=False)
+def _subtract_body_columns(n_active, wk, RF, model, col_pos, ns, pos, S):
+    """The Woodbury matrix's body columns, -R_A^T E (E the active sites' derivatives by their body's free
+    coordinates, wk.Fz), into S[:ns, ns:]: each entry's terms subtracted site by site, row by row (the order both
+    ways of :func:`_fill_woodbury` share)."""
+    bodies, contacts, sites = model.bodies, model.contacts, model.sites
+    gdim = bodies.gdim
+    for a in range(n_active):
+        k = wk.active[a]
+        s0, n_rot = _body_rotations(bodies, contacts.body[sites.contact[k]])
+        for r in range(gdim):
+            row = k * gdim + r
+            for e in range(RF.count[row]):
+                idx = col_pos[RF.index[row, e]]
+                val = RF.value[row, e]
+                for kk in range(gdim + n_rot):
+                    q = pos[s0 + kk]
+                    if q >= 0:
+                        S[idx, ns + q] -= val * wk.Fz[k, r, kk]
 
 
 @njit(cache=True, _nrt=False)
