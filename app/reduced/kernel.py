@@ -47,14 +47,16 @@ law on the sites that can touch"): the contact law runs only on the sites that c
 bound on each site's gap from its last evaluation: exact), and the row updates of the Woodbury matrix and of G f are
 1-D loops of their own (:func:`_subtract_scaled`), which LLVM vectorises where, written inline on rows of the 2-D
 work arrays, it did not (the same numbers). With the rotor lying on the whole ring (1 536 active site rows on 192 of
-the 221 free coordinates: S) the products with G^T's rows, dense although each site row R_F touches ~12 coordinates,
+the 221 free coordinates: S) the products with G^T's rows, dense although a site's rows R_F touch ~12 coordinates (a row
+4 or 8),
 were then most of the step (BENCHMARKS.md "the products through K_eff^-1"): G x, the Woodbury matrix and its solves
 go through K_eff^-1 itself (kept transposed per step size, :class:`Cache` invT) wherever that costs less, chosen per
-call by counting the operations (gathered elements and indexed updates weighted as measured: GATHER_COST,
-INDEXED_COST): G x = K_eff^-1 (R_F^T x), nnz + |S| nf against n_rows nf (:func:`_respond`); I - R_A^T D G_A^T =
-I - (R_A^T D R_A) K_eff^-T on S, ~nnz x 12 + nnz(R_A^T D R_A) |S| against n_rows |S| (gdim + 1) + nnz |S|
-(:func:`_fill_woodbury`); the solves' G_A^T[:, S] sol = R_A (K_eff^-T[S, S] sol), |S|^2 + nnz against n_rows |S|
-(:func:`_woodbury_solve_into`). The collapsing run's loop: 9.1 -> 6.1 ms a step. Dense rows (a model in its free
+call by counting the operations, gathered elements weighted GATHER_COST and indexed updates INDEXED_COST against a
+vectorised multiply-add: G x = K_eff^-1 (R_F^T x), INDEXED_COST nnz + |S| nf against n_rows nf (:func:`_respond`);
+I - R_A^T D G_A^T = I - (R_A^T D R_A) K_eff^-T on S, 4 GATHER_COST |S|^2 + INDEXED_COST nnz (gdim + widest row)
++ nfb (INDEXED_COST nnz + |S|^2) + nnz(R_A^T D R_A) |S| against n_rows |S| (GATHER_COST + gdim) + nnz |S|
++ nfb n_rows |S| (:func:`_fill_woodbury`); the solves' G_A^T[:, S] sol = R_A (K_eff^-T[S, S] sol), |S|^2 +
+GATHER_COST nnz against GATHER_COST n_rows |S| (:func:`_solve_takes_inverse`). The collapsing run's loop: 9.1 -> 6.1 ms a step. Dense rows (a model in its free
 modes: the drill) keep G^T's rows and their numbers to the bit; where K_eff^-1 is taken the sums run in another order
 (round-off). """
 
@@ -990,6 +992,8 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False, way=WOO
         _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols[:n], col_pos, S, D, pos,
                             np.empty((6, n)))
     else:
+        if cp.invT.shape[0] != nf:
+            raise ValueError("the Woodbury matrix through K_eff^-1 needs K_eff^-1 (the compliance's invT)")
         _gather_block(cols[:n], cp.invT, iw.W[:n * n].reshape((n, n)))
         iw.gathered[0] = n
         _site_products(n_active, wk, cp.RF, model.bodies.gdim, col_pos, n, D, iw)
@@ -1045,9 +1049,16 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos,
             _fill_woodbury_inverse(n_active, wk, RF, model, free_body, body_rows, cols, col_pos, S, pos, iw)
             return
     _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG)
-    if iw.gathered[0] < 0 and ns * ns + GATHER_COST * nnz < GATHER_COST * n_rows * ns:
+    if iw.gathered[0] < 0 and _solve_takes_inverse(ns, nnz, n_rows):
         _gather_block(cols, cp.invT, W)
         iw.gathered[0] = ns
+
+
+@njit(cache=True, _nrt=False)
+def _solve_takes_inverse(ns, nnz, n_rows):
+    """The Woodbury solve's cost rule (:func:`_woodbury_solve_into`), also asked by :func:`_fill_woodbury` whether to
+    gather W: R_A (W sol), |S|^2 + nnz_A gathered elements, against G^T's rows gathered on S, n_rows x |S|."""
+    return ns * ns + GATHER_COST * nnz < GATHER_COST * n_rows * ns
 
 
 @njit(cache=True, _nrt=False)
@@ -1305,6 +1316,8 @@ def _woodbury_solve(factors, D, cols, col_pos, active, n_active, gdim, cp, body_
         _woodbury_solve_rows(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, np.empty(k),
                              np.empty(k))
     else:
+        if iw.gathered[0] != cols.size or cp.invT.shape[0] != cp.GT.shape[1]:
+            raise ValueError("the solve through K_eff^-1 needs K_eff^-1 and its block W on these coordinates gathered")
         _woodbury_solve_inverse(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp.RF, body_rows, rhs, x,
                                 np.empty(k), np.empty(k), iw)
     return x
@@ -1324,7 +1337,7 @@ def _woodbury_solve_into(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp,
         for a in range(n_active):
             for r in range(gdim):
                 nnz += cp.RF.count[active[a] * gdim + r]
-        if ns * ns + GATHER_COST * nnz < GATHER_COST * n_active * gdim * ns:
+        if _solve_takes_inverse(ns, nnz, n_active * gdim):
             _woodbury_solve_inverse(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp.RF, body_rows, rhs, x,
                                     small, sol, iw)
             return
@@ -1421,7 +1434,7 @@ class NewtonWork(NamedTuple):
     S: np.ndarray             # (k * k,) the Woodbury matrix, k = |S| + m, |S| at most newton_work's s_max
     S_LU: np.ndarray          # (k * k,) its LU factors in Fortran order (getrf in place: _factor)
     S_ipiv: np.ndarray        # (k,) int32
-    FG: np.ndarray            # (6, s_max) work (:func:`_fill_woodbury`)
+    FG: np.ndarray            # (6, s_max) work (:func:`_fill_woodbury_rows`)
     small: np.ndarray         # (k,) work
     sol: np.ndarray           # (k,) work
     scalars: np.ndarray       # (2,) work: gemv's alpha and beta
@@ -2078,7 +2091,7 @@ def _record(row, t1, dt, q1, pq, wk, state, model, out, closed, y_end, power, se
             out.area[row, c] += sites.weight[i]
         fn = wk.fn[i]
         if fn <= 0.0:
-            if wk.gap[i] < 0.0:     # penetrated, its pressure k d - c dd/dt clipped to zero: the elastic energy the
+            if wk.gap[i] < 0.0:     # penetrated, its pressure k d + c dd/dt clipped to zero: the elastic energy the
                 #                     penalty holds is lost as the gap opens, (0 - elastic) times the closing rate
                 power[c] += _elastic_force(i, c, wk.gap[i], sites, contacts) * wk.rate[i]
             if diagnose:        # an open site: its displacement's harmonic and its time in the wave-frame bins
@@ -2168,7 +2181,7 @@ def _elastic_force(i, c, gap, sites, contacts):
     """The elastic part of site i's normal force [N] at ``gap`` < 0 (contact c's law without its damping). Its
     damping's dissipation is (force - this) times the closing rate -dg/dt, the rate the law saw: a closing rate
     recovered from the force, (force - this) / c, misses the clipped part (the force zero while still penetrated,
-    as a Kelvin-Voigt contact lets go), as the FE tier's form (app/transient/contact.py) does not."""
+    as a Kelvin-Voigt contact lets go); the FE tier's form (app/transient/contact.py) counts it."""
     if contacts.kind[c] == NODE:
         return contacts.stiffness[c] * (-gap) ** contacts.exponent[c]
     return sites.weight[i] * _penalty_pressure(gap, 0.0, contacts.stiffness[c], 0.0, contacts.rounding[c])[0]
