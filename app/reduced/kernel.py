@@ -47,18 +47,17 @@ law on the sites that can touch"): the contact law runs only on the sites that c
 bound on each site's gap from its last evaluation: exact), and the row updates of the Woodbury matrix and of G f are
 1-D loops of their own (:func:`_subtract_scaled`), which LLVM vectorises where, written inline on rows of the 2-D
 work arrays, it did not (the same numbers). With the rotor lying on the whole ring (1 536 active site rows on 192 of
-the 221 free coordinates: S) the products with G^T's rows, dense although a site's rows R_F touch ~12 coordinates (a row
-4 or 8),
-were then most of the step (BENCHMARKS.md "the products through K_eff^-1"): G x, the Woodbury matrix and its solves
-go through K_eff^-1 itself (kept transposed per step size, :class:`Cache` invT) wherever that costs less, chosen per
-call by counting the operations, gathered elements weighted GATHER_COST and indexed updates INDEXED_COST against a
-vectorised multiply-add: G x = K_eff^-1 (R_F^T x), INDEXED_COST nnz + |S| nf against n_rows nf (:func:`_respond`);
-I - R_A^T D G_A^T = I - (R_A^T D R_A) K_eff^-T on S, 4 GATHER_COST |S|^2 + INDEXED_COST nnz (gdim + widest row)
-+ nfb (INDEXED_COST nnz + |S|^2) + nnz(R_A^T D R_A) |S| against n_rows |S| (GATHER_COST + gdim) + nnz |S|
-+ nfb n_rows |S| (:func:`_fill_woodbury`); the solves' G_A^T[:, S] sol = R_A (K_eff^-T[S, S] sol), |S|^2 +
-GATHER_COST nnz against GATHER_COST n_rows |S| (:func:`_solve_takes_inverse`). The collapsing run's loop: 9.1 -> 6.1 ms a step. Dense rows (a model in its free
-modes: the drill) keep G^T's rows and their numbers to the bit; where K_eff^-1 is taken the sums run in another order
-(round-off). """
+the 221 free coordinates: S) the products with G^T's rows, dense although a site's rows R_F touch ~12 coordinates
+(a row 4 or 8), were then most of the step (BENCHMARKS.md "the products through K_eff^-1"): G x, the Woodbury matrix
+and its solves go through K_eff^-1 itself (kept transposed per step size, :class:`Cache` invT) wherever that costs
+less, chosen per call by counting the operations, gathered elements weighted GATHER_COST and indexed updates
+INDEXED_COST against a vectorised multiply-add: G x = K_eff^-1 (R_F^T x), INDEXED_COST nnz + |S| nf against
+n_rows nf (:func:`_respond`); I - R_A^T D G_A^T = I - (R_A^T D R_A) K_eff^-T on S, 4 GATHER_COST |S|^2 +
+INDEXED_COST nnz (gdim + widest row) + nfb (INDEXED_COST nnz + |S|^2) + nnz(R_A^T D R_A) |S| against n_rows |S|
+(GATHER_COST + gdim) + nnz |S| + nfb n_rows |S| (:func:`_fill_woodbury`); the solves' G_A^T[:, S] sol =
+R_A (K_eff^-T[S, S] sol), |S|^2 + GATHER_COST nnz against GATHER_COST n_rows |S| (:func:`_solve_takes_inverse`).
+The collapsing run's loop: 9.1 -> 6.1 ms a step. Dense rows (a model in its free modes: the drill) keep G^T's rows
+and their numbers to the bit; where K_eff^-1 is taken the sums run in another order (round-off). """
 
 from __future__ import annotations
 
