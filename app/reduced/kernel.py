@@ -939,7 +939,8 @@ class InverseWork(NamedTuple):
     site: np.ndarray          # (3, u_max) a site's D_k R_k on the coordinates of S its rows touch
     local: np.ndarray         # (u_max,) int64 those coordinates' places in S
     mark: np.ndarray          # (nf,) int64 a place in S -> its place among the site's (-1: none)
-    gathered: np.ndarray      # (1,) int64 |S| of the W gathered for the iteration's matrix (-1: none)
+    gathered: np.ndarray      # (1,) int64 |S| when the iteration's solves go through K_eff^-1, W gathered on S (-1:
+    #                           they take G^T's rows); decided once per matrix (:func:`_fill_woodbury`)
     scalars: np.ndarray       # (2,) work: gemv's alpha and beta
 
 
@@ -967,7 +968,7 @@ def _woodbury(n_active, wk, cp, model, free_body, body_rows, full=False, way=WOO
     alone: the same system restricted to S (size |S| + nfb, ``full``: all nf coordinates) is exact. ``way``: the
     cheaper of G^T's rows and K_eff^-1 (:func:`_fill_woodbury`), or the one named. Returns that matrix's LU factors
     ((LU, ipiv): :func:`_factor`), the active sites' D (the next evaluation overwrites wk.Fd), S's columns and
-    positions, and the :class:`InverseWork` (its W gathered where the solve may take K_eff^-1)."""
+    positions, and the :class:`InverseWork` (``gathered``: whether the solves take K_eff^-1, W gathered)."""
     nf = cp.GT.shape[1]
     cols = np.empty(nf, np.int64)
     col_pos = np.empty(nf, np.int64)
@@ -1032,6 +1033,8 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos,
     if cp.invT.shape[0] != cp.GT.shape[1]:
         _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG)
         return
+    # the iteration's solves (one per Newton correction and line-search trial) on the same rows: decided here, once
+    solves_inverse = _solve_takes_inverse(ns, nnz, n_rows)
     # G^T's rows: the gathers, D_k G_k^T, the updates of S's site rows, the body rows
     cost_rows = n_rows * ns * (GATHER_COST + gdim) + nnz * ns + nfb * n_rows * ns
     # K_eff^-1: W gathered, B zeroed and counted, its rows scanned; B's sum (indexed updates, >= nnz x widest); the
@@ -1040,23 +1043,28 @@ def _fill_woodbury(n_active, wk, cp, model, free_body, body_rows, cols, col_pos,
     cost_inverse = 4 * GATHER_COST * ns * ns + INDEXED_COST * nnz * (gdim + widest) \
         + nfb * (INDEXED_COST * nnz + ns * ns)
     W = iw.W[:ns * ns].reshape((ns, ns))
+    have_W = False
     if cost_inverse + ns * widest * ns < cost_rows:
         _gather_block(cols, cp.invT, W)
-        iw.gathered[0] = ns
+        have_W = True
         nnz_B = _site_products(n_active, wk, RF, gdim, col_pos, ns, D, iw)
         if cost_inverse + nnz_B * ns < cost_rows:
             _fill_woodbury_inverse(n_active, wk, RF, model, free_body, body_rows, cols, col_pos, S, pos, iw)
+            if solves_inverse:
+                iw.gathered[0] = ns
             return
     _fill_woodbury_rows(n_active, wk, cp, model, free_body, body_rows, cols, col_pos, S, D, pos, FG)
-    if iw.gathered[0] < 0 and _solve_takes_inverse(ns, nnz, n_rows):
-        _gather_block(cols, cp.invT, W)
+    if solves_inverse:
+        if not have_W:
+            _gather_block(cols, cp.invT, W)
         iw.gathered[0] = ns
 
 
 @njit(cache=True, _nrt=False)
 def _solve_takes_inverse(ns, nnz, n_rows):
-    """The Woodbury solve's cost rule (:func:`_woodbury_solve_into`), also asked by :func:`_fill_woodbury` whether to
-    gather W: R_A (W sol), |S|^2 + nnz_A gathered elements, against G^T's rows gathered on S, n_rows x |S|."""
+    """The Woodbury solve's cost rule, asked once per matrix by :func:`_fill_woodbury` (its answer in
+    InverseWork.gathered, which :func:`_woodbury_solve_into` reads): R_A (W sol), |S|^2 + nnz_A gathered elements,
+    against G^T's rows gathered on S, n_rows x |S|."""
     return ns * ns + GATHER_COST * nnz < GATHER_COST * n_rows * ns
 
 
@@ -1328,18 +1336,12 @@ def _woodbury_solve_into(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp,
     :func:`_factor`; its size |S| + nfb); ``small`` and ``sol`` (>= that size) work. The active rows' part
     x_A = rhs_A + G_A^T[:, S] sol the cheaper of two ways (issue 27): G^T's rows gathered on S
     (:func:`_woodbury_solve_rows`: n_rows x |S| gathered elements), or R_A (W sol) with K_eff^-1's block W on S
-    (:func:`_woodbury_solve_inverse`: |S|^2 by gemv + nnz_A gathered), where :func:`_fill_woodbury` gathered W
-    (``iw``)."""
-    ns = cols.size
-    if iw.gathered[0] == ns:
-        nnz = 0
-        for a in range(n_active):
-            for r in range(gdim):
-                nnz += cp.RF.count[active[a] * gdim + r]
-        if _solve_takes_inverse(ns, nnz, n_active * gdim):
-            _woodbury_solve_inverse(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp.RF, body_rows, rhs, x,
-                                    small, sol, iw)
-            return
+    (:func:`_woodbury_solve_inverse`: |S|^2 by gemv + nnz_A gathered), as :func:`_fill_woodbury` decided for the
+    matrix (``iw.gathered``: :func:`_solve_takes_inverse`)."""
+    if iw.gathered[0] == cols.size:
+        _woodbury_solve_inverse(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp.RF, body_rows, rhs, x,
+                                small, sol, iw)
+        return
     _woodbury_solve_rows(LU, ipiv, D, cols, col_pos, active, n_active, gdim, cp, body_rows, rhs, x, small, sol)
 
 
