@@ -22,7 +22,6 @@ import argparse
 import json
 import os
 import re
-import resource
 import subprocess
 import sys
 import time
@@ -52,13 +51,17 @@ def _build(label: str, checkout: Path, case: Path, sets: list[str], out: Path, p
     if petsc_options:
         env["PETSC_OPTIONS"] = petsc_options
     load_before = _load()
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    log = out / f"{label}.log"
     start = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=checkout, env=env, capture_output=True, text=True)
+    with open(log, "w") as sink:
+        child = subprocess.Popen(cmd, cwd=checkout, env=env, stdout=sink, stderr=subprocess.STDOUT, text=True)
+        # wait4: this child's own resource usage (RUSAGE_CHILDREN's peak would be the largest of all builds so far)
+        _, status, usage = os.wait4(child.pid, 0)
+        child.returncode = os.waitstatus_to_exitcode(status)
     wall = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (after.ru_utime - usage.ru_utime) + (after.ru_stime - usage.ru_stime)
-    (out / f"{label}.log").write_text(proc.stdout + proc.stderr)
+    cpu = usage.ru_utime + usage.ru_stime
+    peak_GB = usage.ru_maxrss / 2**20          # ru_maxrss: KiB on Linux
+    proc = subprocess.CompletedProcess(cmd, child.returncode, log.read_text(), "")
     if proc.returncode != 0:
         sys.exit(f"build {label} failed ({proc.returncode}): see {out / f'{label}.log'}")
     phases = {}
@@ -70,8 +73,8 @@ def _build(label: str, checkout: Path, case: Path, sets: list[str], out: Path, p
         phases.update({prefix + name: (float(wall), float(cpu) if cpu else None) for name, wall, cpu in found})
     models = sorted(cache.glob("reduced-*.npz"))
     return {"label": label, "checkout": str(checkout), "case": str(case), "command": " ".join(cmd), "wall_s": wall,
-            "cpu_s": cpu, "petsc_options": petsc_options, "load_before": load_before, "load_after": _load(),
-            "phases": phases,
+            "cpu_s": cpu, "peak_GB": peak_GB, "petsc_options": petsc_options, "load_before": load_before,
+            "load_after": _load(), "phases": phases,
             "model": str(models[0]) if models else None, "run_dir": str(run_dir)}
 
 
@@ -135,7 +138,7 @@ def main() -> None:
         options = dict(item.split("=", 1) for item in args.options)
         result = _build(label, checkout, case, args.sets, args.out, options.get(label, ""))
         results.append(result)
-        print(f"[{label}] {result['wall_s']:.1f} s ({result['cpu_s']:.1f} s CPU), "
+        print(f"[{label}] {result['wall_s']:.1f} s ({result['cpu_s']:.1f} s CPU), peak {result['peak_GB']:.2f} GB, "
               f"load {result['load_before']} -> {result['load_after']}: "
               + ", ".join(f"{k} {v[0]:.1f} s" for k, v in result["phases"].items()), flush=True)
     names = []                       # in order of appearance: the build's phases, then the reduction's
@@ -160,6 +163,7 @@ def main() -> None:
             cells.append("" if value is None else f"{value[0]:.1f}" + (f" ({value[1]:.1f})" if value[1] is not None
                                                                          else ""))
         print(f"| {name} | " + " | ".join(cells) + " |")
+    print("| peak memory (the build's process) [GB] | " + " | ".join(f"{r['peak_GB']:.2f}" for r in results) + " |")
     print("| load (1 min) before -> after | " + " | ".join(f"{r['load_before'].split()[0]} -> "
                                                           f"{r['load_after'].split()[0]}" for r in results) + " |")
     for r in results[1:]:

@@ -139,8 +139,19 @@ def block_shift_invert(factor, M, sigma: float, wanted, block: int = 8, max_dim:
         if columns <= capacity:
             return
         capacity = max(columns, 2 * capacity)
-        V, MV, AV = (np.asfortranarray(np.concatenate([a, np.zeros((n_local, capacity - a.shape[1]))], axis=1))
-                     for a in (V, MV, AV))
+
+        def grown(a: np.ndarray) -> np.ndarray:
+            # np.zeros' pages stay unresident until written, so only the m columns copied here and those appended
+            # later take memory; a concatenation with zeros wrote (made resident) every column of the capacity,
+            # up to twice what is used, with the three old arrays beside the three new ones during the copy
+            # (BENCHMARKS.md, "the reduced stator's build memory")
+            out = np.zeros((n_local, capacity), order="F")
+            out[:, :m] = a[:, :m]
+            return out
+
+        V = grown(V)            # one array at a time: the old one is freed before the next is copied
+        MV = grown(MV)
+        AV = grown(AV)
         H = np.pad(H, ((0, capacity - H.shape[0]), (0, capacity - H.shape[1])))
 
     def outside(W: np.ndarray, MW: np.ndarray, passes: int = 2) -> tuple[np.ndarray, np.ndarray]:

@@ -222,6 +222,10 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
                                                     clamped_ksp=ksp if shared_factorisation else None)
     else:
         frequencies, modes = np.zeros(0), []
+    # the clamped K's factor is done with: freed before the enrichment factorises K - sigma M, so the build never
+    # holds two factors at once (its peak memory is one factor's, not two)
+    ksp.destroy()
+    clamped.destroy()
     mark = _lap(phases, f"{len(modes)} fixed-interface modes", mark)
     enrichment_Hz = np.zeros(0)
     if n_enrich > 0:
@@ -238,8 +242,6 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
         mark = _lap(phases, f"{n_enrich} enrichment modes", mark)
     if damping_solves:
         modes += _damping_vectors(M, damping_solves, modes)
-    ksp.destroy()
-    clamped.destroy()
     columns += modes
 
     K_r, KT = _project(K, columns, comm, keep_products=True)
