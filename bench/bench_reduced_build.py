@@ -57,16 +57,16 @@ def _build(label: str, checkout: Path, case: Path, sets: list[str], out: Path, p
         child = subprocess.Popen(cmd, cwd=checkout, env=env, stdout=sink, stderr=subprocess.STDOUT, text=True)
         # wait4: this child's own resource usage (RUSAGE_CHILDREN's peak would be the largest of all builds so far)
         _, status, usage = os.wait4(child.pid, 0)
-        child.returncode = os.waitstatus_to_exitcode(status)
+    returncode = os.waitstatus_to_exitcode(status)
     wall = time.perf_counter() - start
     cpu = usage.ru_utime + usage.ru_stime
     peak_GB = usage.ru_maxrss / 2**20          # ru_maxrss: KiB on Linux
-    proc = subprocess.CompletedProcess(cmd, child.returncode, log.read_text(), "")
-    if proc.returncode != 0:
-        sys.exit(f"build {label} failed ({proc.returncode}): see {out / f'{label}.log'}")
+    output = log.read_text()
+    if returncode != 0:
+        sys.exit(f"build {label} failed ({returncode}): see {log}")
     phases = {}
     for marker in ("build phases: ", "reduction phases: "):
-        line = next((ln for ln in (proc.stdout + proc.stderr).splitlines() if marker in ln), "")
+        line = next((ln for ln in output.splitlines() if marker in ln), "")
         rest = line.split(marker, 1)[1] if marker in line else ""
         prefix = "  reduction: " if marker.startswith("reduction") else ""
         found = re.findall(r"(.+?) ([0-9]+\.[0-9]+) s(?: \(CPU ([0-9]+\.[0-9]+) s\))?(?:, |$)", rest)
