@@ -244,14 +244,11 @@ def reduce_model(K: PETSc.Mat, M: PETSc.Mat, C: PETSc.Mat | None, W, fixed_local
         modes += _damping_vectors(M, damping_solves, modes)
     columns += modes
 
-    K_r, KT = _project(K, columns, comm, keep_products=True)
+    # the charge rows: the electrodes' rows of K T summed, taken while K T exists (it is as large as the basis)
+    K_r, K_sums = _project(K, columns, comm, summed_rows=[electrode_owned[name] - lo for name in electrodes])
     M_r = _project(M, columns, comm)
     C_r = _project(C, columns, comm) if C is not None else None
-    charge_rows = {}
-    for name in electrodes:
-        rows = electrode_owned[name] - lo
-        charge_rows[name] = -comm.allreduce(KT[rows].sum(axis=0) if rows.size else np.zeros(len(columns)),
-                                            op=MPI.SUM)
+    charge_rows = {name: -comm.allreduce(K_sums[i], op=MPI.SUM) for i, name in enumerate(electrodes)}
     _lap(phases, "damping vectors and projections", mark)
     return ReducedBasis(K_r, M_r, C_r, interface.astype(np.int64), electrodes + list(patterns), frequencies,
                         charge_rows, columns, comm, enrichment_Hz, phases)
@@ -568,23 +565,30 @@ def _lowest_modes_by_restart(ops, constraints, prefix, want, n_modes, cutoff_Hz,
         want = min(max(estimate, 2 * want), MAX_MODES, interior)
 
 
-def _project(A: PETSc.Mat, columns: list[PETSc.Vec], comm, keep_products: bool = False):
-    """T^T A T (dense, replicated) with one allreduce; optionally also the local rows of A T. A T is one sparse
-    times dense product (MatMatMult), which reads A once per few columns rather than once per column."""
+def _project(A: PETSc.Mat, columns: list[PETSc.Vec], comm, summed_rows: list[np.ndarray] | None = None):
+    """T^T A T (dense, replicated) with one allreduce. A T is one sparse times dense product (MatMatMult), which
+    reads A once per few columns rather than once per column. With ``summed_rows`` (local row index arrays) also,
+    for each set, the local sum of those rows of A T: A T itself is not kept, nor copied out of PETSc (at a
+    million DOFs it is as large as the basis; BENCHMARKS.md, "the reduced stator's build memory")."""
     n = len(columns)
     if n == 0:
         reduced = np.zeros((0, 0))
-        return (reduced, np.zeros((A.getLocalSize()[0], 0))) if keep_products else reduced
+        return reduced if summed_rows is None else (reduced, [np.zeros(0) for _ in summed_rows])
     T = np.asfortranarray(np.column_stack([c.array_r for c in columns]))
     T_mat = PETSc.Mat().createDense(((T.shape[0], A.getSize()[1]), (PETSc.DECIDE, n)), array=T, comm=comm)
     T_mat.assemble()
     AT_mat = A.matMult(T_mat)
-    AT = np.array(AT_mat.getDenseArray(readonly=True))
+    AT = AT_mat.getDenseArray(readonly=True)        # a view of PETSc's array: used before AT_mat is destroyed
+    local = T.T @ AT
+    sums = None if summed_rows is None else \
+        [AT[rows].sum(axis=0) if rows.size else np.zeros(n) for rows in summed_rows]
+    del AT
     AT_mat.destroy()
     T_mat.destroy()
-    reduced = comm.allreduce(T.T @ AT, op=MPI.SUM)
+    del T
+    reduced = comm.allreduce(local, op=MPI.SUM)
     reduced = 0.5 * (reduced + reduced.T)      # symmetric up to round-off; make it exactly so
-    return (reduced, AT) if keep_products else reduced
+    return reduced if sums is None else (reduced, sums)
 
 
 def harmonic_response(basis: ReducedBasis, frequency_Hz: float, voltages: dict[str, complex],
